@@ -1,0 +1,76 @@
+"""What a block promises to the composition: its ports, flags, parameters and rates.
+
+Blocks know nothing of each other. Each one declares typed ports (dtype, shape, unit),
+the flags it writes and reads, the parameter model it accepts and the cycle rates it can
+run at; the composition wires them, and the validator checks the wiring against these
+declarations before anything runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+
+@dataclass(frozen=True)
+class Port:
+    """One typed slot of a block's activity state: what flows through a stream.
+
+    `dtype` is a numpy dtype name, `shape` the array shape (`()` for a scalar) and `unit`
+    an SI unit symbol (`m`, `N`, `m/s`, `rad`, `A`; `1` for dimensionless). An input that
+    is not `required` may stay unconnected; the block then sees its initial value.
+    """
+
+    dtype: str
+    shape: tuple[int, ...] = ()
+    unit: str = "1"
+    doc: str = ""
+    required: bool = True
+
+    def __post_init__(self) -> None:
+        np.dtype(self.dtype)  # fail at import time on a typo, not during validation
+
+    def describe(self) -> str:
+        return f"{self.dtype}{list(self.shape)} [{self.unit}]"
+
+    @property
+    def nbytes(self) -> int:
+        return int(np.dtype(self.dtype).itemsize * int(np.prod(self.shape, dtype=np.int64)))
+
+
+@dataclass(frozen=True)
+class RateRange:
+    """The cycle rates, in Hz, at which a block's computation is valid."""
+
+    min_hz: float
+    max_hz: float
+    why: str = ""
+
+    def admits(self, period_ns: int) -> bool:
+        hz = 1e9 / period_ns
+        slack = 1e-6 * hz  # periods are whole nanoseconds: 15 Hz is 66666667 ns
+        return self.min_hz - slack <= hz <= self.max_hz + slack
+
+    def describe(self) -> str:
+        if self.min_hz == self.max_hz:
+            return f"{self.min_hz:g} Hz"
+        return f"{self.min_hz:g} to {self.max_hz:g} Hz"
+
+
+@dataclass(frozen=True)
+class Interface:
+    """A block's declarations once its parameters are known (shapes may depend on them)."""
+
+    inputs: dict[str, Port] = field(default_factory=dict)
+    outputs: dict[str, Port] = field(default_factory=dict)
+    flags_written: dict[str, str] = field(default_factory=dict)
+    flags_read: dict[str, str] = field(default_factory=dict)
+    rate: RateRange | None = None
+
+
+class Params(BaseModel):
+    """Base of every block's parameter model: unknown keys are mistakes, not extensions."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)

@@ -1,0 +1,233 @@
+"""The composition file as typed models: threads, activities, streams and coordination.
+
+Every named thing is a mapping key, never a list item, so a JSON Patch path such as
+`/activities/haptic/params/kp` stays valid when other entries come and go. Each model
+forbids unknown keys: a typo is an error, not a silently ignored setting.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
+
+from hapticop.units import Duration
+
+VERSION = 1
+
+Name = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="lower_snake_case name")]
+PlaceName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$")]
+PortRef = Annotated[
+    str,
+    Field(pattern=r"^[a-z][a-z0-9_]*\.[a-z][a-z0-9_]*$", description="'activity.port'"),
+]
+FlagName = Annotated[
+    str,
+    Field(pattern=r"^[a-z][a-z0-9_]*(\.[a-z0-9_]+)+$", description="dotted flag name, e.g. 'falcon.lcsm.running'"),
+]
+Weight = Annotated[int, Field(ge=1, le=1_000_000)]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+
+class Thread(Strict):
+    """A time-triggered thread: each cycle it runs its selected schedule, then sleeps."""
+
+    period: Duration = Field(description="cycle time or rate: '1ms', '15Hz', '66.667ms'")
+    priority: int | None = Field(
+        None, ge=1, le=99, description="SCHED_FIFO priority 1-98; omit for normal scheduling"
+    )
+    cpus: list[Annotated[int, Field(ge=0, le=4095)]] | None = Field(
+        None, description="CPU affinity: the cores this thread may run on"
+    )
+    deploy: Literal["main", "thread", "process"] = Field(
+        "thread",
+        description="'main': the process's main thread (runs the mediator); "
+        "'thread': a thread of the main process; 'process': its own process",
+    )
+    schedules: dict[Annotated[int, Field(ge=0, le=255)], list[Name]] = Field(
+        description="activity-scheduler sets by ID; ID 0 is selected at start"
+    )
+    doc: str = ""
+
+    @field_validator("priority")
+    @classmethod
+    def _refuse_99(cls, value: int | None) -> int | None:
+        if value == 99:
+            raise PydanticCustomError(
+                "priority_99",
+                "priority 99 is refused: a SCHED_FIFO thread at 99 never yields to the kernel's "
+                "own real-time threads (thesis 2.3.2); use 1 to 98",
+            )
+        return value
+
+    @field_validator("cpus")
+    @classmethod
+    def _unique_cpus(cls, value: list[int] | None) -> list[int] | None:
+        if value is not None and len(set(value)) != len(value):
+            raise PydanticCustomError("cpus_repeated", "a CPU is listed twice in {cpus}", {"cpus": value})
+        if value is not None and not value:
+            raise PydanticCustomError("cpus_empty", "an empty CPU set leaves the thread nowhere to run")
+        return value
+
+
+class Activity(Strict):
+    """An instance of a block with its parameters."""
+
+    block: str = Field(
+        pattern=r"^([a-z][a-z0-9_]*|[A-Za-z_][\w.]*:[A-Za-z_]\w*)$",
+        description="a built-in block name, or 'package.module:ClassName'",
+    )
+    params: dict[str, Any] = Field(default_factory=dict, description="checked against the block's parameter model")
+    doc: str = ""
+
+
+class LatestPolicy(Strict):
+    """Readers see the most recent sample (a seqlock slot across threads)."""
+
+    kind: Literal["latest"] = "latest"
+    sync: Literal["lock_free", "none"] = Field(
+        "lock_free", description="'none' is a plain slot, only valid within one thread"
+    )
+
+
+class QueuePolicy(Strict):
+    """Readers see every sample in order, up to `capacity` (an SPSC ring per reader)."""
+
+    kind: Literal["queue"] = "queue"
+    capacity: int = Field(8, ge=1, le=65536)
+    overflow: Literal["drop_oldest", "drop_newest"] = "drop_oldest"
+    sync: Literal["lock_free", "none"] = "lock_free"
+
+
+StreamPolicy = Annotated[Union[LatestPolicy, QueuePolicy], Field(discriminator="kind")]
+
+
+class Stream(Strict):
+    """One writer port to one or more reader ports, with an explicit connection policy."""
+
+    writer: PortRef = Field(alias="from", description="the writing port, 'activity.port'")
+    readers: list[PortRef] = Field(alias="to", min_length=1, description="the reading ports")
+    policy: StreamPolicy = Field(default_factory=LatestPolicy)
+    max_age: Duration | None = Field(None, description="older samples count as missing")
+    doc: str = ""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _shorthands(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        data = dict(data)
+        writer = data.get("from")
+        if isinstance(writer, list):
+            raise PydanticCustomError(
+                "stream_one_writer",
+                "a stream has exactly one writer port, got {count}; make one stream per writer",
+                {"count": len(writer)},
+            )
+        if isinstance(data.get("to"), str):
+            data["to"] = [data["to"]]
+        if isinstance(data.get("policy"), str):
+            data["policy"] = {"kind": data["policy"]}
+        return data
+
+
+class Place(Strict):
+    doc: str = ""
+
+
+class Transition(Strict):
+    """Fires when every input place holds its arc weight in tokens."""
+
+    inputs: dict[PlaceName, Weight] = Field(alias="in", description="input places and arc weights")
+    outputs: dict[PlaceName, Weight] = Field(default_factory=dict, alias="out")
+    doc: str = ""
+
+    @field_validator("inputs", "outputs", mode="before")
+    @classmethod
+    def _list_means_weight_one(cls, value: Any) -> Any:
+        if isinstance(value, list):
+            return {name: 1 for name in value} if all(isinstance(n, str) for n in value) else value
+        return value
+
+
+class PetriNet(Strict):
+    """A place/transition net, fired to a steady state each coordination step."""
+
+    places: dict[PlaceName, Place | None]
+    transitions: dict[PlaceName, Transition]
+    marking: dict[PlaceName, Annotated[int, Field(ge=0, le=1_000_000)]] = Field(
+        default_factory=dict, description="initial tokens per place (others start empty)"
+    )
+    terminal: list[PlaceName] = Field(
+        default_factory=list,
+        description="places whose marking ends the net's work: a dead marking is expected there",
+    )
+    doc: str = ""
+
+
+class FlagMap(Strict):
+    """Binds flags to the places of one net (the four kinds of coordination.md)."""
+
+    net: Name
+    converting_sources: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="flag true: clear it and add a token (an event in)"
+    )
+    tracking_sources: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="the place holds one token while the flag is true (a level in)"
+    )
+    converting_sinks: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="a token in the place: remove it and set the flag (an event out)"
+    )
+    tracking_sinks: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="the flag is true while the place holds a token (a level out)"
+    )
+    doc: str = ""
+
+
+class Coordination(Strict):
+    """Petri nets and the flag maps through which the mediator drives every LCSM."""
+
+    flags: dict[Name, str | None] = Field(
+        default_factory=dict, description="coupling flags between nets, referenced as 'flags.NAME'"
+    )
+    nets: dict[Name, PetriNet] = Field(default_factory=dict)
+    flag_maps: dict[Name, FlagMap] = Field(default_factory=dict)
+
+
+class Composition(Strict):
+    """A whole hapticop system: what runs, where, how it is wired and coordinated."""
+
+    version: Literal[1] = Field(description="composition format version")
+    name: Name | None = None
+    doc: str = ""
+    threads: dict[Name, Thread] = Field(min_length=1)
+    activities: dict[Name, Activity] = Field(min_length=1)
+    streams: dict[Name, Stream] = Field(default_factory=dict)
+    coordination: Coordination = Field(default_factory=Coordination)
+
+    @field_validator("version", mode="before")
+    @classmethod
+    def _known_version(cls, value: Any) -> Any:
+        if value != VERSION:
+            raise PydanticCustomError(
+                "version",
+                "composition version {value!r} is not supported; this hapticop reads version {known}",
+                {"value": value, "known": VERSION},
+            )
+        return value
+
+
+# Where the named entries live; used to drop a broken entry and keep checking the rest.
+COLLECTIONS: tuple[tuple[str, ...], ...] = (
+    ("threads",),
+    ("activities",),
+    ("streams",),
+    ("coordination", "flags"),
+    ("coordination", "nets"),
+    ("coordination", "flag_maps"),
+)
+RESERVED_NAMES = frozenset({"threads", "system", "flags"})

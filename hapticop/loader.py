@@ -1,0 +1,114 @@
+"""From a YAML tree to a typed composition with every block resolved.
+
+Schema errors do not stop the checking: a broken entry (one thread, one activity...) is
+set aside and the rest is validated, so the user sees all mistakes at once. References to
+set-aside entries are not reported again as "unknown".
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+from pydantic import ValidationError
+
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Interface, Params
+from hapticop.blocks.registry import UnknownBlock, resolve
+from hapticop.description import COLLECTIONS, VERSION, Activity, Composition
+from hapticop.diagnostics import Diagnostic, Path
+from hapticop.validation.schema_errors import diagnostics_from
+
+
+@dataclass
+class ResolvedActivity:
+    name: str
+    spec: Activity
+    block: type[Block]
+    params: Params
+    interface: Interface
+
+
+@dataclass
+class Loaded:
+    """A composition as far as it could be read, plus what went wrong reading it."""
+
+    composition: Composition | None
+    activities: dict[str, ResolvedActivity] = field(default_factory=dict)
+    broken: set[tuple[str, str]] = field(default_factory=set)  # (collection, name) set aside
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+
+    def is_broken(self, collection: str, name: str) -> bool:
+        return (collection, name) in self.broken
+
+
+def load_tree(tree: dict) -> Loaded:
+    diagnostics: list[Diagnostic] = []
+    broken: set[tuple[str, str]] = set()
+    work = copy.deepcopy(tree)
+    composition = None
+    for _ in range(4):  # each pass sets aside the entries the previous one found broken
+        try:
+            composition = Composition.model_validate(work)
+            break
+        except ValidationError as error:
+            found = diagnostics_from(error, Composition)
+            diagnostics.extend(d for d in found if d not in diagnostics)
+            if not _set_aside(work, found, broken):
+                break
+    loaded = Loaded(composition=composition, broken=broken, diagnostics=diagnostics)
+    if composition is not None:
+        _resolve_activities(loaded)
+    return loaded
+
+
+def _set_aside(work: dict, found: list[Diagnostic], broken: set[tuple[str, str]]) -> bool:
+    """Remove the entries named by `found` from `work`; False when an error is not in one."""
+    for diagnostic in found:
+        if len(diagnostic.path) == 1 and diagnostic.rule in ("unknown-key", "bad-version"):
+            # A stray top-level key or an unsupported version: check the rest as version 1.
+            if diagnostic.rule == "unknown-key":
+                work.pop(diagnostic.path[0], None)
+            else:
+                work["version"] = VERSION
+            continue
+        entry = _entry_of(diagnostic.path)
+        if entry is None:
+            return False
+        collection, name = entry
+        container = work
+        for part in collection:
+            container = container.get(part) if isinstance(container, dict) else None
+        if not isinstance(container, dict):
+            return False
+        container.pop(name, None)
+        broken.add((".".join(collection), str(name)))
+    return True
+
+
+def _entry_of(path: Path) -> tuple[tuple[str, ...], str] | None:
+    for collection in sorted(COLLECTIONS, key=len, reverse=True):
+        n = len(collection)
+        if tuple(path[:n]) == collection and len(path) > n:
+            return collection, path[n]
+    return None
+
+
+def _resolve_activities(loaded: Loaded) -> None:
+    for name, spec in loaded.composition.activities.items():
+        path = ("activities", name)
+        try:
+            block = resolve(spec.block)
+        except UnknownBlock as error:
+            loaded.diagnostics.append(
+                Diagnostic(rule="unknown-block", message=error.reason, path=path + ("block",), hint=error.hint)
+            )
+            loaded.broken.add(("activities", name))
+            continue
+        try:
+            params = block.Params.model_validate(spec.params)
+        except ValidationError as error:
+            loaded.diagnostics.extend(diagnostics_from(error, block.Params, prefix=path + ("params",)))
+            loaded.broken.add(("activities", name))
+            continue
+        loaded.activities[name] = ResolvedActivity(name, spec, block, params, block.interface(params))

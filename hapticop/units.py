@@ -1,0 +1,79 @@
+"""Durations and rates written the way engineers write them: `1ms`, `15Hz`, `66.667ms`.
+
+Compositions state cycle times either as a period or as a frequency. Both become one
+integer number of nanoseconds, the unit `clock_nanosleep` works in, so nothing downstream
+ever compares floats of mixed units.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Any
+
+from pydantic import BeforeValidator, PlainSerializer, WithJsonSchema
+from pydantic_core import PydanticCustomError
+
+NS_PER_UNIT = {"ns": 1, "us": 1_000, "µs": 1_000, "ms": 1_000_000, "s": 1_000_000_000}
+HZ_PER_UNIT = {"Hz": 1.0, "kHz": 1_000.0}
+UNITS_TEXT = "ns, us, ms, s, Hz or kHz"
+
+_QUANTITY = re.compile(r"^\s*(?P<number>[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\s*(?P<unit>[A-Za-zµ]+)\s*$")
+_NUMBER = re.compile(r"^\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?")
+
+
+def parse_duration_ns(text: str) -> int:
+    """Parse `1ms`, `66.667ms` or `15Hz` into whole nanoseconds (rounded to the nearest)."""
+    match = _QUANTITY.match(text)
+    if not match:
+        raise ValueError(f"'{text}' is not a number followed by a unit ({UNITS_TEXT})")
+    number = float(_NUMBER.match(text).group(0))
+    unit = match.group("unit")
+    if unit in NS_PER_UNIT:
+        ns = number * NS_PER_UNIT[unit]
+    elif unit in HZ_PER_UNIT:
+        if number == 0:
+            raise ValueError(f"'{text}' is a rate of zero; a cycle needs a positive rate")
+        ns = 1e9 / (number * HZ_PER_UNIT[unit])
+    else:
+        raise ValueError(f"'{unit}' is not a unit of time or rate ({UNITS_TEXT})")
+    if ns < 1:
+        raise ValueError(f"'{text}' is shorter than one nanosecond")
+    return round(ns)
+
+
+def format_duration(ns: int) -> str:
+    """The shortest faithful text for a duration, for messages and reports."""
+    for unit, scale in (("s", 10**9), ("ms", 10**6), ("us", 10**3)):
+        if ns >= scale:
+            return f"{ns / scale:.6g}{unit}"
+    return f"{ns}ns"
+
+
+def _coerce_duration(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, str):
+        raise PydanticCustomError(
+            "duration_unit",
+            "a duration needs a unit: write it as text such as '1ms', '66.667ms' or '15Hz' "
+            "(got {value!r})",
+            {"value": value},
+        )
+    try:
+        return parse_duration_ns(value)
+    except ValueError as error:
+        raise PydanticCustomError("duration", "{reason}", {"reason": str(error)}) from None
+
+
+# A duration in nanoseconds, written in YAML with its unit.
+Duration = Annotated[
+    int,
+    BeforeValidator(_coerce_duration),
+    PlainSerializer(format_duration, return_type=str),
+    WithJsonSchema(
+        {
+            "type": "string",
+            "pattern": r"^\s*([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?\s*(ns|us|µs|ms|s|Hz|kHz)\s*$",
+            "description": "a period or a rate with its unit: '1ms', '66.667ms', '15Hz', '1kHz'",
+            "examples": ["1ms", "15Hz", "66.667ms"],
+        }
+    ),
+]

@@ -1,0 +1,145 @@
+"""Turning pydantic's validation errors into diagnostics a person can act on.
+
+pydantic knows what was wrong; this module adds where (the YAML path, with union tags
+removed), what was expected, and a hint such as the key that was probably meant.
+"""
+
+from __future__ import annotations
+
+import difflib
+import types
+import typing
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from hapticop.diagnostics import Diagnostic, Path
+
+
+def diagnostics_from(error: ValidationError, model: type[BaseModel], prefix: Path = ()) -> list[Diagnostic]:
+    found = []
+    for item in error.errors(include_url=False):
+        loc = _clean_loc(item["loc"])
+        found.append(_one(item, loc, model, prefix))
+    return found
+
+
+def _clean_loc(loc: tuple) -> Path:
+    """Drop the tags pydantic inserts for unions and validators (they are not YAML keys)."""
+    cleaned = []
+    for part in loc:
+        if isinstance(part, str) and ("[" in part or part in ("latest", "queue") and cleaned and cleaned[-1] == "policy"):
+            continue
+        cleaned.append(part)
+    return tuple(cleaned)
+
+
+def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnostic:
+    kind = item["type"]
+    value = item.get("input")
+    path = prefix + loc
+    if kind == "extra_forbidden":
+        allowed = allowed_keys(model, loc[:-1])
+        close = difflib.get_close_matches(str(loc[-1]), allowed, n=1, cutoff=0.6)
+        hint = f"did you mean '{close[0]}'?" if close else ""
+        return Diagnostic(
+            rule="unknown-key",
+            message=f"unknown key '{loc[-1]}'",
+            path=path,
+            expected=f"one of: {', '.join(allowed)}" if allowed else "",
+            hint=hint,
+        )
+    if kind == "missing":
+        return Diagnostic(rule="missing-key", message=f"missing required key '{loc[-1]}'", path=path)
+    if kind == "literal_error":
+        expected = item.get("ctx", {}).get("expected", "")
+        return Diagnostic(rule="bad-value", message=f"{value!r} is not allowed", path=path, expected=expected)
+    if kind == "union_tag_invalid":
+        expected = item.get("ctx", {}).get("expected_tags", "")
+        return Diagnostic(rule="bad-value", message=f"unknown kind {item['ctx'].get('tag')!r}", path=path, expected=expected)
+    if kind == "string_pattern_mismatch":
+        pattern = item.get("ctx", {}).get("pattern", "")
+        return Diagnostic(
+            rule="bad-name",
+            message=f"{value!r} is not a valid {_what_pattern(pattern)}",
+            path=path,
+            expected=_pattern_expected(pattern),
+        )
+    rule = "bad-value"
+    custom = {"priority_99": "priority-99", "duration": "bad-duration", "duration_unit": "bad-duration",
+              "version": "bad-version", "stream_one_writer": "stream-writers"}
+    rule = custom.get(kind, rule)
+    message = item["msg"]
+    if kind not in custom and value is not None and not isinstance(value, (dict, list)):
+        message = f"{message} (got {value!r})"
+    return Diagnostic(rule=rule, message=message, path=path)
+
+
+def _what_pattern(pattern: str) -> str:
+    if "\\." in pattern and "(" in pattern:
+        return "flag name"
+    if "\\." in pattern:
+        return "port reference"
+    if ":" in pattern:
+        return "block type"
+    return "name"
+
+
+def _pattern_expected(pattern: str) -> str:
+    return {
+        "flag name": "a dotted flag name such as 'falcon.lcsm.running'",
+        "port reference": "'activity.port' in lower_snake_case",
+        "block type": "a built-in block name or 'package.module:ClassName'",
+    }.get(_what_pattern(pattern), "letters, digits and '_', starting with a letter "
+          "(lower_snake_case for threads, activities, streams, nets)")
+
+
+def allowed_keys(model: type[BaseModel], path: Path) -> list[str]:
+    """The keys the model accepts at `path` (for 'did you mean' hints)."""
+    annotation: Any = model
+    for part in path:
+        annotation = _step(annotation, part)
+        if annotation is None:
+            return []
+    models = [m for m in _models_in(annotation)]
+    keys: list[str] = []
+    for m in models:
+        for name, info in m.model_fields.items():
+            key = info.alias or name
+            if key not in keys:
+                keys.append(key)
+    return keys
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    annotation = _unwrap(annotation)
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        return [m for arg in typing.get_args(annotation) for m in _models_in(arg)]
+    return []
+
+
+def _unwrap(annotation: Any) -> Any:
+    while typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    return annotation
+
+
+def _step(annotation: Any, part: Any) -> Any:
+    annotation = _unwrap(annotation)
+    for model in _models_in(annotation):
+        for name, info in model.model_fields.items():
+            if part in (name, info.alias):
+                return info.annotation
+    origin = typing.get_origin(annotation)
+    if origin is dict:
+        return typing.get_args(annotation)[1]
+    if origin is list:
+        return typing.get_args(annotation)[0]
+    if origin in (typing.Union, types.UnionType):
+        for arg in typing.get_args(annotation):
+            stepped = _step(arg, part)
+            if stepped is not None:
+                return stepped
+    return None

@@ -1,0 +1,216 @@
+"""Checks of deployment and dataflow: threads, schedules, activities, ports and streams.
+
+Each check reads the composition graph and yields diagnostics; none raises, so a file's
+mistakes are all reported in one run.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections import defaultdict
+from typing import Iterator
+
+from hapticop import graph as G
+from hapticop.description import RESERVED_NAMES
+from hapticop.diagnostics import Diagnostic, Severity
+from hapticop.units import format_duration
+
+Check = Iterator[Diagnostic]
+
+
+def _suggest(name: str, candidates) -> str:
+    close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+    return f"did you mean '{close[0]}'?" if close else ""
+
+
+def unknown_activities(cg: G.CompositionGraph) -> Check:
+    declared = [n[1] for n, _ in cg.nodes_of("activity")]
+    for node, _ in cg.nodes_of("activity", declared=False):
+        for u, v, data in list(cg.g.in_edges(node, data=True)) + list(cg.g.out_edges(node, data=True)):
+            if data["kind"] in ("schedules",):
+                yield Diagnostic("unknown-activity", f"unknown activity '{node[1]}'", data["path"],
+                                 hint=_suggest(node[1], declared) or "declare it under 'activities'")
+        for pnode in cg.g.nodes:
+            if pnode[0] == "port" and pnode[1] == node[1]:
+                for _, _, data in list(cg.g.in_edges(pnode, data=True)) + list(cg.g.out_edges(pnode, data=True)):
+                    yield Diagnostic("unknown-activity", f"unknown activity '{node[1]}' in port reference "
+                                     f"'{node[1]}.{pnode[2]}'", data["path"],
+                                     hint=_suggest(node[1], declared) or "declare it under 'activities'")
+
+
+def reserved_names(cg: G.CompositionGraph) -> Check:
+    for node, data in cg.nodes_of("activity"):
+        if node[1] in RESERVED_NAMES:
+            yield Diagnostic("reserved-name", f"'{node[1]}' cannot name an activity: it begins the names of "
+                             f"{'thread' if node[1] == 'threads' else node[1]} flags", data["path"],
+                             hint="rename the activity")
+
+
+def schedules(cg: G.CompositionGraph) -> Check:
+    """Schedule 0 exists on every thread; no activity twice in a schedule or on two threads."""
+    for node, data in cg.nodes_of("thread"):
+        spec = data["spec"]
+        if 0 not in spec.schedules:
+            yield Diagnostic("schedule-0", f"thread '{node[1]}' has no schedule 0, the one selected at start",
+                             data["path"] + ("schedules",), hint="add '0: []' to start with its activities disabled")
+        for sid, members in spec.schedules.items():
+            seen = set()
+            for index, member in enumerate(members):
+                if member in seen:
+                    yield Diagnostic("schedule-repeat", f"activity '{member}' appears twice in schedule {sid}",
+                                     data["path"] + ("schedules", sid, index))
+                seen.add(member)
+    placed: dict[str, list[tuple[str, tuple]]] = defaultdict(list)
+    for u, v, data in cg.edges_of("schedules"):
+        placed[v[1]].append((u[1], data["path"]))
+    for activity_name, uses in placed.items():
+        threads = sorted({t for t, _ in uses})
+        if len(threads) > 1:
+            second = next(path for t, path in uses if t == threads[1])
+            yield Diagnostic("activity-two-threads",
+                             f"activity '{activity_name}' is scheduled on threads '{threads[0]}' and '{threads[1]}'",
+                             second, hint="an activity belongs to one thread; its state is not shared between them")
+    for node, data in cg.nodes_of("activity"):
+        if node[1] not in placed:
+            yield Diagnostic("activity-unscheduled", f"activity '{node[1]}' is in no thread's schedule, so it never runs",
+                             data["path"], severity=Severity.WARNING)
+
+
+def main_thread_and_mediator(cg: G.CompositionGraph) -> Check:
+    comp = cg.loaded.composition
+    mains = [name for name, spec in comp.threads.items() if spec.deploy == "main"]
+    if not mains and not any(cg.loaded.is_broken("threads", n) for n in comp.threads) and not any(
+        c == "threads" for c, _ in cg.loaded.broken
+    ):
+        yield Diagnostic("main-thread", "no thread has 'deploy: main'; the main thread runs the application mediator",
+                         ("threads",), hint="mark the mediator's thread with 'deploy: main'")
+    for extra in mains[1:]:
+        yield Diagnostic("main-thread", f"threads '{mains[0]}' and '{extra}' both have 'deploy: main'; a process has "
+                         "one main thread", ("threads", extra, "deploy"))
+    mediators = [name for name, r in cg.loaded.activities.items() if r.spec.block == "mediator"]
+    if not mediators and not any(c == "activities" for c, _ in cg.loaded.broken):
+        yield Diagnostic("mediator", "no activity uses block 'mediator'; every composition has one application "
+                         "mediator to own its coordination", ("activities",))
+    for extra in mediators[1:]:
+        yield Diagnostic("mediator", f"activities '{mediators[0]}' and '{extra}' are both mediators; "
+                         "decisions have one owner", ("activities", extra, "block"))
+    if len(mains) == 1 and mediators:
+        spec = comp.threads[mains[0]]
+        for sid, members in spec.schedules.items():
+            if mediators[0] not in members:
+                yield Diagnostic("mediator", f"schedule {sid} of main thread '{mains[0]}' lacks the mediator "
+                                 f"'{mediators[0]}'; it must run in every schedule of the main thread",
+                                 ("threads", mains[0], "schedules", sid))
+        wrong = cg.threads_of(mediators[0]) - {mains[0]}
+        for name in sorted(wrong):
+            yield Diagnostic("mediator", f"the mediator '{mediators[0]}' is scheduled on thread '{name}'; it runs "
+                             f"only on the main thread '{mains[0]}'", ("threads", name, "schedules"))
+
+
+def rates(cg: G.CompositionGraph) -> Check:
+    for u, v, data in cg.edges_of("schedules"):
+        if cg.g.nodes[v].get("declared") is False:
+            continue
+        resolved = cg.g.nodes[v]["resolved"]
+        rate = resolved.interface.rate
+        period = cg.g.nodes[u]["spec"].period
+        if rate is not None and not rate.admits(period):
+            yield Diagnostic(
+                "rate", f"activity '{v[1]}' ({resolved.spec.block}) cannot run at {1e9 / period:.6g} Hz "
+                f"(thread '{u[1]}' period {format_duration(period)})", data["path"],
+                expected=f"a thread rate of {rate.describe()}", hint=rate.why,
+            )
+
+
+def streams(cg: G.CompositionGraph) -> Check:
+    """Ports exist with the right direction, types agree, one writer per input."""
+    for pnode, _ in cg.nodes_of("port", declared=False):
+        if cg.g.nodes.get(G.activity(pnode[1]), {}).get("declared") is False:
+            continue  # reported as an unknown activity
+        ports = cg.loaded.activities[pnode[1]].interface
+        for u, v, data in list(cg.g.in_edges(pnode, data=True)) + list(cg.g.out_edges(pnode, data=True)):
+            candidates = ports.outputs if data["kind"] == "writes" else ports.inputs
+            yield Diagnostic("unknown-port", f"activity '{pnode[1]}' ({cg.loaded.activities[pnode[1]].spec.block}) "
+                             f"has no {'output' if data['kind'] == 'writes' else 'input'} port '{pnode[2]}'",
+                             data["path"], expected=", ".join(candidates) or "(none)",
+                             hint=_suggest(pnode[2], candidates))
+
+    for snode, sdata in cg.nodes_of("stream"):
+        spec = sdata["spec"]
+        writers = [(u, d) for u, _, d in cg.g.in_edges(snode, data=True) if cg.g.nodes[u].get("declared", True)]
+        readers = [(v, d) for _, v, d in cg.g.out_edges(snode, data=True) if cg.g.nodes[v].get("declared", True)]
+        writer_port = None
+        for wnode, wdata in writers:
+            if cg.g.nodes[wnode]["direction"] != "output":
+                yield Diagnostic("port-direction", f"'{wnode[1]}.{wnode[2]}' is an input port; a stream is written "
+                                 "by an output port", wdata["path"])
+            else:
+                writer_port = (wnode, cg.g.nodes[wnode]["port"])
+        seen = set()
+        for rnode, rdata in readers:
+            if rnode in seen:
+                yield Diagnostic("stream-reader-twice", f"'{rnode[1]}.{rnode[2]}' is listed twice", rdata["path"])
+            seen.add(rnode)
+            if cg.g.nodes[rnode]["direction"] != "input":
+                yield Diagnostic("port-direction", f"'{rnode[1]}.{rnode[2]}' is an output port; a stream is read "
+                                 "by input ports", rdata["path"])
+                continue
+            if writer_port is None:
+                continue
+            wnode, wport = writer_port
+            rport = cg.g.nodes[rnode]["port"]
+            for what, a, b in (("dtype", wport.dtype, rport.dtype), ("shape", wport.shape, rport.shape),
+                               ("unit", wport.unit, rport.unit)):
+                if a != b:
+                    yield Diagnostic(
+                        f"stream-{what}", f"{what} mismatch: '{wnode[1]}.{wnode[2]}' writes {wport.describe()}, "
+                        f"'{rnode[1]}.{rnode[2]}' reads {rport.describe()}", rdata["path"],
+                        expected=f"{what} {b!r} as the reader declares", hint="connect ports of the same kind",
+                    )
+                    break
+            yield from _thread_safety(cg, snode, spec, wnode, rnode, rdata)
+
+    for pnode, pdata in cg.nodes_of("port"):
+        if pdata["direction"] != "input":
+            continue
+        incoming = [(u, d) for u, _, d in cg.g.in_edges(pnode, data=True) if d["kind"] == "reads"]
+        if len(incoming) > 1:
+            names = sorted(u[1] for u, _ in incoming)
+            for u, data in incoming[1:]:
+                yield Diagnostic("port-writers", f"input '{pnode[1]}.{pnode[2]}' is written by {len(incoming)} "
+                                 f"streams ({', '.join(names)}); an input has one writer", data["path"])
+        port_spec = pdata["port"]
+        if not incoming and port_spec.required and cg.g.nodes[G.activity(pnode[1])].get("declared", True):
+            if any(c == "streams" for c, _ in cg.loaded.broken):
+                continue  # the stream that fed it may be the broken one
+            yield Diagnostic("input-unconnected", f"required input '{pnode[1]}.{pnode[2]}' "
+                             f"({port_spec.describe()}) is not connected", ("activities", pnode[1]),
+                             hint="add a stream whose 'to' lists it")
+
+
+def _thread_safety(cg, snode, spec, wnode, rnode, rdata) -> Check:
+    writer_threads = cg.threads_of(wnode[1])
+    reader_threads = cg.threads_of(rnode[1])
+    if not writer_threads or not reader_threads:
+        return
+    if writer_threads != reader_threads and spec.policy.sync == "none":
+        yield Diagnostic(
+            "stream-thread-safety",
+            f"stream '{snode[1]}' crosses from thread '{min(writer_threads)}' to '{min(reader_threads)}' "
+            "with 'sync: none', which is only safe within one thread",
+            ("streams", snode[1], "policy", "sync"), hint="use 'sync: lock_free' (the default)",
+        )
+
+
+def cpus(cg: G.CompositionGraph) -> Check:
+    import os
+
+    available = os.cpu_count() or 1
+    for node, data in cg.nodes_of("thread"):
+        for index, cpu in enumerate(data["spec"].cpus or []):
+            if cpu >= available:
+                yield Diagnostic("cpu-affinity", f"CPU {cpu} does not exist on this machine ({available} CPUs)",
+                                 data["path"] + ("cpus", index), severity=Severity.WARNING)
+
+
+CHECKS = (unknown_activities, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus)
