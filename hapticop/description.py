@@ -27,6 +27,11 @@ FlagName = Annotated[
     Field(pattern=r"^[a-z][a-z0-9_]*(\.[a-z0-9_]+)+$", description="dotted flag name, e.g. 'falcon.lcsm.running'"),
 ]
 Weight = Annotated[int, Field(ge=1, le=1_000_000)]
+StartPolicy = Literal["auto", "on_request"]
+START_DOC = (
+    "'auto': the LCSM goes on to running as soon as it is configured; 'on_request': it waits in "
+    "capability configuration until a flag map sets its 'lcsm.request_running' flag"
+)
 
 
 class Strict(BaseModel):
@@ -51,6 +56,7 @@ class Thread(Strict):
     schedules: dict[Annotated[int, Field(ge=0, le=255)], list[Name]] = Field(
         description="activity-scheduler sets by ID; ID 0 is selected at start"
     )
+    start: StartPolicy = Field("auto", description=START_DOC)
     doc: str = ""
 
     @field_validator("priority")
@@ -82,6 +88,7 @@ class Activity(Strict):
         description="a built-in block name, or 'package.module:ClassName'",
     )
     params: dict[str, Any] = Field(default_factory=dict, description="checked against the block's parameter model")
+    start: StartPolicy = Field("auto", description=START_DOC)
     doc: str = ""
 
 

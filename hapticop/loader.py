@@ -17,7 +17,7 @@ from hapticop.blocks.interface import Interface, Params
 from hapticop.blocks.registry import UnknownBlock, resolve
 from hapticop.description import COLLECTIONS, VERSION, Activity, Composition
 from hapticop.diagnostics import Diagnostic, Path
-from hapticop.validation.schema_errors import diagnostics_from
+from hapticop.model_errors import diagnostics_from
 
 
 @dataclass

@@ -121,6 +121,22 @@ def flags(cg: G.CompositionGraph) -> Check:
                              hint=f"add a sink for '{name}' to a flag map")
 
 
+def start_on_request(cg: G.CompositionGraph) -> Check:
+    """An owner that waits for 'request_running' needs a flag map that sends it."""
+    if any(c.startswith("coordination") for c, _ in cg.loaded.broken):
+        return
+    owners = [(f"threads.{n[1]}", d["spec"], d["path"]) for n, d in cg.nodes_of("thread")]
+    owners += [(n[1], d["spec"], d["path"]) for n, d in cg.nodes_of("activity")]
+    for prefix, spec, path in owners:
+        name = f"{prefix}.lcsm.request_running"
+        if spec.start == "on_request" and not any(
+            d["kind"] == "sink" for _, _, d in cg.g.in_edges(G.flag(name), data=True)
+        ):
+            yield Diagnostic("start-never-requested", f"'{prefix}' starts on request, but no flag map writes "
+                             f"'{name}', so it would never run", path + ("start",),
+                             hint=f"add a sink for '{name}', or use 'start: auto'")
+
+
 def _flag_name_help(name: str) -> str:
     return ("flags are '<activity>.lcsm.<state|progress|request>', '<activity>.<declared flag>', "
             "'threads.<thread>.lcsm.*', 'threads.<thread>.schedule.<id>', "
@@ -144,7 +160,8 @@ def reachability(cg: G.CompositionGraph, state_limit: int = DEFAULT_STATE_LIMIT)
                              "so boundedness and dead markings are not proven", path, severity=Severity.WARNING,
                              hint="raise --state-limit, or split the net")
         for finding in analysis.findings:
-            trace = ", ".join(finding.trace) or "(the initial marking)"
+            trace = ", ".join(finding.trace)
+            after = f"after [{trace}]" if trace else "in the initial marking"
             marking = _marking_text(finding.marking)
             if finding.kind == "unbounded":
                 yield Diagnostic("net-unbounded", f"net '{name}': place '{finding.place}' is unbounded; the steps "
@@ -152,10 +169,15 @@ def reachability(cg: G.CompositionGraph, state_limit: int = DEFAULT_STATE_LIMIT)
                                  path + ("places", finding.place),
                                  hint="consume the token again, or guard the producing transition with a place it empties")
             elif finding.kind == "dead":
-                yield Diagnostic("net-dead-marking", f"net '{name}': dead marking {marking} after [{trace}]; no "
+                yield Diagnostic("net-dead-marking", f"net '{name}': dead marking {marking} {after}; no "
                                  "transition can fire again and no terminal place is marked", path,
                                  hint="add the missing transition, or list the place under 'terminal' if the net "
                                  "is meant to end there")
+            elif finding.kind == "stuck":
+                yield Diagnostic("net-terminal-unreachable", f"net '{name}': {after}, the marking {marking} "
+                                 f"can never reach a terminal place ({', '.join(spec.terminal)})", path,
+                                 hint="the net can still fire, but never finishes: check the transitions that "
+                                 "lead to the terminal places")
             else:
                 yield Diagnostic("net-livelock", f"net '{name}': transitions [{trace}] can fire in a cycle from "
                                  f"{marking} without input, so a coordination step never reaches a steady state", path)
@@ -179,4 +201,4 @@ def _environment(cg: G.CompositionGraph, net_name: str) -> Environment:
     return Environment(frozenset(tracking), frozenset(converting - tracking), frozenset(emits), labels)
 
 
-CHECKS = (nets_and_places, flags, reachability)
+CHECKS = (nets_and_places, flags, start_on_request, reachability)

@@ -41,7 +41,7 @@ class Environment:
 
 @dataclass
 class Finding:
-    kind: str  # "unbounded", "dead", "livelock"
+    kind: str  # "unbounded", "dead", "stuck", "livelock"
     marking: dict[str, int]
     trace: list[str]
     place: str = ""
@@ -100,10 +100,19 @@ def explore(
             node = parent[node]
         return steps[::-1]
 
+    event_set = set(events)
+
     def covered_ancestor(marking: tuple, via: tuple) -> int | None:
+        """A strictly covered ancestor proves a pumpable sequence (Karp and Miller).
+
+        Event places must hold the same count at both ends: an event is offered only
+        while its place is empty, so only then does the sequence repeat unchanged.
+        """
         node: tuple | None = via
         while node is not None:
-            if all(a <= b for a, b in zip(node, marking)) and node != marking:
+            if node != marking and all(
+                a == b if k in event_set else a <= b for k, (a, b) in enumerate(zip(node, marking))
+            ):
                 grown = [k for k, (a, b) in enumerate(zip(node, marking)) if b > a]
                 return grown[0]
             node = parent[node]
@@ -139,7 +148,7 @@ def explore(
             parent[nxt] = marking
             grown = covered_ancestor(nxt, marking)
             if grown is not None:
-                findings.append(Finding("unbounded", dict(zip(names, nxt)), trace_to(nxt), place=names[grown]))
+                findings.append(Finding("unbounded", {n: v for n, v in zip(names, nxt) if v}, trace_to(nxt), place=names[grown]))
                 return Analysis(graph.number_of_nodes(), False, findings)
             if graph.number_of_nodes() >= state_limit:
                 complete = False
@@ -150,20 +159,29 @@ def explore(
     if not complete:
         return Analysis(graph.number_of_nodes(), False, findings)
 
-    firing = [n for n in graph if any(d["transition"] for _, _, d in graph.out_edges(n, data=True))]
-    can_fire_again: set[tuple] = set(firing)
-    stack = list(firing)
-    while stack:
-        for before in graph.predecessors(stack.pop()):
-            if before not in can_fire_again:
-                can_fire_again.add(before)
-                stack.append(before)
-    for node in graph:
-        if node in can_fire_again or any(node[k] > 0 for k in terminal_positions):
-            continue
+    def backwards_from(targets: list[tuple]) -> set[tuple]:
+        reached, stack = set(targets), list(targets)
+        while stack:
+            for before in graph.predecessors(stack.pop()):
+                if before not in reached:
+                    reached.add(before)
+                    stack.append(before)
+        return reached
+
+    def is_terminal(node: tuple) -> bool:
+        return any(node[k] > 0 for k in terminal_positions)
+
+    # `graph` was built breadth first, so iteration order is by distance from the start.
+    can_fire_again = backwards_from([n for n in graph if any(d["transition"] for *_, d in graph.out_edges(n, data=True))])
+    dead = [n for n in graph if n not in can_fire_again and not is_terminal(n)]
+    for node in dead[:3]:
         findings.append(Finding("dead", {n: v for n, v in zip(names, node) if v}, trace_to(node)))
-        if sum(f.kind == "dead" for f in findings) >= 3:
-            break
+    if terminal_positions and not dead:
+        can_finish = backwards_from([n for n in graph if is_terminal(n)])
+        stuck = [n for n in graph if n not in can_finish]
+        if stuck:
+            node = stuck[0]
+            findings.append(Finding("stuck", {n: v for n, v in zip(names, node) if v}, trace_to(node)))
 
     transition_only = nx.DiGraph(
         (u, v, d) for u, v, d in graph.edges(data=True) if d["transition"] is True

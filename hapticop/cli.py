@@ -1,0 +1,138 @@
+"""The `hapticop` command line."""
+
+from __future__ import annotations
+
+import os
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from hapticop.diagnostics import Report, reports_to_json
+from hapticop.validation import validate_path
+from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
+
+app = typer.Typer(
+    help="Declarative real-time dataflow for haptic teleoperation.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+SYSTEMS_DIR = Path("systems")
+
+
+class OutputFormat(str, Enum):
+    text = "text"
+    json = "json"
+
+
+class GraphFormat(str, Enum):
+    svg = "svg"
+    png = "png"
+    dot = "dot"
+
+
+def _system_files() -> list[Path]:
+    return sorted(p for p in SYSTEMS_DIR.glob("*.y*ml") if p.suffix in (".yaml", ".yml"))
+
+
+@app.command()
+def validate(
+    files: Optional[list[Path]] = typer.Argument(None, help="composition files (default: every file in systems/)"),
+    format: OutputFormat = typer.Option(OutputFormat.text, "--format", help="text for people, json for editors and CI"),
+    state_limit: int = typer.Option(DEFAULT_STATE_LIMIT, min=100, help="markings to explore per Petri net"),
+    strict: bool = typer.Option(False, help="treat warnings as errors"),
+) -> None:
+    """Check composition files without running anything; exit 1 on any error."""
+    paths = list(files or _system_files())
+    if not paths:
+        typer.echo(f"no composition files given and none in {SYSTEMS_DIR}/", err=True)
+        raise typer.Exit(2)
+    reports: list[Report] = [validate_path(p, state_limit).report for p in paths]
+    if format is OutputFormat.json:
+        typer.echo(reports_to_json(reports))
+    else:
+        for report in reports:
+            for diagnostic in report.sorted():
+                typer.echo(diagnostic.to_text())
+            status = "ok" if report.ok else "FAILED"
+            typer.echo(f"{report.file}: {status} ({len(report.errors)} errors, {len(report.warnings)} warnings)")
+    failed = any(not r.ok or (strict and r.warnings) for r in reports)
+    raise typer.Exit(1 if failed else 0)
+
+
+@app.command()
+def graph(
+    file: Path = typer.Argument(..., help="composition file"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="where to write (default: FILE with the format's suffix)"),
+    format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
+) -> None:
+    """Draw a composition: threads with their activities, streams, nets and flag maps."""
+    from hapticop.render import RenderError, render, to_dot
+
+    validated = validate_path(file)
+    if validated.graph is None or validated.graph.loaded.composition is None:
+        for diagnostic in validated.report.sorted():
+            typer.echo(diagnostic.to_text(), err=True)
+        typer.echo(f"{file}: cannot draw a file that does not load", err=True)
+        raise typer.Exit(1)
+    if not validated.report.ok:
+        typer.echo(f"{file}: note: the file has {len(validated.report.errors)} errors; drawing what loaded", err=True)
+    dot_text = to_dot(validated.graph)
+    if format is GraphFormat.dot and output is None:
+        typer.echo(dot_text, nl=False)
+        return
+    target = output or file.with_suffix(f".{format.value}")
+    if format is GraphFormat.dot:
+        target.write_text(dot_text)
+    else:
+        try:
+            render(dot_text, target, format.value)
+        except RenderError as error:
+            typer.echo(f"error: {error}", err=True)
+            raise typer.Exit(1) from None
+    typer.echo(f"wrote {target}")
+
+
+@app.command()
+def schema(
+    check: bool = typer.Option(False, help="exit 1 if schemas/composition.schema.json is not current"),
+    write: bool = typer.Option(False, help="regenerate schemas/composition.schema.json"),
+) -> None:
+    """Print (or check, or write) the JSON Schema of composition files."""
+    from hapticop.schema import SCHEMA_FILE, schema_text
+
+    text = schema_text()
+    if check:
+        current = SCHEMA_FILE.read_text() if SCHEMA_FILE.exists() else ""
+        if current != text:
+            typer.echo(f"{SCHEMA_FILE} is out of date; run `hapticop schema --write`", err=True)
+            raise typer.Exit(1)
+        typer.echo(f"{SCHEMA_FILE} is current")
+    elif write:
+        SCHEMA_FILE.parent.mkdir(parents=True, exist_ok=True)
+        SCHEMA_FILE.write_text(text)
+        typer.echo(f"wrote {SCHEMA_FILE}")
+    else:
+        typer.echo(text, nl=False)
+
+
+def main() -> None:
+    """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
+    try:
+        app()
+    except KeyboardInterrupt:
+        sys.exit(130)
+    except Exception as error:  # noqa: BLE001 - the last line of defence for the user interface
+        if os.environ.get("HAPTICOP_DEBUG"):
+            raise
+        print(f"hapticop: internal error: {type(error).__name__}: {error}\n"
+              "  set HAPTICOP_DEBUG=1 to see where, and please report it", file=sys.stderr)
+        sys.exit(3)
+
+
+if __name__ == "__main__":
+    main()
