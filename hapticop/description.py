@@ -128,18 +128,23 @@ class Stream(Strict):
         if not isinstance(data, dict):
             return data
         data = dict(data)
-        writer = data.get("from")
-        if isinstance(writer, list):
-            raise PydanticCustomError(
-                "stream_one_writer",
-                "a stream has exactly one writer port, got {count}; make one stream per writer",
-                {"count": len(writer)},
-            )
         if isinstance(data.get("to"), str):
             data["to"] = [data["to"]]
         if isinstance(data.get("policy"), str):
             data["policy"] = {"kind": data["policy"]}
         return data
+
+
+    @field_validator("writer", mode="before")
+    @classmethod
+    def _one_writer(cls, value: Any) -> Any:
+        if isinstance(value, list):
+            raise PydanticCustomError(
+                "stream_one_writer",
+                "a stream has exactly one writer port, got {count}; make one stream per writer",
+                {"count": len(value)},
+            )
+        return value
 
 
 class Place(Strict):
@@ -222,8 +227,8 @@ class Composition(Strict):
         if value != VERSION:
             raise PydanticCustomError(
                 "version",
-                "composition version {value!r} is not supported; this hapticop reads version {known}",
-                {"value": value, "known": VERSION},
+                "composition version {value} is not supported; this hapticop reads version {known}",
+                {"value": repr(value), "known": VERSION},
             )
         return value
 

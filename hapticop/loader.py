@@ -53,7 +53,12 @@ def load_tree(tree: dict) -> Loaded:
             break
         except ValidationError as error:
             found = diagnostics_from(error, Composition)
+            emptied = {tuple(c.split(".")) for c, _ in broken}
+            # Setting entries aside may empty a collection; that is not a second mistake.
+            found = [d for d in found if tuple(d.path) not in emptied]
             diagnostics.extend(d for d in found if d not in diagnostics)
+            if not found:
+                break
             if not _set_aside(work, found, broken):
                 break
     loaded = Loaded(composition=composition, broken=broken, diagnostics=diagnostics)

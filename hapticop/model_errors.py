@@ -7,6 +7,7 @@ removed), what was expected, and a hint such as the key that was probably meant.
 from __future__ import annotations
 
 import difflib
+import re
 import types
 import typing
 from typing import Any
@@ -24,11 +25,16 @@ def diagnostics_from(error: ValidationError, model: type[BaseModel], prefix: Pat
     return found
 
 
+_TAG = re.compile(r"^([A-Za-z_][\w-]*\[.*\]|\[key\])$")
+
+
 def _clean_loc(loc: tuple) -> Path:
     """Drop the tags pydantic inserts for unions and validators (they are not YAML keys)."""
-    cleaned = []
-    for part in loc:
-        if isinstance(part, str) and ("[" in part or part in ("latest", "queue") and cleaned and cleaned[-1] == "policy"):
+    cleaned: list = []
+    for index, part in enumerate(loc):
+        is_tag = isinstance(part, str) and bool(_TAG.match(part))
+        is_policy_tag = part in ("latest", "queue") and cleaned and cleaned[-1] == "policy" and index < len(loc) - 1
+        if is_tag or is_policy_tag:
             continue
         cleaned.append(part)
     return tuple(cleaned)
@@ -38,19 +44,20 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
     kind = item["type"]
     value = item.get("input")
     path = prefix + loc
+    name = str(item["loc"][-1]) if item["loc"] else "<document>"
     if kind == "extra_forbidden":
-        allowed = allowed_keys(model, loc[:-1])
-        close = difflib.get_close_matches(str(loc[-1]), allowed, n=1, cutoff=0.6)
+        allowed = allowed_keys(model, tuple(loc[:-1]))
+        close = difflib.get_close_matches(name, allowed, n=1, cutoff=0.6)
         hint = f"did you mean '{close[0]}'?" if close else ""
         return Diagnostic(
             rule="unknown-key",
-            message=f"unknown key '{loc[-1]}'",
+            message=f"unknown key '{name}'",
             path=path,
             expected=f"one of: {', '.join(allowed)}" if allowed else "",
             hint=hint,
         )
     if kind == "missing":
-        return Diagnostic(rule="missing-key", message=f"missing required key '{loc[-1]}'", path=path)
+        return Diagnostic(rule="missing-key", message=f"missing required key '{name}'", path=path)
     if kind == "literal_error":
         expected = item.get("ctx", {}).get("expected", "")
         return Diagnostic(rule="bad-value", message=f"{value!r} is not allowed", path=path, expected=expected)
@@ -65,6 +72,13 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
             path=path,
             expected=_pattern_expected(pattern),
         )
+    bounds = {"greater_than_equal": ("at least", "ge"), "less_than_equal": ("at most", "le"),
+              "greater_than": ("more than", "gt"), "less_than": ("less than", "lt")}
+    if kind in bounds:
+        words, key = bounds[kind]
+        limit = item.get("ctx", {}).get(key)
+        return Diagnostic(rule="bad-value", message=f"'{name}' must be {words} {limit} (got {value!r})",
+                          path=path)
     rule = "bad-value"
     custom = {"priority_99": "priority-99", "duration": "bad-duration", "duration_unit": "bad-duration",
               "version": "bad-version", "stream_one_writer": "stream-writers"}

@@ -54,8 +54,8 @@ def _coerce_duration(value: Any) -> int:
         raise PydanticCustomError(
             "duration_unit",
             "a duration needs a unit: write it as text such as '1ms', '66.667ms' or '15Hz' "
-            "(got {value!r})",
-            {"value": value},
+            "(got {value})",
+            {"value": repr(value)},
         )
     try:
         return parse_duration_ns(value)

@@ -190,12 +190,13 @@ def locate(tree: Any, path: Path, *, key: bool = False) -> tuple[int, int]:
             name = _find_key(node, part)
             if name is _MISSING:
                 continue
-            line, column = node.lc.key(name) if (key and last) else node.lc.value(name)
-            if not (key and last) and not isinstance(node[name], (CommentedMap, CommentedSeq)):
-                line, column = node.lc.value(name)
-            elif not (key and last):
-                # A nested block starts on the line after its key; point at the key then.
+            value = node[name]
+            if key and last or value is None or isinstance(value, (CommentedMap, CommentedSeq)):
+                # A nested block starts on the line after its key, and an empty value has no
+                # position of its own: point at the key then.
                 line, column = node.lc.key(name)
+            else:
+                line, column = node.lc.value(name)
             position = (line + 1, column + 1)
             node = node[name]
         elif isinstance(node, CommentedSeq) and isinstance(part, int) and 0 <= part < len(node):

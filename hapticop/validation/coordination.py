@@ -101,10 +101,9 @@ def flags(cg: G.CompositionGraph) -> Check:
                 who = f"read by {info.declared_by}" if owner_reads else "never written"
                 yield Diagnostic("flag-no-writer", f"flag '{name}' is {who}: no one writes it, so this source "
                                  "never sees it change", d["path"])
-        if sink_writes and not owner_reads and not source_reads:
+        if sink_writes and not owner_reads and not source_reads and not owner_writes:
             for _, d in sink_writes:
-                who = f"written by {info.declared_by}" if owner_writes else "read by no one"
-                yield Diagnostic("flag-no-reader", f"flag '{name}' is {who}: setting it from a sink has no effect",
+                yield Diagnostic("flag-no-reader", f"flag '{name}' is read by no one: setting it from a sink has no effect",
                                  d["path"])
         converting = [d for _, d in source_reads if d["mode"] == "converting_sources"]
         for d in converting[1:]:
@@ -146,10 +145,14 @@ def _flag_name_help(name: str) -> str:
 
 def reachability(cg: G.CompositionGraph, state_limit: int = DEFAULT_STATE_LIMIT) -> Check:
     comp = cg.loaded.composition
+    if any(c.startswith("coordination") for c, _ in cg.loaded.broken) or any(cg.nodes_of("net", declared=False)):
+        return  # with a net or flag map set aside, the others' environment is unknown
     for name, spec in comp.coordination.nets.items():
-        if any(cg.g.nodes[n].get("declared") is False for n in cg.g.successors(G.net(name))):
-            continue  # an undeclared place was reported; the net cannot be compiled
-        if any(data["spec"].inputs == {} for n, data in cg.nodes_of("transition") if n[1] == name):
+        referenced = {p for t in spec.transitions.values() for p in (*t.inputs, *t.outputs)}
+        referenced |= set(spec.marking) | set(spec.terminal)
+        if not referenced <= set(spec.places):
+            continue  # the undeclared place was reported; the net cannot be compiled
+        if any(not t.inputs for t in spec.transitions.values()):
             continue
         compiled = CompiledNet.from_spec(spec)
         env = _environment(cg, name)

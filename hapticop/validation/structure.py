@@ -63,9 +63,10 @@ def schedules(cg: G.CompositionGraph) -> Check:
     placed: dict[str, list[tuple[str, tuple]]] = defaultdict(list)
     for u, v, data in cg.edges_of("schedules"):
         placed[v[1]].append((u[1], data["path"]))
+    mediators = {name for name, r in cg.loaded.activities.items() if r.spec.block == "mediator"}
     for activity_name, uses in placed.items():
         threads = sorted({t for t, _ in uses})
-        if len(threads) > 1:
+        if len(threads) > 1 and activity_name not in mediators:  # the mediator has its own rule
             second = next(path for t, path in uses if t == threads[1])
             yield Diagnostic("activity-two-threads",
                              f"activity '{activity_name}' is scheduled on threads '{threads[0]}' and '{threads[1]}'",
@@ -101,10 +102,10 @@ def main_thread_and_mediator(cg: G.CompositionGraph) -> Check:
                 yield Diagnostic("mediator", f"schedule {sid} of main thread '{mains[0]}' lacks the mediator "
                                  f"'{mediators[0]}'; it must run in every schedule of the main thread",
                                  ("threads", mains[0], "schedules", sid))
-        wrong = cg.threads_of(mediators[0]) - {mains[0]}
-        for name in sorted(wrong):
-            yield Diagnostic("mediator", f"the mediator '{mediators[0]}' is scheduled on thread '{name}'; it runs "
-                             f"only on the main thread '{mains[0]}'", ("threads", name, "schedules"))
+        for u, v, data in cg.g.in_edges(G.activity(mediators[0]), data=True):
+            if data["kind"] == "schedules" and u[1] != mains[0]:
+                yield Diagnostic("mediator", f"the mediator '{mediators[0]}' is scheduled on thread '{u[1]}'; it "
+                                 f"runs only on the main thread '{mains[0]}'", data["path"])
 
 
 def rates(cg: G.CompositionGraph) -> Check:
@@ -174,6 +175,7 @@ def streams(cg: G.CompositionGraph) -> Check:
         if pdata["direction"] != "input":
             continue
         incoming = [(u, d) for u, _, d in cg.g.in_edges(pnode, data=True) if d["kind"] == "reads"]
+        incoming = list({u: (u, d) for u, d in incoming}.values())  # a reader listed twice is one writer
         if len(incoming) > 1:
             names = sorted(u[1] for u, _ in incoming)
             for u, data in incoming[1:]:

@@ -1,0 +1,146 @@
+"""Golden-file corpus for `hapticop validate`: one tiny composition per rule.
+
+Each file in corpus/invalid breaks exactly one rule and is pinned here to the one error
+it must produce: its rule id, the line it points at, a piece of its message and, for
+'did you mean' cases, a piece of its hint. Every file in corpus/valid must produce no
+diagnostics at all, warnings included.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hapticop.validation import validate_path
+
+CORPUS = Path(__file__).parent / "corpus"
+INVALID = CORPUS / "invalid"
+VALID = CORPUS / "valid"
+
+# (file, rule, line, substring of the message, substring of the hint or None)
+CASES = [
+    # found while writing the corpus: each once gave a crash, a second error or a wrong line
+    ("invalid-arc-undeclared-place.yaml", "unknown-place", 21, "arc to undeclared place 'EXTRA' of net 'boot'", None),
+    ("invalid-mediator-off-main.yaml", "mediator", 12, "scheduled on thread 'sensors'", None),
+    ("invalid-net-unbounded.yaml", "net-unbounded", 18, "place 'COUNT' is unbounded", None),
+    ("invalid-period-no-unit.yaml", "bad-duration", 10, "a duration needs a unit", None),
+    ("invalid-sink-owner-writes.yaml", "flag-two-writers", 30, "is written by activity 'mediator'", None),
+    ("invalid-stream-reader-twice.yaml", "stream-reader-twice", 18, "'haptic.handle_velocity' is listed twice", None),
+    ("invalid-version.yaml", "bad-version", 2, "composition version 2 is not supported", None),
+    ("invalid-flag-map-unknown-net-follow-on.yaml", "unknown-net", 25, "unknown net 'exti'", "did you mean 'exit'?"),
+    ("invalid-priority-99-only-thread.yaml", "priority-99", 6, "priority 99 is refused", None),
+    # YAML level
+    ("invalid-yaml-syntax.yaml", "yaml-syntax", 7, "malformed YAML", None),
+    ("invalid-duplicate-key.yaml", "duplicate-key", 7, 'duplicate key "period"', None),
+    ("invalid-empty-file.yaml", "empty-file", 1, "the file is empty", None),
+    ("invalid-top-level-list.yaml", "top-level-type", 1, "the document is a list, not a mapping", None),
+    # schema: top level
+    ("invalid-top-level-key-typo.yaml", "unknown-key", 3, "unknown key 'nmae'", "did you mean 'name'?"),
+    ("invalid-missing-version.yaml", "missing-key", 1, "missing required key 'version'", None),
+    # schema: threads (on a second thread; see the report about single-thread files)
+    ("invalid-thread-unknown-key.yaml", "unknown-key", 11, "unknown key 'priorty'", "did you mean 'priority'?"),
+    ("invalid-missing-period.yaml", "missing-key", 9, "missing required key 'period'", None),
+    ("invalid-period-bad-unit.yaml", "bad-duration", 10, "'parsec' is not a unit of time or rate", None),
+    ("invalid-period-zero-rate.yaml", "bad-duration", 10, "'0Hz' is a rate of zero", None),
+    ("invalid-priority-99.yaml", "priority-99", 11, "priority 99 is refused", None),
+    ("invalid-priority-0.yaml", "bad-value", 11, "'priority' must be at least 1 (got 0)", None),
+    ("invalid-cpus-repeated.yaml", "bad-value", 11, "a CPU is listed twice in [0, 0]", None),
+    ("invalid-cpus-empty.yaml", "bad-value", 11, "an empty CPU set", None),
+    ("invalid-deploy-value.yaml", "bad-value", 11, "'fork' is not allowed", None),
+    # schema: activities and blocks
+    ("invalid-block-type.yaml", "unknown-block", 17, "unknown block type 'lidarr'", "did you mean 'lidar'?"),
+    ("invalid-block-import.yaml", "unknown-block", 17, "cannot import module 'my_robot.sensors'", None),
+    ("invalid-block-param-value.yaml", "bad-value", 15, "'serial' is not allowed", None),
+    ("invalid-block-param-key.yaml", "unknown-key", 19, "unknown key 'pionts'", "did you mean 'points'?"),
+    # schema: streams
+    ("invalid-bad-name.yaml", "bad-name", 17, "'Pos' is not a valid name", None),
+    ("invalid-stream-from-list.yaml", "stream-writers", 17, "exactly one writer port, got 2", None),
+    ("invalid-policy-kind.yaml", "bad-value", 20, "unknown kind 'ring'", None),
+    ("invalid-queue-capacity.yaml", "bad-value", 20, "'capacity' must be at least 1 (got 0)", None),
+    # threads, schedules, mediator, rates
+    ("invalid-no-schedule-0.yaml", "schedule-0", 7, "thread 'main' has no schedule 0", None),
+    ("invalid-schedule-repeat.yaml", "schedule-repeat", 8, "activity 'mediator' appears twice in schedule 0", None),
+    ("invalid-activity-two-threads.yaml", "activity-two-threads", 12,
+     "activity 'lidar' is scheduled on threads 'main' and 'sensors'", None),
+    ("invalid-unknown-activity.yaml", "unknown-activity", 13, "unknown activity 'lidr'", "did you mean 'lidar'?"),
+    ("invalid-reserved-name.yaml", "reserved-name", 10, "'system' cannot name an activity", None),
+    ("invalid-no-main-thread.yaml", "main-thread", 3, "no thread has 'deploy: main'", None),
+    ("invalid-two-main-threads.yaml", "main-thread", 11, "threads 'main' and 'other' both have 'deploy: main'", None),
+    ("invalid-no-mediator.yaml", "mediator", 9, "no activity uses block 'mediator'", None),
+    ("invalid-two-mediators.yaml", "mediator", 13, "'mediator' and 'mediator_2' are both mediators", None),
+    ("invalid-mediator-not-in-schedule.yaml", "mediator", 9,
+     "schedule 1 of main thread 'main' lacks the mediator", None),
+    ("invalid-rate-mismatch.yaml", "rate", 10, "activity 'falcon' (falcon) cannot run at 15 Hz", None),
+    ("invalid-start-never-requested.yaml", "start-never-requested", 11,
+     "'threads.sensors' starts on request, but no flag map writes", None),
+    # streams and ports
+    ("invalid-stream-unknown-port.yaml", "unknown-port", 17, "has no output port 'positon'", "did you mean 'position'?"),
+    ("invalid-stream-unknown-activity.yaml", "unknown-activity", 17, "unknown activity 'falcn' in port reference",
+     "did you mean 'falcon'?"),
+    ("invalid-stream-direction.yaml", "port-direction", 21, "'lidar.angles' is an output port", None),
+    ("invalid-stream-dtype.yaml", "stream-dtype", 18, "dtype mismatch: 'falcon.buttons' writes uint8[]", None),
+    ("invalid-stream-shape.yaml", "stream-shape", 21,
+     "shape mismatch: 'lidar_400.ranges' writes float32[400] [m], 'haptic.ranges' reads float32[811]", None),
+    ("invalid-stream-unit.yaml", "stream-unit", 19, "unit mismatch: 'haptic.velocity_setpoint'", None),
+    ("invalid-port-two-writers.yaml", "port-writers", 19, "'haptic.handle_position' is written by 2 streams (pos, pos_2)",
+     None),
+    ("invalid-input-unconnected.yaml", "input-unconnected", 15, "required input 'haptic.handle_velocity'", None),
+    ("invalid-stream-sync-none.yaml", "stream-thread-safety", 20, "with 'sync: none'", None),
+    ("invalid-block-flag-never-written.yaml", "flag-no-writer", 15,
+     "activity 'haptic' reads flag 'haptic.resources_ready' but no flag map writes it", None),
+    # coordination: nets
+    ("invalid-marking-undeclared-place.yaml", "unknown-place", 18, "initial marking of undeclared place 'BEGIN'", None),
+    ("invalid-terminal-undeclared-place.yaml", "unknown-place", 19, "terminal undeclared place 'END'", None),
+    ("invalid-transition-no-input.yaml", "transition-no-input", 21, "transition 'finish' has no input place", None),
+    ("invalid-net-dead-marking.yaml", "net-dead-marking", 14, "dead marking {MIDDLE: 1} after [begin]", None),
+    ("invalid-net-terminal-unreachable.yaml", "net-terminal-unreachable", 14,
+     "can never reach a terminal place (EXIT)", None),
+    ("invalid-net-livelock.yaml", "net-livelock", 14, "transitions [ping, pong] can fire in a cycle", None),
+    # coordination: flag maps and flags
+    ("invalid-flag-map-unknown-net.yaml", "unknown-net", 24, "unknown net 'bot'", "did you mean 'boot'?"),
+    ("invalid-flag-map-undeclared-place.yaml", "unknown-place", 29,
+     "flag map binding to undeclared place 'EXITED'", "did you mean 'EXIT'?"),
+    ("invalid-unknown-flag.yaml", "unknown-flag", 27, "unknown flag 'system.shutdown_request'",
+     "did you mean 'system.shutdown_requested'?"),
+    ("invalid-source-never-written.yaml", "flag-no-writer", 27,
+     "flag 'mediator.lcsm.request_running' is read by activity 'mediator': no one writes it", None),
+    ("invalid-sink-two-writers.yaml", "flag-two-writers", 33, "already written by flag map 'exit'", None),
+    ("invalid-coupling-flag-unread.yaml", "flag-no-reader", 32, "flag 'flags.stopped' is read by no one", None),
+    ("invalid-flag-consumed-twice.yaml", "flag-consumed-twice", 34,
+     "'system.shutdown_requested' is consumed by two converting sources", None),
+]
+
+
+@pytest.mark.parametrize(("name", "rule", "line", "message", "hint"), CASES, ids=[c[0] for c in CASES])
+def test_invalid_file_gives_its_one_error(name, rule, line, message, hint):
+    path = INVALID / name
+    report = validate_path(path).report
+    assert len(report.errors) == 1, "\n".join(d.to_text() for d in report.sorted())
+    error = report.errors[0]
+    assert error.rule == rule
+    assert error.line == line, error.to_text()
+    assert message in error.message
+    if hint is not None:
+        assert hint in error.hint
+    assert error.file == str(path)
+
+
+def test_every_invalid_file_is_pinned():
+    on_disk = {p.name for p in INVALID.iterdir()}
+    pinned = [c[0] for c in CASES]
+    assert len(pinned) == len(set(pinned)), "a file is pinned twice"
+    assert on_disk == set(pinned), {"not pinned": sorted(on_disk - set(pinned)), "missing": sorted(set(pinned) - on_disk)}
+
+
+VALID_FILES = sorted(VALID.glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", VALID_FILES, ids=[p.name for p in VALID_FILES])
+def test_valid_file_has_no_diagnostics(path):
+    report = validate_path(path).report
+    assert report.diagnostics == [], "\n".join(d.to_text() for d in report.sorted())
+
+
+def test_corpus_is_not_empty():
+    assert len(CASES) >= 36 and len(VALID_FILES) >= 3

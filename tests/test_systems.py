@@ -1,0 +1,32 @@
+"""Every shipped composition validates clean, and the hallway one is the thesis's layout."""
+
+import pytest
+
+from hapticop.validation import validate_path
+
+from .conftest import SYSTEMS
+
+
+@pytest.mark.parametrize("path", sorted(SYSTEMS.glob("*.yaml")), ids=lambda p: p.name)
+def test_system_validates_clean(path):
+    report = validate_path(path).report
+    assert report.diagnostics == [], "\n".join(d.to_text() for d in report.diagnostics)
+
+
+def test_hallway_is_the_thesis_layout():
+    composition = validate_path(SYSTEMS / "hallway.yaml").composition
+    threads = composition.threads
+    assert list(threads) == ["main", "lidar", "fieldbus", "watchdog"]
+    assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 1_000_000, 1_000_000]
+    assert threads["fieldbus"].priority == 39 and threads["watchdog"].priority == 40
+    assert threads["main"].schedules == {0: ["mediator"], 1: ["mediator", "falcon", "haptic"]}
+    assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
+    assert len(composition.activities) == 7
+    haptic = composition.activities["haptic"].params
+    assert (haptic["kp_n_per_m"], haptic["kd_ns_per_m"], haptic["k1"], haptic["k2"]) == (55.0, 0.2, 28.0, 10.0)
+    assert (haptic["dead_zone_m"], haptic["force_limit_n"]) == (0.005, 10.0)
+    lidar = composition.activities["lidar"].params
+    assert (lidar["points"], lidar["scan_rate_hz"]) == (811, 15.0)
+    ropod = composition.activities["ropod"].params
+    assert ropod["platform_theta"]["p_gain"] == 755 and ropod["wheel"]["i_saturation"] == 7
+    assert set(composition.coordination.nets) == {"mediator", "thread_lcsm", "thread_scheduler"}

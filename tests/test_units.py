@@ -1,0 +1,55 @@
+import pytest
+from pydantic import BaseModel, ValidationError
+
+from hapticop.units import Duration, format_duration, parse_duration_ns
+
+
+@pytest.mark.parametrize(
+    "text, ns",
+    [
+        ("1ms", 1_000_000),
+        ("15Hz", 66_666_667),
+        ("66.667ms", 66_667_000),
+        ("1kHz", 1_000_000),
+        ("500us", 500_000),
+        ("500µs", 500_000),
+        ("2s", 2_000_000_000),
+        ("250ns", 250),
+        (" 1 ms ", 1_000_000),
+        ("1e3us", 1_000_000),
+        (".5ms", 500_000),
+    ],
+)
+def test_parse(text, ns):
+    assert parse_duration_ns(text) == ns
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("1", "not a number followed by a unit"),
+    ("1 parsec", "not a unit of time or rate"),
+    ("0Hz", "rate of zero"),
+    ("0.1ns", "shorter than one nanosecond"),
+    ("-1ms", "not a number followed by a unit"),
+    ("ms", "not a number followed by a unit"),
+])
+def test_parse_rejects(text, fragment):
+    with pytest.raises(ValueError, match=fragment):
+        parse_duration_ns(text)
+
+
+class Holder(BaseModel):
+    period: Duration
+
+
+def test_model_requires_text_with_unit():
+    with pytest.raises(ValidationError, match="needs a unit"):
+        Holder(period=1)
+    with pytest.raises(ValidationError, match="needs a unit"):
+        Holder(period=True)
+    assert Holder(period="15Hz").period == 66_666_667
+
+
+def test_serialises_back_to_text():
+    assert Holder(period="1ms").model_dump() == {"period": "1ms"}
+    assert format_duration(66_666_667) == "66.6667ms"
+    assert format_duration(250) == "250ns"
