@@ -64,6 +64,61 @@ def validate(
     raise typer.Exit(1 if failed else 0)
 
 
+class ClockKind(str, Enum):
+    realtime = "realtime"
+    virtual = "virtual"
+
+
+def _duration(text: Optional[str], option: str) -> Optional[int]:
+    if text is None:
+        return None
+    from hapticop.units import parse_duration_ns
+
+    try:
+        return parse_duration_ns(text)
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint=option) from None
+
+
+@app.command()
+def compose(
+    file: Path = typer.Argument(..., help="composition file"),
+    clock: ClockKind = typer.Option(ClockKind.realtime, "--clock", help="realtime, or virtual: simulated time, as fast as the CPU allows"),
+    duration: Optional[str] = typer.Option(None, help="stop after this long (e.g. 30s); default: until Ctrl+C"),
+    seed: int = typer.Option(0, help="seed of every activity's random generator"),
+    run_dir: Optional[Path] = typer.Option(None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
+    shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
+) -> None:
+    """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
+    from rich.console import Console
+
+    from hapticop.runtime.report import print_timing, timing, write_timing
+    from hapticop.runtime.system import RunOptions, System
+
+    validated = validate_path(file)
+    for diagnostic in validated.report.sorted():
+        typer.echo(diagnostic.to_text(), err=True)
+    if not validated.report.ok:
+        typer.echo(f"{file}: not started: {len(validated.report.errors)} errors", err=True)
+        raise typer.Exit(1)
+    options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
+                         run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"))
+    system = System(validated.graph.loaded, validated.source.text, str(file), options)
+    console = Console(stderr=True)
+    console.print(f"[bold]{system.composition.name or file}[/]: running ({clock.value} clock); logs in {system.run_dir}")
+    try:
+        outcome = system.run()
+        data = timing(system.region, system.composition)
+        print_timing(data, console, system.virtual)
+        write_timing(data, system.run_dir)
+    finally:
+        system.close()
+    for reason in outcome.reasons:
+        console.print(f"[red]{reason}[/]")
+    console.print(f"exit: {outcome.status.name.lower()} ({int(outcome.status)})")
+    raise typer.Exit(int(outcome.status))
+
+
 @app.command()
 def graph(
     file: Path = typer.Argument(..., help="composition file"),

@@ -28,6 +28,7 @@ FlagName = Annotated[
 ]
 Weight = Annotated[int, Field(ge=1, le=1_000_000)]
 StartPolicy = Literal["auto", "on_request"]
+LogLevel = Literal["always", "error", "warning", "info", "debug"]
 START_DOC = (
     "'auto': the LCSM goes on to running as soon as it is configured; 'on_request': it waits in "
     "capability configuration until a flag map sets its 'lcsm.request_running' flag"
@@ -57,6 +58,7 @@ class Thread(Strict):
         description="activity-scheduler sets by ID; ID 0 is selected at start"
     )
     start: StartPolicy = Field("auto", description=START_DOC)
+    log: LogLevel = Field("info", description="the most detailed level written to this thread's log")
     doc: str = ""
 
     @field_validator("priority")
@@ -89,6 +91,7 @@ class Activity(Strict):
     )
     params: dict[str, Any] = Field(default_factory=dict, description="checked against the block's parameter model")
     start: StartPolicy = Field("auto", description=START_DOC)
+    log: LogLevel = Field("info", description="the most detailed level written to this activity's log")
     doc: str = ""
 
 

@@ -10,7 +10,7 @@ owner:
 - `<activity>.<flag>` for the flags a block declares it writes or reads.
 - `threads.<thread>.lcsm.*` likewise for a thread's LCSM; `threads.<thread>.schedule.<id>`
   (level: that schedule is selected), `threads.<thread>.select_schedule.<id>` (request),
-  `threads.<thread>.deadline_missed` (event).
+  `threads.<thread>.deadline_missed` (event), `threads.<thread>.lost` (level: its process died).
 - `system.shutdown_requested` (event: Ctrl+C or SIGTERM) and `system.exit` (read by the
   runtime: leave the process).
 - `flags.<name>`: coupling flags declared under `coordination.flags`, written by one flag
@@ -55,6 +55,7 @@ def thread_flags(thread: str, schedule_ids: list[int]) -> dict[str, FlagInfo]:
             f"{prefix}.select_schedule.{sid}", readers=[owner], declared_by=owner
         )
     flags[f"{prefix}.deadline_missed"] = FlagInfo(f"{prefix}.deadline_missed", writers=[owner], declared_by=owner)
+    flags[f"{prefix}.lost"] = FlagInfo(f"{prefix}.lost", writers=[owner], declared_by=owner)
     return flags
 
 

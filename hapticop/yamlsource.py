@@ -38,6 +38,7 @@ class Source:
 
     file: str
     tree: CommentedMap
+    text: str = ""  # what was parsed: a process-deployed thread rebuilds the system from it
 
     def locate(self, path: Path, *, key: bool = False) -> tuple[int, int]:
         return locate(self.tree, path, key=key)
@@ -110,7 +111,7 @@ def parse_text(text: str, file: str = "<string>") -> Source:
             )
         )
     _reject_aliases_of_containers(tree, file)
-    return Source(file=file, tree=tree)
+    return Source(file=file, tree=tree, text=text)
 
 
 def read_file(path: str | FilePath) -> Source:

@@ -3,13 +3,28 @@
 A block type is a class. Its class attributes declare the interface the validator checks
 (`Params`, `inputs`, `outputs`, `flags_written`, `flags_read`, `rate`); a block whose
 port shapes depend on its parameters overrides `interface(params)` instead.
+
+At run time the runtime makes one instance per activity and calls its hooks from the
+activity's Life Cycle State Machine, on the activity's thread, in this order:
+
+    create -> configure_resources -> configure_capabilities -> compute (each cycle while
+    running) / pausing (each cycle while paused) ... -> clean
+
+Every hook is optional and succeeds by default. A configuration hook returns `False` to be
+called again next cycle (waiting for a device, a flag), anything else to say it is complete;
+a hook that raises puts the activity in a reported failed state and the mediator decides
+what follows. `compute` is the time-critical step: it reads `self.inputs`, writes
+`self.outputs` and publishes them, and must not allocate, block or log synchronously.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
+
+if TYPE_CHECKING:
+    from hapticop.runtime.context import ActivityContext
 
 
 class NoParams(Params):
@@ -25,6 +40,9 @@ class Block:
     flags_written: ClassVar[dict[str, str]] = {}
     flags_read: ClassVar[dict[str, str]] = {}
     rate: ClassVar[RateRange | None] = None
+    # Parameters a live patch may change with only capability configuration (gains, limits);
+    # a change to any other parameter takes the activity through resource configuration.
+    capability_params: ClassVar[frozenset[str]] = frozenset()
 
     @classmethod
     def interface(cls, params: Params) -> Interface:
@@ -36,3 +54,37 @@ class Block:
             flags_read=dict(cls.flags_read),
             rate=cls.rate,
         )
+
+    def __init__(self, context: "ActivityContext"):
+        self.context = context
+        self.name = context.name
+        self.params = context.params
+        self.inputs = context.inputs
+        self.outputs = context.outputs
+        self.flags = context.flags
+        self.clock = context.clock
+        self.log = context.log
+        self.rng = context.rng
+
+    # -- life-cycle hooks: override only what the block needs ---------------------------
+    def create(self) -> bool | None:
+        """Allocate the activity's own bookkeeping."""
+
+    def configure_resources(self) -> bool | None:
+        """Acquire what the activity needs from others: a socket, a device, a flag."""
+
+    def configure_capabilities(self) -> bool | None:
+        """Prepare its own capabilities before serving: homing, calibration."""
+
+    def compute(self) -> None:
+        """One cycle of the service, while running. Time-critical."""
+
+    def pausing(self) -> None:
+        """One cycle while paused: hold outputs safe, ready to resume at once."""
+
+    def clean(self) -> bool | None:
+        """Release everything the other hooks acquired."""
+
+    @classmethod
+    def implements_compute(cls) -> bool:
+        return cls.compute is not Block.compute

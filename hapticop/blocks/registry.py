@@ -21,6 +21,8 @@ BUILTIN: dict[str, str] = {
     "ethercat_watchdog": "hapticop.blocks.ethercat:EthercatWatchdog",
     "ropod_controller": "hapticop.blocks.ropod:RopodController",
     "haptic_controller": "hapticop.blocks.haptic:HapticController",
+    "counter": "hapticop.blocks.basic:Counter",
+    "echo": "hapticop.blocks.basic:Echo",
 }
 
 _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")

@@ -1,0 +1,119 @@
+"""Building one process's share of a system: its activities, ports and thread loops.
+
+The main process builds the threads deployed in it; a process-deployed thread builds
+only itself, from the same composition and the same shared region, so both sides wire
+exactly the same stream buffers.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+
+from hapticop.description import Composition
+from hapticop.graph import CompositionGraph
+from hapticop.loader import Loaded, ResolvedActivity
+from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
+from hapticop.runtime.logs import Level, LogWriter
+from hapticop.runtime.region import Layout, Region
+from hapticop.runtime.streams import LatestSlot, SpscQueue
+from hapticop.runtime.thread import ActivityRunner, CyclicThread
+
+
+def flag_names(loaded: Loaded) -> list[str]:
+    return [node[1] for node, _ in CompositionGraph(loaded).nodes_of("flag")]
+
+
+def layout_of(loaded: Loaded) -> Layout:
+    return Layout.build(loaded.composition, loaded.activities, flag_names(loaded))
+
+
+def thread_of(composition: Composition) -> dict[str, str]:
+    """Which thread each scheduled activity belongs to."""
+    owner = {}
+    for thread_name, spec in composition.threads.items():
+        for members in spec.schedules.values():
+            for member in members:
+                owner.setdefault(member, thread_name)
+    return owner
+
+
+def activity_rng(seed: int, name: str) -> np.random.Generator:
+    """Independent, reproducible randomness per activity: the same seed, the same run."""
+    return np.random.default_rng([seed, zlib.crc32(name.encode())])
+
+
+@dataclass
+class Built:
+    threads: dict[str, CyclicThread]
+    runners: dict[str, ActivityRunner]
+
+
+def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer: LogWriter, seed: int,
+          apply_realtime: bool) -> Built:
+    composition = loaded.composition
+    layout = region.layout
+    owner = thread_of(composition)
+    transports = _transports(loaded, region, owner)
+    runners: dict[str, ActivityRunner] = {}
+    threads: dict[str, CyclicThread] = {}
+    for thread_name in thread_names:
+        spec = composition.threads[thread_name]
+        members = [a for a, t in owner.items() if t == thread_name]
+        members.sort(key=list(composition.activities).index)
+        mine = {}
+        for name in members:
+            resolved = loaded.activities[name]
+            mine[name] = runners[name] = _runner(name, resolved, composition, region, transports, clock, writer, seed)
+        log = writer.logger(f"thread-{thread_name}", Level[spec.log.upper()], clock.now_ns)
+        threads[thread_name] = CyclicThread(thread_name, spec, region, mine, clock, log, apply_realtime)
+    return Built(threads, runners)
+
+
+def _transports(loaded: Loaded, region: Region, owner: dict[str, str]) -> dict[str, list]:
+    """Transport objects over the region's buffers, one set per stream."""
+    made: dict[str, list] = {}
+    layout = region.layout
+    for name, spec in loaded.composition.streams.items():
+        writer_activity, writer_port = spec.writer.split(".")
+        port = loaded.activities[writer_activity].interface.outputs[writer_port]
+        reader_threads = {owner.get(r.split(".")[0]) for r in spec.readers}
+        same_thread = reader_threads == {owner.get(writer_activity)}
+        objects = []
+        for transport in layout.transports[name]:
+            buffer = region.transport_buffer(transport)
+            if transport.kind == "latest":
+                synchronised = spec.policy.sync == "lock_free" and not same_thread
+                objects.append(LatestSlot(buffer, port, synchronised=synchronised))
+            else:
+                objects.append(SpscQueue(buffer, port, spec.policy.capacity, spec.policy.overflow))
+        made[name] = objects
+    return made
+
+
+def _runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
+            transports: dict[str, list], clock, writer: LogWriter, seed: int) -> ActivityRunner:
+    iface = resolved.interface
+    inputs = {p: InputPort(p, spec, clock.now_ns) for p, spec in iface.inputs.items()}
+    outputs = {p: OutputPort(p, spec, clock.now_ns) for p, spec in iface.outputs.items()}
+    for stream_name, spec in composition.streams.items():
+        objects = transports[stream_name]
+        if spec.writer.split(".")[0] == name:
+            outputs[spec.writer.split(".")[1]].transports.extend(objects)
+        for index, reader in enumerate(spec.readers):
+            activity, port = reader.split(".")
+            if activity != name:
+                continue
+            target = inputs[port]
+            target.queue = spec.policy.kind == "queue"
+            target.transport = objects[index] if target.queue else objects[0]
+            target.max_age_ns = spec.max_age or 0
+    flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
+    log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
+    context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
+                              clock, log, activity_rng(seed, name))
+    block = resolved.block(context)
+    return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log)

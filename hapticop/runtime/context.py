@@ -1,0 +1,112 @@
+"""What an activity sees of the world: its ports, its own flags, its clock and its log.
+
+Ports hold preallocated numpy arrays. Before each step the runtime copies the newest
+sample of every latest-policy input into its array (queue inputs are popped by the block);
+a block fills an output's array and calls `publish()`, which stamps it and copies it into
+the stream's transports. Nothing here allocates on the cycle path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any, Callable
+
+import numpy as np
+
+from hapticop.blocks.interface import Params, Port
+from hapticop.runtime.logs import Logger
+
+
+class InputPort:
+    """The reader's side of a stream: `value`, and how fresh it is."""
+
+    __slots__ = ("name", "spec", "value", "meta", "max_age_ns", "transport", "queue", "fresh", "_clock")
+
+    def __init__(self, name: str, spec: Port, clock: Callable[[], int]):
+        self.name, self.spec, self._clock = name, spec, clock
+        self.value = np.zeros(spec.shape, dtype=spec.dtype)
+        self.meta = np.zeros(2, dtype=np.int64)  # [sample sequence number, write time ns]
+        self.max_age_ns = 0
+        self.transport: Any = None  # a LatestSlot or SpscQueue; None while unconnected
+        self.queue = False
+        self.fresh = False  # a new sample arrived for this step
+
+    def refresh(self) -> None:
+        """Copy the newest sample in (runtime, before the step); queue inputs are left to pop()."""
+        if self.transport is None or self.queue:
+            self.fresh = False
+            return
+        before = self.meta[0]
+        self.fresh = self.transport.read_into(self.value, self.meta) and self.meta[0] != before
+
+    def pop(self) -> bool:
+        """Take the next queued sample into `value`; False when the queue is empty."""
+        return self.transport is not None and self.transport.pop_into(self.value, self.meta)
+
+    @property
+    def seq(self) -> int:
+        return int(self.meta[0])
+
+    @property
+    def stamp_ns(self) -> int:
+        return int(self.meta[1])
+
+    def age_ns(self) -> int:
+        return self._clock() - int(self.meta[1]) if self.meta[0] else -1
+
+    @property
+    def valid(self) -> bool:
+        """A sample exists and is no older than the stream's `max_age`."""
+        if not self.meta[0]:
+            return False
+        return self.max_age_ns == 0 or self._clock() - int(self.meta[1]) <= self.max_age_ns
+
+
+class OutputPort:
+    """The writer's side: fill `value`, then `publish()`."""
+
+    __slots__ = ("name", "spec", "value", "transports", "published", "_clock")
+
+    def __init__(self, name: str, spec: Port, clock: Callable[[], int]):
+        self.name, self.spec, self._clock = name, spec, clock
+        self.value = np.zeros(spec.shape, dtype=spec.dtype)
+        self.transports: list = []
+        self.published = 0
+
+    def publish(self) -> None:
+        now = self._clock()
+        for transport in self.transports:
+            if hasattr(transport, "push"):
+                transport.push(self.value, now)
+            else:
+                transport.write(self.value, now)
+        self.published += 1
+
+
+class FlagView:
+    """An activity's own declared flags, by name: `flags["new_scan"] = True`."""
+
+    __slots__ = ("_flags", "_index", "_activity")
+
+    def __init__(self, flags: np.ndarray, index: dict[str, int], activity: str, names: list[str]):
+        self._flags, self._activity = flags, activity
+        self._index = {name: index[f"{activity}.{name}"] for name in names}
+
+    def __getitem__(self, name: str) -> bool:
+        return bool(self._flags[self._index[name]])
+
+    def __setitem__(self, name: str, value: bool) -> None:
+        self._flags[self._index[name]] = 1 if value else 0
+
+
+@dataclass
+class ActivityContext:
+    name: str
+    params: Params
+    inputs: SimpleNamespace
+    outputs: SimpleNamespace
+    flags: FlagView
+    clock: Any
+    log: Logger
+    rng: np.random.Generator

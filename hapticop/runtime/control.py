@@ -1,0 +1,330 @@
+"""The control channel of a running system: one JSON line in, one JSON line out.
+
+A running system listens on a Unix domain socket in a directory only its owner can
+enter; the socket itself is mode 0600 and every connection's peer credentials are
+checked (SO_PEERCRED), so only the same user, or root, can patch or query it.
+`hapticop patch` and `hapticop status` talk to it with `request`.
+
+Requests are handled one at a time in the server's own thread, in the order they
+arrive: a handler never runs concurrently with itself.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import selectors
+import socket
+import stat
+import struct
+import threading
+from pathlib import Path
+from typing import Any, Callable
+
+MAX_REQUEST_BYTES = 1 << 20  # a patch is at most a composition's size (1 MiB)
+MAX_REPLY_BYTES = 16 << 20
+CONNECTION_TIMEOUT = 5.0  # seconds a client may take to send its request
+
+Handler = Callable[[dict], dict]
+
+
+class ControlError(Exception):
+    """The control channel could not be set up or reached; the message says why."""
+
+
+def socket_path(system: str) -> Path:
+    """Where the system's control socket is.
+
+    A value with a '/' or ending in '.sock' is the socket's path; anything else is a system
+    name: `$XDG_RUNTIME_DIR/hapticop/NAME.sock`, or `/run/hapticop/NAME.sock` for root
+    without XDG_RUNTIME_DIR, or `/tmp/hapticop-UID/NAME.sock`.
+    """
+    if "/" in system or system.endswith(".sock"):
+        return Path(system)
+    if not system or system in (".", ".."):
+        raise ControlError(f"{system!r} is not a system name")
+    runtime_dir = os.environ.get("XDG_RUNTIME_DIR")
+    if runtime_dir:
+        return Path(runtime_dir) / "hapticop" / f"{system}.sock"
+    uid = os.geteuid()
+    if uid == 0:
+        return Path("/run/hapticop") / f"{system}.sock"
+    return Path(f"/tmp/hapticop-{uid}") / f"{system}.sock"
+
+
+def peer_uid(connection: socket.socket) -> int | None:
+    """The user id of the process at the other end, or None where SO_PEERCRED is missing."""
+    if not hasattr(socket, "SO_PEERCRED"):
+        return None
+    credentials = connection.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
+    _pid, uid, _gid = struct.unpack("3i", credentials)
+    return uid
+
+
+def _peer_pid(connection: socket.socket) -> int | None:
+    if not hasattr(socket, "SO_PEERCRED"):
+        return None
+    return struct.unpack("3i", connection.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i")))[0]
+
+
+def _allowed(uid: int | None) -> bool:
+    return uid is None or uid in (os.geteuid(), 0)
+
+
+class ControlServer:
+    """Serves `handler(request) -> reply` on a Unix socket until `stop()`."""
+
+    def __init__(self, path: str | os.PathLike, handler: Handler):
+        self.path = Path(path)
+        self.handler = handler
+        self._listener: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._wake_read: socket.socket | None = None
+        self._wake_write: socket.socket | None = None
+        self._stopping = threading.Event()
+        self._inode: int | None = None
+
+    # -- life cycle ----------------------------------------------------------------
+
+    def start(self) -> "ControlServer":
+        if self._listener is not None:
+            raise ControlError(f"the control server at {self.path} is already started")
+        self._prepare_directory()
+        self._clear_stale_socket()
+        listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            listener.bind(str(self.path))
+            os.chmod(self.path, 0o600)
+            self._inode = os.stat(self.path).st_ino
+            listener.listen(8)
+            listener.setblocking(False)
+        except OSError as error:
+            listener.close()
+            raise ControlError(f"cannot listen at {self.path}: {error.strerror or error}") from None
+        self._listener = listener
+        self._wake_read, self._wake_write = socket.socketpair()
+        self._stopping.clear()
+        self._thread = threading.Thread(target=self._serve, name=f"hapticop-control {self.path.name}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 5.0) -> None:
+        if self._listener is None:
+            return
+        self._stopping.set()
+        try:
+            self._wake_write.send(b"x")
+        except OSError:
+            pass
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+        self._listener.close()
+        for end in (self._wake_read, self._wake_write):
+            end.close()
+        try:
+            # Only our own socket: a newer server may have replaced it since.
+            if os.stat(self.path).st_ino == self._inode:
+                self.path.unlink()
+        except FileNotFoundError:
+            pass
+        self._listener = self._thread = self._wake_read = self._wake_write = None
+
+    def __enter__(self) -> "ControlServer":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def _prepare_directory(self) -> None:
+        directory = self.path.parent
+        try:
+            directory.mkdir(mode=0o700)
+            os.chmod(directory, 0o700)  # mkdir's mode is filtered by the umask
+        except FileExistsError:
+            pass
+        except OSError as error:
+            raise ControlError(f"cannot create {directory} for the control socket: {error.strerror or error}") from None
+        info = os.stat(directory)
+        if not stat.S_ISDIR(info.st_mode):
+            raise ControlError(f"{directory} is not a directory")
+        # Someone else's directory, or one anyone may replace our socket in, is refused.
+        if info.st_uid not in (os.geteuid(), 0):
+            raise ControlError(f"{directory} belongs to another user (uid {info.st_uid}); refusing to put the "
+                               "control socket there")
+        if info.st_mode & (stat.S_IWGRP | stat.S_IWOTH) and not info.st_mode & stat.S_ISVTX:
+            raise ControlError(f"{directory} is writable by other users; refusing to put the control socket there")
+
+    def _clear_stale_socket(self) -> None:
+        try:
+            info = os.lstat(self.path)
+        except FileNotFoundError:
+            return
+        if not stat.S_ISSOCK(info.st_mode):
+            raise ControlError(f"{self.path} exists and is not a socket; refusing to replace it")
+        probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        probe.settimeout(1.0)
+        try:
+            probe.connect(str(self.path))
+        except (ConnectionRefusedError, FileNotFoundError):
+            try:
+                self.path.unlink()  # left by a process that is gone
+            except FileNotFoundError:
+                pass
+            return
+        except OSError as error:
+            raise ControlError(f"cannot check the existing socket {self.path}: {error.strerror or error}") from None
+        else:
+            pid = _peer_pid(probe)
+            raise ControlError(
+                f"a hapticop system is already running at {self.path}"
+                + (f" (pid {pid})" if pid else "")
+                + "; stop it first, or give this one another name"
+            )
+        finally:
+            probe.close()
+
+    # -- serving -------------------------------------------------------------------
+
+    def _serve(self) -> None:
+        with selectors.DefaultSelector() as selector:
+            selector.register(self._listener, selectors.EVENT_READ)
+            selector.register(self._wake_read, selectors.EVENT_READ)
+            while not self._stopping.is_set():
+                for key, _ in selector.select():
+                    if key.fileobj is self._wake_read or self._stopping.is_set():
+                        return
+                    try:
+                        connection, _ = self._listener.accept()
+                    except (BlockingIOError, InterruptedError):
+                        continue
+                    except OSError:
+                        if self._stopping.is_set():
+                            return
+                        continue
+                    with connection:
+                        try:
+                            self._handle(connection)
+                        except OSError:
+                            pass  # the client went away; nothing to tell it
+
+    def _handle(self, connection: socket.socket) -> None:
+        connection.setblocking(True)
+        connection.settimeout(CONNECTION_TIMEOUT)
+        uid = peer_uid(connection)
+        if not _allowed(uid):
+            _send(connection, {"ok": False, "error": f"permission denied: this system belongs to uid "
+                               f"{os.geteuid()}, not uid {uid}"})
+            return
+        try:
+            line = _read_line(connection, MAX_REQUEST_BYTES)
+        except _TooLarge:
+            _send(connection, {"ok": False, "error": f"the request is larger than {MAX_REQUEST_BYTES} bytes"})
+            return
+        except socket.timeout:
+            _send(connection, {"ok": False, "error": f"no request within {CONNECTION_TIMEOUT:g} s"})
+            return
+        if not line.strip():
+            return  # a probe (or a client that gave up): nothing to answer
+        _send(connection, self._reply(line))
+
+    def _reply(self, line: bytes) -> dict:
+        try:
+            message = json.loads(line)
+        except (UnicodeDecodeError, ValueError) as error:
+            return {"ok": False, "error": f"malformed request: not JSON ({error})"}
+        if not isinstance(message, dict):
+            return {"ok": False, "error": "malformed request: a request is a JSON object"}
+        try:
+            reply = self.handler(message)
+        except Exception as error:  # noqa: BLE001 - a handler bug must not end the server
+            return {"ok": False, "error": str(error) or type(error).__name__}
+        if not isinstance(reply, dict):
+            return {"ok": False, "error": f"the handler answered a {type(reply).__name__}, not a JSON object"}
+        return reply
+
+
+class _TooLarge(Exception):
+    pass
+
+
+def _read_line(connection: socket.socket, limit: int) -> bytes:
+    """Bytes up to the first newline (or the end of the stream), at most `limit` of them."""
+    data = bytearray()
+    while True:
+        chunk = connection.recv(65536)
+        if not chunk:
+            return bytes(data)
+        newline = chunk.find(b"\n")
+        if newline >= 0:
+            data += chunk[:newline]
+            if len(data) > limit:
+                raise _TooLarge
+            return bytes(data)
+        data += chunk
+        if len(data) > limit:
+            raise _TooLarge
+
+
+def _send(connection: socket.socket, reply: dict) -> None:
+    try:
+        text = json.dumps(reply, allow_nan=False)
+    except (TypeError, ValueError) as error:
+        text = json.dumps({"ok": False, "error": f"the reply cannot be written as JSON: {error}"})
+    connection.sendall(text.encode("utf-8") + b"\n")
+
+
+def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5.0) -> dict:
+    """Send one request to a running system and return its reply, or raise `ControlError`."""
+    path = socket_path(os.fspath(system_or_path))
+    text = str(system_or_path)
+    who = f"'{text}'" if ("/" not in text and not text.endswith(".sock")) else f"at {path}"
+    data = json.dumps(message).encode("utf-8") + b"\n"
+    if len(data) > MAX_REQUEST_BYTES:
+        raise ControlError(f"the request is larger than {MAX_REQUEST_BYTES} bytes")
+    client = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    client.settimeout(timeout)
+    try:
+        try:
+            client.connect(str(path))
+        except FileNotFoundError:
+            raise ControlError(f"no hapticop system {who} is running (no socket at {path})") from None
+        except ConnectionRefusedError:
+            raise ControlError(f"no hapticop system {who} is running (nothing listens at {path}; "
+                               "the socket was left by a process that is gone)") from None
+        except PermissionError:
+            raise ControlError(f"cannot reach the hapticop system {who}: permission denied on {path} "
+                               "(it belongs to another user)") from None
+        except socket.timeout:
+            raise ControlError(f"the hapticop system {who} did not accept a connection within {timeout:g} s") from None
+        except OSError as error:
+            if error.errno in (errno.ENOTSOCK, errno.ENOTDIR):
+                raise ControlError(f"no hapticop system {who} is running ({path} is not a socket)") from None
+            raise ControlError(f"cannot reach the hapticop system {who} at {path}: {error.strerror or error}") from None
+        server_uid = peer_uid(client)
+        if os.geteuid() != 0 and not _allowed(server_uid):
+            raise ControlError(f"refusing to talk to {path}: it is served by uid {server_uid}, not by you or root")
+        try:
+            client.sendall(data)
+            line = _read_line(client, MAX_REPLY_BYTES)
+        except socket.timeout:
+            raise ControlError(f"the hapticop system {who} did not answer within {timeout:g} s") from None
+        except _TooLarge:
+            raise ControlError(f"the reply of the hapticop system {who} is larger than {MAX_REPLY_BYTES} bytes") from None
+        except OSError as error:
+            raise ControlError(f"the connection to the hapticop system {who} failed: {error.strerror or error}") from None
+    finally:
+        client.close()
+    if not line:
+        raise ControlError(f"the hapticop system {who} closed the connection without answering")
+    try:
+        reply = json.loads(line)
+    except (UnicodeDecodeError, ValueError):
+        raise ControlError(f"the hapticop system {who} answered something that is not JSON") from None
+    if not isinstance(reply, dict):
+        raise ControlError(f"the hapticop system {who} answered a JSON {type(reply).__name__}, not an object")
+    return reply

@@ -1,0 +1,122 @@
+"""Logging with the thesis's five levels that never blocks a cyclic thread.
+
+A log call below the owner's level costs one integer comparison. Otherwise it puts one
+tuple on a lock-free queue (`SimpleQueue.put`) and returns; a writer thread per process
+formats the lines and appends them to one file per thread or activity in the run
+directory, which defaults to a tmpfs (`/dev/shm`) as the thesis advises. Errors and
+warnings are echoed to the console by the writer, not by the caller.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import sys
+import threading
+import time
+from enum import IntEnum
+from pathlib import Path
+from typing import Callable, TextIO
+
+
+class Level(IntEnum):
+    ALWAYS = 0
+    ERROR = 1
+    WARNING = 2
+    INFO = 3
+    DEBUG = 4
+
+
+LEVEL_NAMES = [level.name.lower() for level in Level]
+
+
+def default_run_dir(name: str) -> Path:
+    base = Path("/dev/shm") if Path("/dev/shm").is_dir() and os.access("/dev/shm", os.W_OK) else Path("/tmp")
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return base / "hapticop" / f"{name}-{stamp}-{os.getpid()}"
+
+
+class LogWriter:
+    """Drains the queue of one process into per-owner files."""
+
+    def __init__(self, run_dir: Path, echo: TextIO | None = sys.stderr, echo_level: Level = Level.WARNING):
+        self.run_dir = run_dir
+        self.queue: queue.SimpleQueue = queue.SimpleQueue()
+        self.echo, self.echo_level = echo, echo_level
+        self._files: dict[str, TextIO] = {}
+        self._thread = threading.Thread(target=self._drain, name="hapticop-log", daemon=True)
+        self._stopped = False
+
+    def start(self) -> "LogWriter":
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self._thread.start()
+        return self
+
+    def logger(self, owner: str, level: Level, clock_ns: Callable[[], int]) -> "Logger":
+        return Logger(owner, level, self.queue, clock_ns)
+
+    def _file(self, owner: str) -> TextIO:
+        handle = self._files.get(owner)
+        if handle is None:
+            handle = self._files[owner] = open(self.run_dir / f"{owner}.log", "a", buffering=1 << 16)
+        return handle
+
+    def _write(self, item: tuple) -> None:
+        stamp_ns, owner, level, message, args = item
+        try:
+            text = message % args if args else message
+        except (TypeError, ValueError):
+            text = f"{message} {args!r}"
+        line = f"{stamp_ns / 1e9:.6f} {LEVEL_NAMES[level]:7s} {text}\n"
+        self._file(owner).write(line)
+        if self.echo is not None and level <= self.echo_level:
+            self.echo.write(f"[{owner}] {LEVEL_NAMES[level]}: {text}\n")
+
+    def _drain(self) -> None:
+        while True:
+            item = self.queue.get()
+            if item is None:
+                break
+            self._write(item)
+            if self.queue.empty():
+                for handle in self._files.values():
+                    handle.flush()
+
+    def stop(self) -> None:
+        if self._stopped:
+            return
+        self._stopped = True
+        self.queue.put(None)
+        if self._thread.is_alive():
+            self._thread.join(timeout=5)
+        for handle in self._files.values():
+            handle.close()
+        self._files.clear()
+
+
+class Logger:
+    """What a thread or an activity logs through."""
+
+    __slots__ = ("owner", "level", "_queue", "_now")
+
+    def __init__(self, owner: str, level: Level, sink: queue.SimpleQueue, clock_ns: Callable[[], int]):
+        self.owner, self.level, self._queue, self._now = owner, level, sink, clock_ns
+
+    def _log(self, level: Level, message: str, args: tuple) -> None:
+        if level <= self.level:
+            self._queue.put((self._now(), self.owner, level, message, args))
+
+    def always(self, message: str, *args: object) -> None:
+        self._log(Level.ALWAYS, message, args)
+
+    def error(self, message: str, *args: object) -> None:
+        self._log(Level.ERROR, message, args)
+
+    def warning(self, message: str, *args: object) -> None:
+        self._log(Level.WARNING, message, args)
+
+    def info(self, message: str, *args: object) -> None:
+        self._log(Level.INFO, message, args)
+
+    def debug(self, message: str, *args: object) -> None:
+        self._log(Level.DEBUG, message, args)

@@ -1,0 +1,61 @@
+"""Asking Linux for real-time treatment: SCHED_FIFO, CPU affinity, locked memory.
+
+These need root or CAP_SYS_NICE (and CAP_IPC_LOCK for mlockall). Where the process may
+not, the system still runs with normal scheduling and says so once, not once per thread.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import threading
+
+from hapticop.description import Thread
+from hapticop.runtime.logs import Logger
+
+MCL_CURRENT, MCL_FUTURE = 1, 2
+
+_lock = threading.Lock()
+_warned: set[str] = set()
+_memory_locked = False
+
+
+def _warn_once(key: str, log: Logger, message: str, *args: object) -> None:
+    with _lock:
+        if key in _warned:
+            return
+        _warned.add(key)
+    log.warning(message, *args)
+
+
+def lock_memory(log: Logger) -> None:
+    """mlockall once per process, so page faults never stall a cycle."""
+    global _memory_locked
+    with _lock:
+        if _memory_locked:
+            return
+        _memory_locked = True
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+            raise OSError(ctypes.get_errno(), os.strerror(ctypes.get_errno()))
+    except OSError as error:
+        _warn_once("mlockall", log, "cannot lock memory (mlockall: %s); page faults may delay cycles", error.strerror)
+
+
+def apply(spec: Thread, log: Logger) -> None:
+    """Apply the thread's declared priority and affinity to the calling thread."""
+    if spec.priority is not None:
+        lock_memory(log)
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(spec.priority))
+            log.info("SCHED_FIFO priority %d", spec.priority)
+        except PermissionError:
+            _warn_once("fifo", log, "cannot use SCHED_FIFO (needs root or CAP_SYS_NICE): threads run with "
+                       "normal scheduling and their deadlines are not protected")
+    if spec.cpus:
+        try:
+            os.sched_setaffinity(0, spec.cpus)
+        except OSError as error:
+            _warn_once(f"cpus{spec.cpus}", log, "cannot set CPU affinity %s: %s", spec.cpus, error.strerror)

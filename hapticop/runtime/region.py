@@ -1,0 +1,153 @@
+"""The one shared-memory region that holds every piece of state crossing threads.
+
+Flags, LCSM states, selected schedules, timing counters and every stream buffer live in a
+single `multiprocessing.shared_memory` block laid out from the composition alone, so a
+thread deployed in its own process attaches by name, computes the same layout and sees the
+same arrays. Moving a thread into a process therefore changes nothing else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from multiprocessing import shared_memory
+
+import numpy as np
+
+from hapticop import lcsm
+from hapticop.description import Composition
+from hapticop.loader import ResolvedActivity
+from hapticop.runtime import streams as st
+from hapticop.runtime.timing import BINS
+
+ALIGN = 64
+
+
+def _align(n: int) -> int:
+    return (n + ALIGN - 1) // ALIGN * ALIGN
+
+
+@dataclass(frozen=True)
+class Transport:
+    """Where one stream transport lives: a latest slot, or one queue ring per reader."""
+
+    stream: str
+    kind: str  # "latest" or "queue"
+    offset: int
+    nbytes: int
+    reader: str | None = None  # "activity.port" for queue rings
+
+
+@dataclass
+class Layout:
+    """Offsets and indices, computed identically in every process from the composition."""
+
+    threads: list[str]
+    activities: list[str]
+    flags: list[str]
+    sections: dict[str, tuple[int, tuple[int, ...], str]] = field(default_factory=dict)
+    transports: dict[str, list[Transport]] = field(default_factory=dict)
+    size: int = 0
+
+    def __post_init__(self) -> None:
+        self.thread_index = {n: i for i, n in enumerate(self.threads)}
+        self.activity_index = {n: i for i, n in enumerate(self.activities)}
+        self.owner_index = {**{f"threads.{n}": i for i, n in enumerate(self.threads)},
+                            **{n: len(self.threads) + i for i, n in enumerate(self.activities)}}
+        self.flag_index = {n: i for i, n in enumerate(self.flags)}
+
+    @classmethod
+    def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str]) -> "Layout":
+        layout = cls(list(composition.threads), list(activities), sorted(flags))
+        threads, owners, acts = len(layout.threads), len(layout.owner_index), len(layout.activities)
+        offset = 0
+
+        def section(name: str, shape: tuple[int, ...], dtype: str) -> None:
+            nonlocal offset
+            layout.sections[name] = (offset, shape, dtype)
+            offset = _align(offset + int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize)
+
+        section("system", (8,), "int64")
+        section("flags", (max(1, len(layout.flags)),), "uint8")
+        section("state", (owners,), "uint8")
+        section("failed", (owners,), "uint8")
+        section("selected", (threads,), "int64")
+        section("cycles", (threads,), "int64")
+        section("missed", (threads,), "int64")
+        section("heartbeat", (threads,), "int64")
+        section("control", (threads,), "int64")
+        section("latency_max", (threads,), "int64")
+        section("latency", (threads, BINS), "int64")
+        section("compute_max", (max(1, acts),), "int64")
+        section("compute", (max(1, acts), BINS), "int64")
+        for name, spec in composition.streams.items():
+            writer_activity, writer_port = spec.writer.split(".")
+            port = activities[writer_activity].interface.outputs[writer_port]
+            if spec.policy.kind == "latest":
+                nbytes = st.latest_nbytes(port)
+                layout.transports[name] = [Transport(name, "latest", offset, nbytes)]
+                offset = _align(offset + nbytes)
+            else:
+                rings = []
+                for reader in spec.readers:
+                    nbytes = st.queue_nbytes(port, spec.policy.capacity)
+                    rings.append(Transport(name, "queue", offset, nbytes, reader))
+                    offset = _align(offset + nbytes)
+                layout.transports[name] = rings
+        layout.size = max(offset, ALIGN)
+        return layout
+
+
+class Region:
+    """Numpy views of the layout's sections over one shared-memory block."""
+
+    # system[] slots
+    TERMINATE = 0  # set by the main process: every loop leaves at once (forced exit)
+    STARTED_NS = 1
+
+    def __init__(self, layout: Layout, memory: shared_memory.SharedMemory, owner: bool):
+        self.layout = layout
+        self.memory = memory
+        self.owner = owner
+        buffer = memory.buf
+        for name, (offset, shape, dtype) in layout.sections.items():
+            setattr(self, name, np.ndarray(shape, dtype=dtype, buffer=buffer, offset=offset))
+
+    @classmethod
+    def create(cls, layout: Layout) -> "Region":
+        memory = shared_memory.SharedMemory(create=True, size=layout.size)
+        memory.buf[: layout.size] = bytes(layout.size)
+        region = cls(layout, memory, owner=True)
+        region.state[:] = lcsm.State.CREATION
+        return region
+
+    @classmethod
+    def attach(cls, layout: Layout, name: str) -> "Region":
+        """Attach from a thread's own process. Children are started with 'spawn', so they
+        share the parent's resource tracker: the block stays registered once, and only the
+        creating process unlinks it."""
+        memory = shared_memory.SharedMemory(name=name, create=False)
+        return cls(layout, memory, owner=False)
+
+    @property
+    def name(self) -> str:
+        return self.memory.name
+
+    def transport_buffer(self, transport: Transport) -> np.ndarray:
+        return np.ndarray((transport.nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=transport.offset)
+
+    def flag(self, name: str) -> bool:
+        return bool(self.flags[self.layout.flag_index[name]])
+
+    def close(self) -> None:
+        for name in self.layout.sections:
+            if hasattr(self, name):
+                delattr(self, name)
+        try:
+            self.memory.close()
+        except BufferError:
+            return  # a view is still referenced somewhere; the OS frees it at exit
+        if self.owner:
+            try:
+                self.memory.unlink()
+            except FileNotFoundError:
+                pass

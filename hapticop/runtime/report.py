@@ -1,0 +1,66 @@
+"""The table a run ends with: how well every thread kept time, what every activity cost."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from hapticop.runtime.region import Region
+from hapticop.runtime.timing import Summary
+from hapticop.units import format_duration
+
+
+def timing(region: Region, composition) -> dict:
+    layout = region.layout
+    threads = {}
+    for name, index in layout.thread_index.items():
+        summary = Summary.of(region.latency[index], int(region.latency_max[index]))
+        threads[name] = {
+            "period": format_duration(composition.threads[name].period),
+            "cycles": int(region.cycles[index]),
+            "missed_deadlines": int(region.missed[index]),
+            "wakeup_latency_us": _numbers(summary),
+        }
+    activities = {}
+    for name, index in layout.activity_index.items():
+        summary = Summary.of(region.compute[index], int(region.compute_max[index]))
+        activities[name] = {"steps": summary.count, "compute_us": _numbers(summary)}
+    return {"threads": threads, "activities": activities}
+
+
+def _numbers(summary: Summary) -> dict:
+    clean = lambda v: None if math.isnan(v) else round(v, 1)  # noqa: E731
+    return {"p50": clean(summary.p50_us), "p99": clean(summary.p99_us), "p99.9": clean(summary.p999_us),
+            "max": clean(summary.max_us)}
+
+
+def _cell(value) -> str:
+    return "-" if value is None else f"{value:g}"
+
+
+def print_timing(data: dict, console: Console, virtual: bool) -> None:
+    table = Table(title="threads" + (" (virtual clock: no wake-up latency)" if virtual else ""), title_justify="left")
+    for column in ("thread", "period", "cycles", "wake p50 us", "p99", "p99.9", "max", "missed"):
+        table.add_column(column, justify="right" if column != "thread" else "left")
+    for name, t in data["threads"].items():
+        lat = t["wakeup_latency_us"]
+        table.add_row(name, t["period"], str(t["cycles"]), _cell(lat["p50"]), _cell(lat["p99"]),
+                      _cell(lat["p99.9"]), _cell(lat["max"]), str(t["missed_deadlines"]))
+    console.print(table)
+    table = Table(title="activities", title_justify="left")
+    for column in ("activity", "steps", "compute p50 us", "p99", "max"):
+        table.add_column(column, justify="right" if column != "activity" else "left")
+    for name, a in data["activities"].items():
+        c = a["compute_us"]
+        table.add_row(name, str(a["steps"]), _cell(c["p50"]), _cell(c["p99"]), _cell(c["max"]))
+    console.print(table)
+
+
+def write_timing(data: dict, run_dir: Path) -> Path:
+    path = run_dir / "timing.json"
+    path.write_text(json.dumps(data, indent=2))
+    return path

@@ -1,0 +1,318 @@
+"""Stream buffers in shared memory: a latest-sample slot and a bounded one-reader queue.
+
+The runtime places every stream in one shared-memory region so that threads may run in
+other processes; each class here is a handle over a slice of that region. The layout is
+all in the buffer (headers included), so handles in different processes over the same
+bytes see the same stream. A buffer must start zeroed (fresh shared memory is).
+
+On the cycle path (`write`, `read_into`, `push`, `pop_into`) nothing blocks, no lock is
+taken and no numpy array, list, dict or tuple is created: headers are read and written
+through `memoryview` casts and payloads copied into views made once, at construction.
+
+Why the seqlock is sound here (x86-64, CPython): a writer makes the sequence odd, copies
+the payload and makes it even again; a reader reads the sequence, copies, and re-reads
+it, keeping the copy only if both reads are equal and even. Header fields are aligned
+8-byte words read and written with single loads and stores (memoryview item access is a
+fixed-size memcpy). numpy copies are plain loads and stores, and x86-64 is TSO: stores
+become visible in program order and loads are not reordered with older loads, so a
+reader that saw any store of a write also sees that write's odd sequence on its re-read.
+(glibc's non-temporal stores, used only for multi-megabyte copies, end with an sfence.)
+The compiler cannot move accesses across the interpreter's opaque calls between
+bytecodes. The GIL orders threads within a process only; across processes the ordering
+comes from TSO plus the sequence re-check. Other architectures would need fences.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from hapticop.blocks.interface import Port
+
+SAMPLE_ALIGN = 64
+"""Every slot starts and ends on a cache line, so writers never share a line."""
+
+MAX_RETRIES = 1000
+"""Reads retried this often while a writer is busy, then give up: a reader never spins forever."""
+
+Buffer = memoryview | np.ndarray
+
+# One sample: header and payload; the payload starts right after the header.
+SLOT_HEADER = np.dtype(
+    {
+        "names": ["seq", "count", "stamp_ns"],
+        "formats": ["<u8", "<u8", "<i8"],
+        "offsets": [0, 8, 16],
+        "itemsize": 32,
+    }
+)
+"""`seq` is odd while a write is in progress; `count` is the sample's number (1 = first)."""
+
+# A queue's indices: the producer's and the consumer's on separate cache lines.
+QUEUE_HEADER = np.dtype(
+    {
+        "names": ["write_index", "dropped_newest", "read_index", "dropped_oldest"],
+        "formats": ["<u8", "<u8", "<u8", "<u8"],
+        "offsets": [0, 8, 64, 72],
+        "itemsize": 128,
+    }
+)
+"""Each field has one writer: the producer owns the first line, the consumer the second."""
+
+_SEQ = SLOT_HEADER.fields["seq"][1] // 8
+_COUNT = SLOT_HEADER.fields["count"][1] // 8
+_STAMP = SLOT_HEADER.fields["stamp_ns"][1] // 8
+_W = QUEUE_HEADER.fields["write_index"][1] // 8
+_DROP_NEW = QUEUE_HEADER.fields["dropped_newest"][1] // 8
+_R = QUEUE_HEADER.fields["read_index"][1] // 8
+_DROP_OLD = QUEUE_HEADER.fields["dropped_oldest"][1] // 8
+
+
+def _align(nbytes: int) -> int:
+    return -(-nbytes // SAMPLE_ALIGN) * SAMPLE_ALIGN
+
+
+def latest_nbytes(port: Port) -> int:
+    """Bytes a `LatestSlot` for `port` needs."""
+    return _align(SLOT_HEADER.itemsize + port.nbytes)
+
+
+def queue_nbytes(port: Port, capacity: int) -> int:
+    """Bytes an `SpscQueue` of `capacity` samples of `port` needs."""
+    if capacity < 1:
+        raise ValueError(f"queue capacity must be at least 1, not {capacity}")
+    return QUEUE_HEADER.itemsize + capacity * latest_nbytes(port)
+
+
+def _raw(buffer: Buffer, nbytes: int) -> np.ndarray:
+    """The first `nbytes` of `buffer` as writable uint8, checked once so cycles need not."""
+    view = memoryview(buffer)
+    if view.readonly:
+        raise ValueError("stream buffer is read-only")
+    raw = np.frombuffer(view.cast("B"), dtype=np.uint8)
+    if raw.size < nbytes:
+        raise ValueError(f"stream buffer holds {raw.size} bytes, needs {nbytes}")
+    if raw.ctypes.data % 8:
+        raise ValueError("stream buffer must be 8-byte aligned (headers are atomic words)")
+    return raw[:nbytes]
+
+
+class _Slot:
+    """Views over one sample in the buffer: header words and the payload (typed and raw)."""
+
+    __slots__ = ("words", "stamps", "payload", "payload_bytes")
+
+    def __init__(self, raw: np.ndarray, port: Port) -> None:
+        head = raw[: SLOT_HEADER.itemsize]
+        body = raw[SLOT_HEADER.itemsize : SLOT_HEADER.itemsize + port.nbytes]
+        self.words = memoryview(head).cast("Q")
+        self.stamps = memoryview(head).cast("q")
+        self.payload = body.view(port.dtype).reshape(port.shape)
+        self.payload_bytes = memoryview(body)
+
+    def release(self) -> None:
+        self.words.release()
+        self.stamps.release()
+        self.payload_bytes.release()
+        self.payload = None
+
+
+def _scratch(port: Port) -> tuple[np.ndarray, memoryview]:
+    """A private copy target, so a torn copy is caught before it reaches the caller's array."""
+    raw = np.zeros(port.nbytes, dtype=np.uint8)
+    return raw.view(port.dtype).reshape(port.shape), memoryview(raw)
+
+
+class LatestSlot:
+    """The newest sample of a stream, seqlock-protected: readers never wait and never tear.
+
+    One writer; any number of readers, each with its own handle (a handle holds a private
+    scratch copy). `synchronised=False` drops the protocol for a writer and readers that
+    run one after the other in one thread; the header is kept up to date all the same.
+    """
+
+    def __init__(self, buffer: Buffer, port: Port, synchronised: bool = True) -> None:
+        self.port = port
+        self.synchronised = synchronised
+        self._slot = _Slot(_raw(buffer, latest_nbytes(port)), port)
+        self._scratch, self._scratch_bytes = _scratch(port)
+
+    @property
+    def count(self) -> int:
+        """Samples written so far."""
+        return self._slot.words[_COUNT]
+
+    def write(self, value: np.ndarray, stamp_ns: int) -> None:
+        """Publish `value` (cast like `np.copyto`) as the newest sample, taken at `stamp_ns`."""
+        words = self._slot.words
+        seq = words[_SEQ]
+        if self.synchronised:
+            words[_SEQ] = seq + 1
+        try:
+            np.copyto(self._slot.payload, value)
+            self._slot.stamps[_STAMP] = stamp_ns
+            words[_COUNT] = words[_COUNT] + 1
+        finally:  # a failed copy must not leave the slot locked for ever
+            words[_SEQ] = seq + 2
+
+    def read_into(self, out: np.ndarray, meta: np.ndarray) -> bool:
+        """Copy the newest sample into `out`, its number and stamp into `meta[0:2]`.
+
+        False, with `out` and `meta` untouched, if nothing was written yet or the writer
+        kept the slot busy for `MAX_RETRIES` attempts.
+        """
+        slot = self._slot
+        words = slot.words
+        if not self.synchronised:
+            count = words[_COUNT]
+            if count == 0:
+                return False
+            np.copyto(out, slot.payload)
+            meta[0] = count
+            meta[1] = slot.stamps[_STAMP]
+            return True
+        tries = MAX_RETRIES
+        while tries:
+            tries -= 1
+            seq = words[_SEQ]
+            if seq == 0:
+                return False
+            if seq & 1:
+                continue
+            count = words[_COUNT]
+            stamp = slot.stamps[_STAMP]
+            self._scratch_bytes[:] = slot.payload_bytes
+            if words[_SEQ] == seq:
+                np.copyto(out, self._scratch)
+                meta[0] = count
+                meta[1] = stamp
+                return True
+        return False
+
+    def close(self) -> None:
+        """Let go of the buffer, so the shared memory can be closed."""
+        self._slot.release()
+
+    def __repr__(self) -> str:
+        words = self._slot.words
+        kind = "synchronised" if self.synchronised else "plain"
+        return (
+            f"LatestSlot({self.port.describe()}, {kind}, count={words[_COUNT]}, "
+            f"seq={words[_SEQ]}, stamp_ns={self._slot.stamps[_STAMP]})"
+        )
+
+
+class SpscQueue:
+    """A bounded ring for one producer and one consumer (the runtime makes one per reader).
+
+    The producer writes sample `w` into slot `w % capacity` under that slot's seqlock,
+    stamping it with its number, then advances `w`. With `drop_oldest` it never waits:
+    a consumer more than `capacity` behind skips to the oldest sample still in the ring,
+    and one whose slot was overwritten while it copied skips that sample; both count the
+    loss. With `drop_newest` the producer refuses a sample while the ring is full.
+    """
+
+    def __init__(
+        self,
+        buffer: Buffer,
+        port: Port,
+        capacity: int,
+        overflow: Literal["drop_oldest", "drop_newest"] = "drop_oldest",
+    ) -> None:
+        if overflow not in ("drop_oldest", "drop_newest"):
+            raise ValueError(f"overflow must be 'drop_oldest' or 'drop_newest', not {overflow!r}")
+        raw = _raw(buffer, queue_nbytes(port, capacity))
+        self.port = port
+        self.capacity = capacity
+        self.overflow = overflow
+        self._drop_newest = overflow == "drop_newest"
+        self._head = memoryview(raw[: QUEUE_HEADER.itemsize]).cast("Q")
+        stride = latest_nbytes(port)
+        start = QUEUE_HEADER.itemsize
+        self._slots = [
+            _Slot(raw[start + k * stride : start + (k + 1) * stride], port) for k in range(capacity)
+        ]
+        self._scratch, self._scratch_bytes = _scratch(port)
+
+    @property
+    def dropped(self) -> int:
+        """Samples lost so far: refused by the producer or skipped by the consumer."""
+        return self._head[_DROP_NEW] + self._head[_DROP_OLD]
+
+    def pending(self) -> int:
+        """Samples the consumer could still pop."""
+        head = self._head
+        return min(head[_W] - head[_R], self.capacity)
+
+    def push(self, value: np.ndarray, stamp_ns: int) -> bool:
+        """Append a sample (producer only); False if refused because the ring is full."""
+        head = self._head
+        w = head[_W]
+        if self._drop_newest and w - head[_R] >= self.capacity:
+            head[_DROP_NEW] = head[_DROP_NEW] + 1
+            return False
+        slot = self._slots[w % self.capacity]
+        words = slot.words
+        seq = words[_SEQ]
+        words[_SEQ] = seq + 1
+        try:
+            np.copyto(slot.payload, value)
+            slot.stamps[_STAMP] = stamp_ns
+            words[_COUNT] = w + 1
+        finally:
+            words[_SEQ] = seq + 2
+        head[_W] = w + 1
+        return True
+
+    def pop_into(self, out: np.ndarray, meta: np.ndarray) -> bool:
+        """Take the oldest sample still held into `out`, its number and stamp into `meta`.
+
+        Sample numbers start at 1 and have gaps where samples were dropped. False, with
+        `out` and `meta` untouched, when the ring is empty (consumer only).
+        """
+        head = self._head
+        capacity = self.capacity
+        r = head[_R]
+        tries = MAX_RETRIES
+        while tries:
+            tries -= 1
+            w = head[_W]
+            if r >= w:
+                break
+            if w - r > capacity:  # lapped: the oldest samples were overwritten
+                head[_DROP_OLD] = head[_DROP_OLD] + (w - capacity - r)
+                r = w - capacity
+            slot = self._slots[r % capacity]
+            words = slot.words
+            seq = words[_SEQ]
+            if seq & 1 or words[_COUNT] != r + 1:  # being or already overwritten
+                head[_DROP_OLD] = head[_DROP_OLD] + 1
+                r += 1
+                continue
+            stamp = slot.stamps[_STAMP]
+            self._scratch_bytes[:] = slot.payload_bytes
+            if words[_SEQ] != seq:  # overwritten while we copied
+                head[_DROP_OLD] = head[_DROP_OLD] + 1
+                r += 1
+                continue
+            head[_R] = r + 1
+            np.copyto(out, self._scratch)
+            meta[0] = r + 1
+            meta[1] = stamp
+            return True
+        head[_R] = r
+        return False
+
+    def close(self) -> None:
+        """Let go of the buffer, so the shared memory can be closed."""
+        self._head.release()
+        for slot in self._slots:
+            slot.release()
+
+    def __repr__(self) -> str:
+        head = self._head
+        return (
+            f"SpscQueue({self.port.describe()}, capacity={self.capacity}, {self.overflow}, "
+            f"write_index={head[_W]}, read_index={head[_R]}, dropped={self.dropped})"
+        )

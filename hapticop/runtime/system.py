@@ -1,0 +1,329 @@
+"""`hapticop compose`: a validated composition turned into a running system.
+
+The main process creates the shared region, builds the threads deployed in it, and runs
+the main thread, whose mediator activity owns the coordination: it starts the other
+threads (as threads, or as processes attached to the same region), steps the nets every
+cycle, and applies live patches at cycle boundaries. Around it, a supervisor on the main
+thread keeps the run bounded: the duration, Ctrl+C and SIGTERM, a shutdown that
+coordination must finish in time, and threads whose process died.
+
+With the virtual clock nothing sleeps: every thread is stepped in the main process, at its
+deadlines in simulated time, in a fixed order, so one composition and seed always give
+the same run.
+"""
+
+from __future__ import annotations
+
+import heapq
+import multiprocessing
+import signal
+import sys
+import threading
+from dataclasses import dataclass, field
+from enum import IntEnum
+from pathlib import Path
+
+from hapticop.lcsm import State
+from hapticop.loader import Loaded
+from hapticop.runtime.assembly import Built, build, layout_of, thread_of
+from hapticop.runtime.clock import RealtimeClock, VirtualClock
+from hapticop.runtime.coordinator import Coordinator
+from hapticop.runtime.lifecycle import OK
+from hapticop.runtime.logs import Level, LogWriter, default_run_dir
+from hapticop.runtime.region import Region
+from hapticop.runtime.thread import CyclicThread
+from hapticop.units import format_duration
+
+SECOND = 1_000_000_000
+
+
+class ExitStatus(IntEnum):
+    SUCCESS = 0
+    FAILURE = 1
+    INTERRUPTED = 130
+    TERMINATED = 143
+
+
+@dataclass
+class RunOptions:
+    clock: str = "realtime"  # or "virtual"
+    duration_ns: int | None = None
+    seed: int = 0
+    run_dir: Path | None = None
+    shutdown_timeout_ns: int = 5 * SECOND
+    echo: bool = True  # errors and warnings to the console
+
+
+@dataclass
+class _ProcessThread:
+    name: str
+    process: multiprocessing.Process
+    reported: bool = False
+
+
+@dataclass
+class Outcome:
+    status: ExitStatus
+    run_dir: Path
+    reasons: list[str] = field(default_factory=list)
+
+
+class System:
+    def __init__(self, loaded: Loaded, source_text: str, file: str, options: RunOptions):
+        self.loaded, self.text, self.file, self.options = loaded, source_text, file, options
+        self.composition = loaded.composition
+        self.virtual = options.clock == "virtual"
+        self.clock = VirtualClock() if self.virtual else RealtimeClock()
+        self.run_dir = options.run_dir or default_run_dir(self.composition.name or Path(file).stem)
+        self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
+        self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
+        self.layout = layout_of(loaded)
+        self.region = Region.create(self.layout)
+        self.flag_index = self.layout.flag_index
+        self.coordinator = Coordinator(self.composition.coordination, self.region.flags, self.flag_index)
+        self.owner_thread = thread_of(self.composition)
+        local = [t for t, spec in self.composition.threads.items() if self.virtual or spec.deploy != "process"]
+        self.built: Built = build(loaded, self.region, local, self.clock, self.writer, options.seed,
+                                  apply_realtime=not self.virtual)
+        self.main_name = next(t for t, spec in self.composition.threads.items() if spec.deploy == "main")
+        self.main: CyclicThread = self.built.threads[self.main_name]
+        self.processes: dict[str, _ProcessThread] = {}
+        self.os_threads: dict[str, threading.Thread] = {}
+        self.virtual_queue: list[tuple[int, int, str]] = []
+        self.started = False
+        self.reasons: list[str] = []
+        self.interrupted: ExitStatus | None = None
+        self.shutdown_at: int | None = None
+        self.forced = False
+        self.default_shutdown = not self._read_by_flag_map("system.shutdown_requested")
+        self.exit_by_flag = self._written_by_flag_map("system.exit")
+        self.main.supervisor = self.supervise
+        for runner in self.built.runners.values():
+            attach = getattr(runner.block, "attach_system", None)
+            if attach is not None:
+                attach(self)
+        self.region.system[Region.STARTED_NS] = self.clock.now_ns()
+        self._warn_declaration_only_blocks()
+
+    # -- what the flag maps say ---------------------------------------------------------
+    def _read_by_flag_map(self, flag: str) -> bool:
+        return any(flag in fm.converting_sources or flag in fm.tracking_sources
+                   for fm in self.composition.coordination.flag_maps.values())
+
+    def _written_by_flag_map(self, flag: str) -> bool:
+        return any(flag in fm.converting_sinks or flag in fm.tracking_sinks
+                   for fm in self.composition.coordination.flag_maps.values())
+
+    def _warn_declaration_only_blocks(self) -> None:
+        for name, resolved in self.loaded.activities.items():
+            if resolved.interface.outputs and not resolved.block.implements_compute():
+                self.log.warning("activity '%s': block '%s' declares its ports but has no computation yet; "
+                                 "its outputs stay at zero", name, resolved.spec.block)
+
+    def flag(self, name: str) -> bool:
+        return bool(self.region.flags[self.flag_index[name]])
+
+    def set_flag(self, name: str, value: bool = True) -> None:
+        self.region.flags[self.flag_index[name]] = 1 if value else 0
+
+    def state(self, owner: str) -> State:
+        return State(int(self.region.state[self.layout.owner_index[owner]]))
+
+    # -- the mediator's duties ----------------------------------------------------------
+    def start_threads(self) -> bool:
+        """Create every thread but the main one (the mediator's resource configuration)."""
+        if self.started:
+            return True
+        self.started = True
+        now = self.clock.now_ns()
+        for order, (name, spec) in enumerate(self.composition.threads.items()):
+            if name == self.main_name:
+                continue
+            if self.virtual:
+                heapq.heappush(self.virtual_queue, (now, order, name))
+            elif spec.deploy == "process":
+                self._spawn(name)
+            else:
+                thread = self.built.threads[name]
+                os_thread = threading.Thread(target=thread.run_realtime, args=(self._first_deadline(), self._never),
+                                             name=f"hapticop-{name}", daemon=True)
+                self.os_threads[name] = os_thread
+                os_thread.start()
+        self.log.info("threads started")
+        return True
+
+    @staticmethod
+    def _never() -> bool:
+        return False
+
+    def _first_deadline(self) -> int:
+        return self.clock.now_ns() + 2_000_000
+
+    def _spawn(self, name: str) -> None:
+        from hapticop.runtime.child import process_main
+
+        context = multiprocessing.get_context("spawn")
+        process = context.Process(
+            target=process_main,
+            args=(self.text, self.file, self.region.name, name, str(self.run_dir), self.options.seed),
+            name=f"hapticop-{name}", daemon=True,
+        )
+        process.start()
+        self.processes[name] = _ProcessThread(name, process)
+        self.log.info("thread '%s' runs in process %d", name, process.pid)
+
+    def coordinate(self) -> None:
+        """One coordination step (the mediator's compute)."""
+        self.coordinator.step()
+
+    # -- supervision, every main-thread cycle -------------------------------------------
+    def supervise(self) -> None:
+        now = self.clock.now_ns()
+        started = int(self.region.system[Region.STARTED_NS])
+        if self.options.duration_ns is not None and self.shutdown_at is None and now - started >= self.options.duration_ns:
+            self.log.info("duration %s reached", format_duration(self.options.duration_ns))
+            self.request_shutdown()
+        self._watch_processes()
+        if self.shutdown_at is None:
+            return
+        if self.default_shutdown or self.forced:
+            self._walk_down()
+        elif now - self.shutdown_at > self.options.shutdown_timeout_ns:
+            self.forced = True
+            self.reasons.append(f"coordination did not finish the shutdown within "
+                                f"{format_duration(self.options.shutdown_timeout_ns)}; forced")
+            self.log.error(self.reasons[-1])
+        if self.exit_by_flag and self.flag("system.exit"):
+            self._finish()
+
+    def request_shutdown(self) -> None:
+        if self.shutdown_at is not None:
+            return
+        self.shutdown_at = self.clock.now_ns()
+        if "system.shutdown_requested" in self.flag_index:
+            self.set_flag("system.shutdown_requested")
+
+    def _walk_down(self) -> None:
+        """The runtime's own shutdown: activities, then threads, then the main thread."""
+        others = [n for n in self.loaded.activities if self.owner_thread.get(n) and
+                  self.composition.activities[n].block != "mediator"]
+        for name in others:
+            if self.state(name) is not State.DONE and not self._lost(self.owner_thread[name]):
+                self.set_flag(f"{name}.lcsm.request_cleaning")
+        if any(self.state(n) is not State.DONE and not self._lost(self.owner_thread[n]) for n in others):
+            return
+        threads = [t for t in self.composition.threads if t != self.main_name]
+        for name in threads:
+            if self.state(f"threads.{name}") is not State.DONE and not self._lost(name):
+                if self.virtual or name in self.os_threads or name in self.processes:
+                    self.set_flag(f"threads.{name}.lcsm.request_cleaning")
+                else:  # never started: nothing to clean
+                    self.region.state[self.layout.owner_index[f"threads.{name}"]] = State.DONE
+        if all(self.state(f"threads.{t}") is State.DONE or self._lost(t) for t in threads):
+            self._finish()
+
+    def _finish(self) -> None:
+        self.main.lifecycle.request_cleaning()
+
+    def _lost(self, thread: str) -> bool:
+        handle = self.processes.get(thread)
+        return handle is not None and handle.reported
+
+    def _watch_processes(self) -> None:
+        for handle in self.processes.values():
+            if handle.reported or handle.process.is_alive():
+                continue
+            if self.state(f"threads.{handle.name}") is State.DONE and handle.process.exitcode == 0:
+                continue
+            handle.reported = True
+            message = (f"thread '{handle.name}' was lost: its process {handle.process.pid} ended with exit code "
+                       f"{handle.process.exitcode}")
+            self.reasons.append(message)
+            self.log.error(message)
+            self.set_flag(f"threads.{handle.name}.lost")
+
+    # -- running ------------------------------------------------------------------------
+    def run(self) -> Outcome:
+        previous = self._install_signals()
+        try:
+            if self.virtual:
+                self._run_virtual()
+            else:
+                self._run_realtime()
+        finally:
+            self._restore_signals(previous)
+            self._stop_everything()
+        return Outcome(self._status(), self.run_dir, self.reasons)
+
+    def _run_realtime(self) -> None:
+        self.main.run_realtime(self._first_deadline(), self._never)
+
+    def _run_virtual(self) -> None:
+        """Step every started thread at its deadlines, earliest first, ties in file order."""
+        order = {name: i for i, name in enumerate(self.composition.threads)}
+        queue = self.virtual_queue
+        heapq.heappush(queue, (0, order[self.main_name], self.main_name))
+        limit = (self.options.duration_ns or 0) + 2 * self.options.shutdown_timeout_ns + 60 * SECOND
+        while queue:
+            deadline, rank, name = heapq.heappop(queue)
+            if deadline > limit:
+                self.reasons.append("the virtual run did not end within its time limit")
+                break
+            self.clock.advance_to(deadline)
+            thread = self.built.threads[name]
+            thread.cycle()
+            if name == self.main_name and thread.done:
+                break
+            if not thread.done:
+                heapq.heappush(queue, (deadline + thread.period, rank, name))
+
+    def _install_signals(self):
+        if threading.current_thread() is not threading.main_thread():
+            return None
+
+        def handler(signum, _frame):
+            if self.interrupted is not None:  # the second one: leave now
+                self.region.system[Region.TERMINATE] = 1
+                raise KeyboardInterrupt
+            self.interrupted = ExitStatus.INTERRUPTED if signum == signal.SIGINT else ExitStatus.TERMINATED
+            self.log.always("%s: shutting down (again to force)", signal.Signals(signum).name)
+            self.request_shutdown()
+
+        return {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    @staticmethod
+    def _restore_signals(previous) -> None:
+        for signum, handler in (previous or {}).items():
+            signal.signal(signum, handler)
+
+    def _stop_everything(self) -> None:
+        self.region.system[Region.TERMINATE] = 1 if any(
+            self.state(f"threads.{t}") is not State.DONE for t in self.composition.threads) else 0
+        for os_thread in self.os_threads.values():
+            os_thread.join(timeout=2)
+        for handle in self.processes.values():
+            handle.process.join(timeout=2)
+            if handle.process.is_alive():
+                handle.process.terminate()
+                handle.process.join(timeout=2)
+
+    def _status(self) -> ExitStatus:
+        failed = [owner for owner, index in self.layout.owner_index.items() if self.region.failed[index] != OK]
+        for owner in failed:
+            self.reasons.append(f"'{owner}' failed ({self._failure(owner)})")
+        if self.forced or failed or any(h.reported for h in self.processes.values()):
+            return ExitStatus.FAILURE
+        if self.interrupted is not None:
+            return self.interrupted
+        return ExitStatus.SUCCESS
+
+    def _failure(self, owner: str) -> str:
+        from hapticop.runtime.lifecycle import FAILURE_TEXT
+
+        return FAILURE_TEXT.get(int(self.region.failed[self.layout.owner_index[owner]]), "failed")
+
+    def close(self) -> None:
+        self.writer.stop()
+        self.built = None  # drop the views into the region before it is released
+        self.main = None
+        self.region.close()

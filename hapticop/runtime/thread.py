@@ -1,0 +1,167 @@
+"""A time-triggered thread: each cycle it steps its own LCSM, then its selected schedule.
+
+The same `CyclicThread` runs as a thread of the main process, as the only loop of its own
+process, or stepped by the virtual-clock scheduler: only the loop that calls `cycle()`
+differs. In real time the loop sleeps to absolute deadlines, records each wake-up latency
+and counts every missed deadline (a cycle that overruns skips, and counts, the periods it
+covered).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Callable
+
+from hapticop.blocks.base import Block
+from hapticop.description import Thread
+from hapticop.lcsm import State
+from hapticop.runtime import realtime
+from hapticop.runtime.lifecycle import Hooks, Lifecycle
+from hapticop.runtime.logs import Logger
+from hapticop.runtime.region import Region
+from hapticop.runtime.timing import record
+
+
+class ActivityRunner:
+    """One activity on its thread: the block, its LCSM and its ports."""
+
+    def __init__(self, name: str, block: Block, region: Region, start_on_request: bool, log: Logger):
+        self.name, self.block, self.region, self.log = name, block, region, log
+        layout = region.layout
+        self.index = layout.activity_index[name]
+        self.inputs = [port for port in vars(block.inputs).values()]
+        self.lifecycle = Lifecycle(
+            region.flags, region.state, region.failed, layout.owner_index[name], layout.flag_index, name,
+            Hooks(block.create, block.configure_resources, block.configure_capabilities, block.compute,
+                  block.pausing, block.clean),
+            start_on_request, log,
+        )
+
+    @property
+    def state(self) -> State:
+        return self.lifecycle.state
+
+    def step(self) -> None:
+        for port in self.inputs:
+            port.refresh()
+        started = time.perf_counter_ns()
+        self.lifecycle.step()
+        record(self.region.compute, self.region.compute_max, self.index, time.perf_counter_ns() - started)
+
+
+class CyclicThread:
+    """The event loop of one thread of the composition."""
+
+    def __init__(self, name: str, spec: Thread, region: Region, runners: dict[str, ActivityRunner],
+                 clock, log: Logger, apply_realtime: bool):
+        self.name, self.spec, self.region, self.clock, self.log = name, spec, region, clock, log
+        self.runners = runners
+        self.apply_realtime = apply_realtime
+        layout = region.layout
+        self.index = layout.thread_index[name]
+        self.period = spec.period
+        self.schedules = {sid: [runners[a] for a in members if a in runners] for sid, members in spec.schedules.items()}
+        prefix = f"threads.{name}"
+        self.select_flags = [(sid, layout.flag_index[f"{prefix}.select_schedule.{sid}"]) for sid in spec.schedules]
+        self.schedule_flags = {sid: layout.flag_index[f"{prefix}.schedule.{sid}"] for sid in spec.schedules}
+        self.deadline_missed_flag = layout.flag_index[f"{prefix}.deadline_missed"]
+        self.lifecycle = Lifecycle(
+            region.flags, region.state, region.failed, layout.owner_index[prefix], layout.flag_index, prefix,
+            Hooks(self._create, self._configure_resources, self._configure_capabilities, self._run_schedule,
+                  self._pause, self._clean),
+            spec.start == "on_request", log,
+        )
+        self.selected = -1
+        self._select(0)
+        self.supervisor: Callable[[], None] | None = None  # the main thread's supervisor runs first
+
+    # -- the thread's own life cycle ------------------------------------------------------
+    def _create(self) -> bool:
+        return True
+
+    def _configure_resources(self) -> bool:
+        if self.apply_realtime:
+            realtime.apply(self.spec, self.log)
+        return True
+
+    def _configure_capabilities(self) -> bool:
+        return True
+
+    def _pause(self) -> None:
+        self._housekeeping(())
+
+    def _run_schedule(self) -> None:
+        for sid, index in self.select_flags:
+            if self.region.flags[index]:
+                self.region.flags[index] = 0
+                self._select(sid)
+        active = self.schedules[self.selected]
+        for runner in active:
+            runner.step()
+        self._housekeeping(active)
+
+    def _housekeeping(self, active) -> None:
+        """Activities outside the selected schedule still honour a request to clean."""
+        for runner in self.runners.values():
+            if runner not in active and (runner.lifecycle.cleaning_requested() or runner.state is State.CLEANING):
+                runner.step()
+
+    def _clean(self) -> bool:
+        """Walk every activity of this thread to done, then the thread is done."""
+        finished = True
+        for runner in self.runners.values():
+            if runner.state is not State.DONE:
+                runner.lifecycle.request_cleaning()
+                runner.step()
+                finished = finished and runner.state is State.DONE
+        return finished
+
+    def _select(self, sid: int) -> None:
+        if sid == self.selected:
+            return
+        for other, index in self.schedule_flags.items():
+            self.region.flags[index] = 1 if other == sid else 0
+        if self.selected >= 0:
+            self.log.info("schedule %d -> %d", self.selected, sid)
+        self.selected = sid
+        self.region.selected[self.index] = sid
+
+    def replace_schedules(self, schedules: dict[int, list[str]]) -> None:
+        """A live patch changed the schedules: takes effect from the next cycle."""
+        self.schedules = {sid: [self.runners[a] for a in members if a in self.runners]
+                          for sid, members in schedules.items()}
+        if self.selected not in self.schedules:
+            self._select(0)
+
+    @property
+    def done(self) -> bool:
+        return self.lifecycle.state is State.DONE
+
+    # -- one cycle, and the real-time loop ------------------------------------------------
+    def cycle(self) -> None:
+        if self.supervisor is not None:
+            self.supervisor()
+        self.region.heartbeat[self.index] = self.clock.now_ns()
+        self.region.cycles[self.index] += 1
+        self.lifecycle.step()
+
+    def run_realtime(self, first_deadline_ns: int, should_stop: Callable[[], bool]) -> None:
+        region, index, period = self.region, self.index, self.period
+        deadline = first_deadline_ns
+        clock = self.clock
+        while not region.system[Region.TERMINATE] and not should_stop():
+            clock.sleep_until(deadline)
+            woke = clock.now_ns()
+            record(region.latency, region.latency_max, index, woke - deadline)
+            self.cycle()
+            if self.done:
+                break
+            deadline += period
+            finished = clock.now_ns()
+            if finished > deadline:  # overran: skip and count the periods already gone
+                missed = (finished - deadline) // period + 1
+                region.missed[index] += missed
+                region.flags[self.deadline_missed_flag] = 1
+                deadline += missed * period
+        self.log.info("loop ended after %d cycles (pid %d)", int(region.cycles[index]), os.getpid())
