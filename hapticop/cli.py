@@ -92,8 +92,8 @@ def compose(
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_timing, timing, write_timing
-    from hapticop.runtime.system import RunOptions, System
+    from hapticop.runtime.report import print_timing
+    from hapticop.runtime.system import RunOptions, run_system
 
     validated = validate_path(file)
     for diagnostic in validated.report.sorted():
@@ -103,20 +103,18 @@ def compose(
         raise typer.Exit(1)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"))
-    system = System(validated.graph.loaded, validated.source.text, str(file), options)
     console = Console(stderr=True)
-    console.print(f"[bold]{system.composition.name or file}[/]: running ({clock.value} clock); logs in {system.run_dir}")
-    try:
-        outcome = system.run()
-        data = timing(system.region, system.composition)
-        print_timing(data, console, system.virtual)
-        write_timing(data, system.run_dir)
-    finally:
-        system.close()
-    for reason in outcome.reasons:
+
+    def announce(system) -> None:
+        console.print(f"[bold]{system.composition.name or file}[/]: running ({clock.value} clock); "
+                      f"logs in {system.run_dir}")
+
+    result = run_system(validated.graph.loaded, validated.source.text, str(file), options, on_start=announce)
+    print_timing(result.timing, console, result.virtual)
+    for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
-    console.print(f"exit: {outcome.status.name.lower()} ({int(outcome.status)})")
-    raise typer.Exit(int(outcome.status))
+    console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
+    raise typer.Exit(int(result.outcome.status))
 
 
 @app.command()

@@ -65,6 +65,7 @@ class Block:
         self.clock = context.clock
         self.log = context.log
         self.rng = context.rng
+        self.run_dir = context.run_dir
 
     # -- life-cycle hooks: override only what the block needs ---------------------------
     def create(self) -> bool | None:

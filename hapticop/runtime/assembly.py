@@ -114,6 +114,6 @@ def _runner(name: str, resolved: ResolvedActivity, composition: Composition, reg
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name))
+                              clock, log, activity_rng(seed, name), writer.run_dir)
     block = resolved.block(context)
     return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log)

@@ -9,6 +9,7 @@ the stream's transports. Nothing here allocates on the cycle path.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Callable
 
@@ -110,3 +111,4 @@ class ActivityContext:
     clock: Any
     log: Logger
     rng: np.random.Generator
+    run_dir: Path  # where the activity may leave results (logs live there too)

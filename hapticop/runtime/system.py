@@ -22,6 +22,7 @@ import threading
 from dataclasses import dataclass, field
 from enum import IntEnum
 from pathlib import Path
+from typing import Callable
 
 from hapticop.lcsm import State
 from hapticop.loader import Loaded
@@ -327,3 +328,34 @@ class System:
         self.built = None  # drop the views into the region before it is released
         self.main = None
         self.region.close()
+
+
+@dataclass
+class RunResult:
+    """What a finished run leaves: its outcome, timing, and the final LCSM states and flags."""
+
+    outcome: Outcome
+    timing: dict
+    states: dict[str, State]
+    flags: set[str]
+    markings: dict[str, dict[str, int]]
+    virtual: bool
+
+
+def run_system(loaded: Loaded, text: str, file: str, options: RunOptions,
+               on_start: Callable[["System"], None] | None = None) -> RunResult:
+    """Build, run and release a system; `on_start` sees it just before it runs."""
+    from hapticop.runtime.report import timing, write_timing
+
+    system = System(loaded, text, file, options)
+    try:
+        if on_start is not None:
+            on_start(system)
+        outcome = system.run()
+        data = timing(system.region, system.composition)
+        write_timing(data, system.run_dir)
+        states = {owner: system.state(owner) for owner in system.layout.owner_index}
+        flags = {name for name, i in system.flag_index.items() if system.region.flags[i]}
+        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual)
+    finally:
+        system.close()

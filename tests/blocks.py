@@ -1,0 +1,74 @@
+"""Test-only blocks, named in test compositions as 'tests.blocks:Name'."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Params, Port
+
+
+class StuckParams(Params):
+    stuck_in: Literal["creation", "resource_configuration", "capability_configuration", "running"] = "running"
+
+
+class Stuck(Block):
+    """Never completes the configuration step it is told to be stuck in."""
+
+    Params = StuckParams
+
+    def create(self):
+        return self.params.stuck_in != "creation"
+
+    def configure_resources(self):
+        return self.params.stuck_in != "resource_configuration"
+
+    def configure_capabilities(self):
+        return self.params.stuck_in != "capability_configuration"
+
+    def clean(self):
+        (self.run_dir / f"{self.name}.cleaned").write_text("yes")
+
+
+class NoiseParams(Params):
+    sigma: float = 1.0
+
+
+class Noise(Block):
+    """Publishes seeded Gaussian noise: tests that a seed reproduces a run bit for bit."""
+
+    Params = NoiseParams
+    outputs = {"sample": Port("float64", (3,), "1")}
+
+    def compute(self):
+        self.outputs.sample.value[:] = self.rng.normal(0.0, self.params.sigma, 3)
+        self.outputs.sample.publish()
+
+
+class RecorderParams(Params):
+    capacity: int = Field(100_000, ge=1)
+
+
+class Recorder(Block):
+    """Keeps every new input sample with its stamp; writes them to the run directory on clean."""
+
+    Params = RecorderParams
+    inputs = {"sample": Port("float64", (3,), "1")}
+
+    def create(self):
+        self.samples = np.zeros((self.params.capacity, 3))
+        self.stamps = np.zeros(self.params.capacity, dtype=np.int64)
+        self.n = 0
+
+    def compute(self):
+        port = self.inputs.sample
+        if port.fresh and self.n < len(self.samples):
+            self.samples[self.n] = port.value
+            self.stamps[self.n] = port.stamp_ns
+            self.n += 1
+
+    def clean(self):
+        np.savez(self.run_dir / f"{self.name}.npz", samples=self.samples[: self.n], stamps=self.stamps[: self.n])

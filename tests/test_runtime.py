@@ -1,0 +1,174 @@
+"""The runtime under the virtual clock: life cycles, coordination, schedules, determinism."""
+
+import numpy as np
+import pytest
+
+from hapticop.lcsm import State
+from hapticop.runtime.system import ExitStatus
+
+from .runtime_helpers import compose, pipeline
+
+
+def test_a_run_walks_everything_to_done(tmp_path):
+    result = compose(tmp_path, pipeline(), duration="500ms")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert all(state is State.DONE for state in result.states.values())
+    threads = result.timing["threads"]
+    assert threads["main"]["cycles"] >= 500 and threads["slow"]["cycles"] >= 50
+    assert threads["main"]["missed_deadlines"] == 0
+    assert result.timing["activities"]["recorder"]["steps"] >= 48
+
+
+def test_same_seed_same_run_bit_for_bit(tmp_path):
+    def samples(seed, name):
+        compose(tmp_path, pipeline(), duration="300ms", seed=seed, name=name)
+        data = np.load(tmp_path / f"run-{name}" / "recorder.npz")
+        return data["samples"], data["stamps"]
+
+    a, stamps_a = samples(7, "a")
+    b, stamps_b = samples(7, "b")
+    c, _ = samples(8, "c")
+    assert len(a) > 20
+    assert a.tobytes() == b.tobytes() and np.array_equal(stamps_a, stamps_b)
+    assert not np.array_equal(a, c)
+    # the recorder on the 10 ms thread sees the newest 1 ms sample: stamps advance by 10 ms
+    assert set(np.diff(stamps_a)) == {10_000_000}
+
+
+def test_process_deployment_is_ignored_by_the_virtual_clock(tmp_path):
+    compose(tmp_path, pipeline("process"), duration="200ms", seed=3, name="p")
+    compose(tmp_path, pipeline("thread"), duration="200ms", seed=3, name="t")
+    p = np.load(tmp_path / "run-p" / "recorder.npz")["samples"]
+    t = np.load(tmp_path / "run-t" / "recorder.npz")["samples"]
+    assert p.tobytes() == t.tobytes()
+
+
+SWITCH = """
+version: 1
+threads:
+  main:
+    period: 1ms
+    deploy: main
+    schedules: {0: [mediator], 1: [mediator, counter]}
+activities:
+  mediator: {block: mediator}
+  counter: {block: counter, params: {stop_after: 100}}
+coordination:
+  nets:
+    switch:
+      places: {START: , WAITING: , SELECT: , DONE: , STOP: , REACHED: }
+      transitions:
+        select: {in: [START], out: [WAITING, SELECT]}
+        stop: {in: [WAITING, REACHED], out: [DONE, STOP]}
+      marking: {START: 1}
+      terminal: [DONE]
+  flag_maps:
+    switch:
+      net: switch
+      converting_sinks: {threads.main.select_schedule.1: SELECT, system.exit: STOP}
+      converting_sources: {counter.reached: REACHED}
+"""
+
+
+def test_schedule_switch_and_a_net_that_ends_the_run(tmp_path):
+    result = compose(tmp_path, SWITCH, duration=None)
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert result.timing["activities"]["counter"]["steps"] >= 100
+    log = (tmp_path / "run-c" / "thread-main.log").read_text()
+    assert "schedule 0 -> 1" in log
+    assert result.markings["switch"]["DONE"] == 1
+
+
+FAILING = """
+version: 1
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
+activities:
+  mediator: {block: mediator}
+  counter: {block: counter, params: {fail_at: 50}}
+"""
+
+
+def test_a_failing_activity_is_reported_and_fails_the_run(tmp_path):
+    result = compose(tmp_path, FAILING, duration="200ms")
+    assert result.outcome.status is ExitStatus.FAILURE
+    assert any("'counter' failed (running failed)" in r for r in result.outcome.reasons)
+    assert "counter reached fail_at=50" in (tmp_path / "run-c" / "counter.log").read_text()
+    assert result.states["counter"] is State.DONE
+
+
+@pytest.mark.parametrize("stuck_in", ["creation", "resource_configuration", "capability_configuration", "running"])
+def test_shutdown_from_each_state(tmp_path, stuck_in):
+    text = f"""
+    version: 1
+    threads:
+      main: {{period: 1ms, deploy: main, schedules: {{0: [mediator]}}}}
+      worker: {{period: 5ms, schedules: {{0: [stuck]}}}}
+    activities:
+      mediator: {{block: mediator}}
+      stuck: {{block: "tests.blocks:Stuck", params: {{stuck_in: {stuck_in}}}}}
+    """
+    result = compose(tmp_path, text, duration="100ms")
+    assert result.outcome.status is ExitStatus.SUCCESS
+    assert all(state is State.DONE for state in result.states.values())
+    assert (tmp_path / "run-c" / "stuck.cleaned").exists() == (stuck_in != "creation")
+
+
+def test_shutdown_from_pausing(tmp_path):
+    text = """
+    version: 1
+    threads:
+      main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
+    activities:
+      mediator: {block: mediator}
+      counter: {block: counter}
+    coordination:
+      nets:
+        pause:
+          places: {A: , P: , PAUSED: }
+          transitions: {t: {in: [A], out: [P, PAUSED]}}
+          marking: {A: 1}
+          terminal: [PAUSED]
+      flag_maps:
+        pause: {net: pause, converting_sinks: {counter.lcsm.request_pausing: P}}
+    """
+    result = compose(tmp_path, text, duration="100ms")
+    assert result.outcome.status is ExitStatus.SUCCESS
+    log = (tmp_path / "run-c" / "counter.log").read_text()
+    assert "running -> pausing" in log and "pausing -> cleaning" in log
+
+
+def test_coordination_that_never_finishes_is_forced(tmp_path):
+    text = """
+    version: 1
+    threads:
+      main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
+    activities:
+      mediator: {block: mediator}
+      counter: {block: counter}
+    coordination:
+      nets:
+        ignore:
+          places: {IDLE: , S: , SEEN: }
+          transitions: {seen: {in: [IDLE, S], out: [SEEN]}}
+          marking: {IDLE: 1}
+          terminal: [SEEN]
+      flag_maps:
+        ignore: {net: ignore, tracking_sources: {system.shutdown_requested: S}}
+    """
+    result = compose(tmp_path, text, duration="100ms", shutdown_timeout="50ms")
+    assert result.outcome.status is ExitStatus.FAILURE
+    assert any("did not finish the shutdown" in r for r in result.outcome.reasons)
+    assert all(state is State.DONE for state in result.states.values())
+
+
+def test_hallway_coordination_runs_its_course(tmp_path):
+    from .conftest import SYSTEMS
+
+    result = compose(tmp_path, (SYSTEMS / "hallway.yaml").read_text(), duration="1s", name="hallway")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert result.markings["mediator"]["EXIT"] == 1 and result.markings["thread_lcsm"]["DONE"] == 1
+    assert result.markings["thread_scheduler"] == {"SELECTED": 1}
+    assert all(state is State.DONE for state in result.states.values())
+    lidar_thread = (tmp_path / "run-hallway" / "thread-lidar.log").read_text()
+    assert "schedule 0 -> 1" in lidar_thread

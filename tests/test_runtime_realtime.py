@@ -1,0 +1,88 @@
+"""The runtime on the wall clock: threads, processes, signals, a process killed from outside.
+
+These runs are short and assert behaviour, never timing.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+from hapticop.lcsm import State
+from hapticop.runtime.system import ExitStatus
+
+from .conftest import ROOT
+from .runtime_helpers import compose, pipeline
+
+
+def test_threads_in_the_main_process(tmp_path):
+    result = compose(tmp_path, pipeline("thread"), clock="realtime", duration="600ms")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert all(state is State.DONE for state in result.states.values())
+    samples = np.load(tmp_path / "run-c" / "recorder.npz")["samples"]
+    assert len(samples) > 10
+
+
+def test_a_thread_in_its_own_process_shares_the_same_streams(tmp_path):
+    result = compose(tmp_path, pipeline("process"), clock="realtime", duration="2s")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert result.states["threads.slow"] is State.DONE and result.states["recorder"] is State.DONE
+    data = np.load(tmp_path / "run-c" / "recorder.npz")
+    assert len(data["samples"]) > 10
+    assert np.all(np.diff(data["stamps"]) > 0)  # every sample new, in order, across processes
+
+
+def test_a_killed_process_is_detected_and_reported(tmp_path):
+    def kill_when_running(system):
+        def killer():
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline:
+                handle = system.processes.get("slow")
+                if handle and system.state("recorder") is State.RUNNING:
+                    os.kill(handle.process.pid, signal.SIGKILL)
+                    return
+                time.sleep(0.01)
+        threading.Thread(target=killer, daemon=True).start()
+
+    result = compose(tmp_path, pipeline("process"), clock="realtime", duration="3s", on_start=kill_when_running)
+    assert result.outcome.status is ExitStatus.FAILURE
+    assert any("thread 'slow' was lost" in r and "exit code -9" in r for r in result.outcome.reasons)
+    assert "threads.slow.lost" in result.flags
+    assert result.states["threads.main"] is State.DONE  # the rest still shut down cleanly
+
+
+def _compose_process(tmp_path, text):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    run_dir = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", str(path), "--run-dir", str(run_dir)],
+                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    log = run_dir / "counter.log"
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not (log.exists() and "-> running" in log.read_text()):
+        time.sleep(0.02)
+    return process
+
+
+SIMPLE = pipeline("thread").replace("noise", "counter").replace('"tests.blocks:Noise"', "counter") \
+    .replace("recorder", "echo").replace('"tests.blocks:Echo"', "echo").replace('"tests.blocks:Recorder"', "echo") \
+    .replace("counter.sample", "counter.count").replace("echo.sample", "echo.input")
+
+
+def test_ctrl_c_shuts_down_and_reports_interruption(tmp_path):
+    process = _compose_process(tmp_path, SIMPLE)
+    process.send_signal(signal.SIGINT)
+    out, err = process.communicate(timeout=30)
+    assert process.returncode == 130, err
+    assert "exit: interrupted (130)" in err and "wake p50" in err and "Traceback" not in err
+
+
+def test_sigterm_reports_termination(tmp_path):
+    process = _compose_process(tmp_path, SIMPLE)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 143, err
