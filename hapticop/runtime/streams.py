@@ -8,22 +8,11 @@ bytes see the same stream. A buffer must start zeroed (fresh shared memory is).
 On the cycle path (`write`, `read_into`, `push`, `pop_into`) nothing blocks, no lock is
 taken and no numpy array, list, dict or tuple is created: headers are read and written
 through `memoryview` casts and payloads copied into views made once, at construction.
-
-Why the seqlock is sound here (x86-64, CPython): a writer makes the sequence odd, copies
-the payload and makes it even again; a reader reads the sequence, copies, and re-reads
-it, keeping the copy only if both reads are equal and even. Header fields are aligned
-8-byte words read and written with single loads and stores (memoryview item access is a
-fixed-size memcpy). numpy copies are plain loads and stores, and x86-64 is TSO: stores
-become visible in program order and loads are not reordered with older loads, so a
-reader that saw any store of a write also sees that write's odd sequence on its re-read.
-(glibc's non-temporal stores, used only for multi-megabyte copies, end with an sfence.)
-The compiler cannot move accesses across the interpreter's opaque calls between
-bytecodes. The GIL orders threads within a process only; across processes the ordering
-comes from TSO plus the sequence re-check. Other architectures would need fences.
 """
 
 from __future__ import annotations
 
+from threading import get_ident
 from typing import Literal
 
 import numpy as np
@@ -124,19 +113,33 @@ def _scratch(port: Port) -> tuple[np.ndarray, memoryview]:
     return raw.view(port.dtype).reshape(port.shape), memoryview(raw)
 
 
+# Why the seqlock is sound here (x86-64, CPython): a writer makes the sequence odd, copies
+# the payload and makes it even again; a reader reads the sequence, copies, and re-reads
+# it, keeping the copy only if both reads are equal and even. Header fields are aligned
+# 8-byte words read and written with single loads and stores (memoryview item access is a
+# fixed-size memcpy). numpy copies are plain loads and stores, and x86-64 is TSO: stores
+# become visible in program order and loads are not reordered with older loads, so a
+# reader that saw any store of a write also sees that write's odd sequence on its re-read.
+# (glibc's non-temporal stores, used only for multi-megabyte copies, end with an sfence.)
+# The compiler cannot move accesses across the interpreter's opaque calls between
+# bytecodes. The GIL orders threads within a process only; across processes the ordering
+# comes from TSO plus the sequence re-check. Other architectures would need fences.
+
+
 class LatestSlot:
     """The newest sample of a stream, seqlock-protected: readers never wait and never tear.
 
-    One writer; any number of readers, each with its own handle (a handle holds a private
-    scratch copy). `synchronised=False` drops the protocol for a writer and readers that
-    run one after the other in one thread; the header is kept up to date all the same.
+    One writer; any number of readers, in any threads and processes, sharing a handle or
+    not. `synchronised=False` drops the protocol for a writer and readers that run one
+    after the other in one thread; the header is kept up to date all the same.
     """
 
     def __init__(self, buffer: Buffer, port: Port, synchronised: bool = True) -> None:
         self.port = port
         self.synchronised = synchronised
         self._slot = _Slot(_raw(buffer, latest_nbytes(port)), port)
-        self._scratch, self._scratch_bytes = _scratch(port)
+        # One scratch per reading thread: threads sharing this handle must not share it.
+        self._scratches: dict[int, tuple[np.ndarray, memoryview]] = {}
 
     @property
     def count(self) -> int:
@@ -172,6 +175,10 @@ class LatestSlot:
             meta[0] = count
             meta[1] = slot.stamps[_STAMP]
             return True
+        scratch = self._scratches.get(get_ident())
+        if scratch is None:  # this thread's first read
+            scratch = self._scratches.setdefault(get_ident(), _scratch(self.port))
+        scratch_array, scratch_bytes = scratch
         tries = MAX_RETRIES
         while tries:
             tries -= 1
@@ -182,9 +189,9 @@ class LatestSlot:
                 continue
             count = words[_COUNT]
             stamp = slot.stamps[_STAMP]
-            self._scratch_bytes[:] = slot.payload_bytes
+            scratch_bytes[:] = slot.payload_bytes
             if words[_SEQ] == seq:
-                np.copyto(out, self._scratch)
+                np.copyto(out, scratch_array)
                 meta[0] = count
                 meta[1] = stamp
                 return True
@@ -193,6 +200,7 @@ class LatestSlot:
     def close(self) -> None:
         """Let go of the buffer, so the shared memory can be closed."""
         self._slot.release()
+        self._scratches.clear()
 
     def __repr__(self) -> str:
         words = self._slot.words
