@@ -219,11 +219,13 @@ class ControlServer:
         if not _allowed(uid):
             _send(connection, {"ok": False, "error": f"permission denied: this system belongs to uid "
                                f"{os.geteuid()}, not uid {uid}"})
+            _drain(connection)
             return
         try:
             line = _read_line(connection, MAX_REQUEST_BYTES)
         except _TooLarge:
             _send(connection, {"ok": False, "error": f"the request is larger than {MAX_REQUEST_BYTES} bytes"})
+            _drain(connection)
             return
         except socket.timeout:
             _send(connection, {"ok": False, "error": f"no request within {CONNECTION_TIMEOUT:g} s"})
@@ -268,6 +270,22 @@ def _read_line(connection: socket.socket, limit: int) -> bytes:
         data += chunk
         if len(data) > limit:
             raise _TooLarge
+
+
+def _drain(connection: socket.socket, limit: int = MAX_REQUEST_BYTES, timeout: float = 0.5) -> None:
+    """After an early reply: read what the client still sends, so closing does not reset the
+    connection before the client has read the reply (bounded in bytes and time)."""
+    try:
+        connection.shutdown(socket.SHUT_WR)
+        connection.settimeout(timeout)
+        read = 0
+        while read <= limit:
+            chunk = connection.recv(65536)
+            if not chunk:
+                return
+            read += len(chunk)
+    except OSError:
+        pass
 
 
 def _send(connection: socket.socket, reply: dict) -> None:

@@ -20,7 +20,7 @@ import difflib
 import io
 import re
 from collections.abc import Mapping, MutableMapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import jsonpatch
@@ -80,7 +80,10 @@ def load_patch(text: str, file: str = "<patch>") -> list | dict:
     except PatchError:
         raise
     except SourceError as error:
-        raise PatchError([error.diagnostic]) from None
+        found = error.diagnostic
+        if found.rule == "file-too-large":
+            found = replace(found, message=found.message.replace("a composition", "a patch"), hint="")
+        raise PatchError([found]) from None
     except Exception as error:  # noqa: BLE001 - the contract is "only PatchError"
         raise PatchError([Diagnostic(rule="patch-syntax", message=f"cannot read the patch: {error}", file=file)]) from None
 
@@ -201,9 +204,8 @@ def apply_patch(tree: Mapping, patch: list | Mapping, *, file: str = "<patch>") 
 
     A list is applied as RFC 6902 JSON Patch, one operation after another; a mapping as
     RFC 7396 merge patch (null deletes a key; mappings merge; anything else replaces).
-    The result is re-read from its own YAML dump, so it keeps comments and its positions
-    (used by `validate_patched`'s diagnostics) are those of the patched document that
-    `diff_text` shows.
+    Comments stay where they were, and a plain list or mapping that replaces a flow-style
+    one (`[a, b]`) is written in flow style too. `file` names the patch in diagnostics.
     """
     check_patch(patch, file)
     work: Any = copy.deepcopy(tree)
@@ -211,8 +213,15 @@ def apply_patch(tree: Mapping, patch: list | Mapping, *, file: str = "<patch>") 
         work = _merge(work, patch)
     else:
         for index, op in enumerate(patch):
+            op = copy.deepcopy(dict(op))
             try:
-                work = jsonpatch.JsonPatch([copy.deepcopy(dict(op))], pointer_cls=_Pointer).apply(work, in_place=True)
+                pointer = _Pointer(op["path"])
+                before = pointer.resolve(work, None) if op["op"] in ("replace", "add") else None
+                work = jsonpatch.JsonPatch([op], pointer_cls=_Pointer).apply(work, in_place=True)
+                if _flow(before) and op["path"]:
+                    parent, key = pointer.to_last(work)
+                    if op["op"] == "replace" or isinstance(parent, Mapping):
+                        parent[key] = _restyle(before, parent[key])
             except Exception as error:  # noqa: BLE001 - jsonpatch and jsonpointer raise several kinds
                 line, column = _item_position(patch, index)
                 raise PatchError(
@@ -228,15 +237,15 @@ def apply_patch(tree: Mapping, patch: list | Mapping, *, file: str = "<patch>") 
             [Diagnostic(rule="patch-apply", message=f"the patch replaces the whole description with a "
                         f"{type(work).__name__}, not a mapping", file=file)]
         )
-    return _reread(work)
+    return work if isinstance(work, CommentedMap) else _reread(work, "<patched>")
 
 
 def _merge(target: Any, patch: Any) -> Any:
     """RFC 7396 MergePatch, changing `target` in place where it is a mapping."""
     if not isinstance(patch, Mapping):
-        return copy.deepcopy(patch)
+        return _restyle(target, copy.deepcopy(patch))
     if not isinstance(target, MutableMapping):
-        target = CommentedMap()
+        target = _restyle(target, CommentedMap())
     for name, value in patch.items():
         key = _key_for(target, name)
         if value is None:
@@ -247,6 +256,24 @@ def _merge(target: Any, patch: Any) -> Any:
         if merged is not current:
             target[key] = merged
     return target
+
+
+def _flow(node: Any) -> bool:
+    return isinstance(node, (CommentedMap, CommentedSeq)) and bool(node.fa.flow_style())
+
+
+def _restyle(old: Any, new: Any) -> Any:
+    """A plain list or dict replacing a flow-style one becomes flow-style too."""
+    if not _flow(old) or isinstance(new, (CommentedMap, CommentedSeq)):
+        return new
+    if isinstance(new, list):
+        styled: Any = CommentedSeq(new)
+    elif isinstance(new, dict):
+        styled = CommentedMap(new)
+    else:
+        return new
+    styled.fa.set_flow_style()
+    return styled
 
 
 def _reason(error: Exception, op: Mapping, doc: Any) -> str:
@@ -278,9 +305,10 @@ def _dump(tree: Any) -> str:
     return buffer.getvalue()
 
 
-def _reread(tree: Any) -> CommentedMap:
+def _reread(tree: Any, file: str) -> CommentedMap:
+    """The tree as read back from its own dump: positions then match what `diff_text` shows."""
     try:
-        return parse_text(_dump(tree), "<patched>").tree
+        return parse_text(_dump(tree), file).tree
     except SourceError as error:
         raise PatchError([Diagnostic(rule="patch-apply", message=f"the patched description cannot be "
                                      f"written as YAML: {error.diagnostic.message}")]) from None
@@ -295,10 +323,13 @@ def _reread(tree: Any) -> CommentedMap:
 def validate_patched(new_tree: CommentedMap, file: str = "<patched>", state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
     """Run every check of `hapticop validate` on the patched description.
 
-    Errors raise `PatchError` with the validator's own diagnostics (rule ids and messages
-    unchanged, located in the patched document); warnings stay in the returned report.
+    The checks run on the tree read back from its YAML dump, so every diagnostic's line
+    and column are those of the patched document as `diff_text` and a dump show it (the
+    patched tree itself mixes positions from the old file and the patch). Errors raise
+    `PatchError` with the validator's own diagnostics (rule ids and messages unchanged);
+    warnings stay in the returned report.
     """
-    validated = validate_source(Source(file, new_tree), state_limit)
+    validated = validate_source(Source(file, _reread(new_tree, file)), state_limit)
     if not validated.report.ok:
         errors = [d for d in validated.report.sorted() if d.severity is Severity.ERROR]
         raise PatchError(errors, f"the patched description is invalid ({len(errors)} "
@@ -371,10 +402,10 @@ _REASONS = {
     ("thread", "cpus"): "the CPU affinity of a running thread cannot change live",
     ("thread", "deploy"): "where a thread is deployed cannot change live",
     ("thread", "start"): "the start policy of a thread only matters at start",
-    ("activity", "block"): "the block of a running activity cannot change live; remove it and add a new activity",
+    ("activity", "block"): "the block of a running activity cannot change live; add an activity with a new name instead",
     ("activity", "start"): "the start policy of an activity only matters at start",
-    ("stream", "writer"): "the endpoints of a running stream cannot change live; remove it and add a new stream",
-    ("stream", "readers"): "the endpoints of a running stream cannot change live; remove it and add a new stream",
+    ("stream", "writer"): "the endpoints of a running stream cannot change live; add a stream with a new name instead",
+    ("stream", "readers"): "the endpoints of a running stream cannot change live; add a stream with a new name instead",
     ("stream", "policy"): "the connection policy of a running stream cannot change live",
 }
 
@@ -485,7 +516,7 @@ def prepare(
                                          "validate it before patching", file=file)])
     plan = plan_changes(old, new)
     if plan.unsupported:
-        source = Source(file, new_tree)
+        source = validated.source
         found = []
         for path, reason in plan.unsupported:
             line, column = source.locate(path, key=True)
