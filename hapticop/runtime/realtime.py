@@ -44,10 +44,20 @@ def lock_memory(log: Logger) -> None:
         _warn_once("mlockall", log, "cannot lock memory (mlockall: %s); page faults may delay cycles", error.strerror)
 
 
+def prepare_process(threads: list[Thread], log: Logger) -> None:
+    """Before any loop starts: lock memory if a thread of this process is real-time.
+
+    mlockall walks every mapped page (tens of milliseconds with numpy loaded), so it is
+    done here, once, rather than inside a cycle where it would count as missed deadlines.
+    """
+    if any(spec.priority is not None for spec in threads):
+        lock_memory(log)
+
+
 def apply(spec: Thread, log: Logger) -> None:
     """Apply the thread's declared priority and affinity to the calling thread."""
     if spec.priority is not None:
-        lock_memory(log)
+        lock_memory(log)  # already done by prepare_process; a no-op then
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(spec.priority))
             log.info("SCHED_FIFO priority %d", spec.priority)

@@ -75,6 +75,7 @@ class Layout:
         section("missed", (threads,), "int64")
         section("heartbeat", (threads,), "int64")
         section("control", (threads,), "int64")
+        section("go", (threads,), "int64")  # the mediator started this thread
         section("latency_max", (threads,), "int64")
         section("latency", (threads, BINS), "int64")
         section("compute_max", (max(1, acts),), "int64")

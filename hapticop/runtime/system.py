@@ -31,6 +31,7 @@ from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.coordinator import Coordinator
 from hapticop.runtime.lifecycle import OK
 from hapticop.runtime.logs import Level, LogWriter, default_run_dir
+from hapticop.runtime import realtime
 from hapticop.runtime.region import Region
 from hapticop.runtime.thread import CyclicThread
 from hapticop.units import format_duration
@@ -103,6 +104,13 @@ class System:
             attach = getattr(runner.block, "attach_system", None)
             if attach is not None:
                 attach(self)
+        if not self.virtual:
+            # Processes are created now, before memory is locked and before any loop runs
+            # (forking a large locked process stalls the parent); they wait for the mediator.
+            for name, spec in self.composition.threads.items():
+                if spec.deploy == "process":
+                    self._spawn(name)
+            realtime.prepare_process([self.composition.threads[t] for t in local], self.log)
         self.region.system[Region.STARTED_NS] = self.clock.now_ns()
         self._warn_declaration_only_blocks()
 
@@ -143,7 +151,7 @@ class System:
             if self.virtual:
                 heapq.heappush(self.virtual_queue, (now, order, name))
             elif spec.deploy == "process":
-                self._spawn(name)
+                self.region.go[self.layout.thread_index[name]] = 1
             else:
                 thread = self.built.threads[name]
                 os_thread = threading.Thread(target=thread.run_realtime, args=(self._first_deadline(), self._never),
@@ -216,7 +224,7 @@ class System:
         threads = [t for t in self.composition.threads if t != self.main_name]
         for name in threads:
             if self.state(f"threads.{name}") is not State.DONE and not self._lost(name):
-                if self.virtual or name in self.os_threads or name in self.processes:
+                if self.started:
                     self.set_flag(f"threads.{name}.lcsm.request_cleaning")
                 else:  # never started: nothing to clean
                     self.region.state[self.layout.owner_index[f"threads.{name}"]] = State.DONE
