@@ -88,6 +88,7 @@ def compose(
     seed: int = typer.Option(0, help="seed of every activity's random generator"),
     run_dir: Optional[Path] = typer.Option(None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
+    control: Optional[str] = typer.Option(None, help="control socket name or path for patch/status (default: the composition's name)"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -102,7 +103,8 @@ def compose(
         typer.echo(f"{file}: not started: {len(validated.report.errors)} errors", err=True)
         raise typer.Exit(1)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
-                         run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"))
+                         run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
+                         control=control)
     console = Console(stderr=True)
 
     def announce(system) -> None:
@@ -115,6 +117,73 @@ def compose(
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
     raise typer.Exit(int(result.outcome.status))
+
+
+def _ask(system: str, message: dict) -> dict:
+    from hapticop.runtime.control import ControlError, request
+
+    try:
+        return request(system, message, timeout=30.0)
+    except ControlError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(2) from None
+
+
+@app.command()
+def patch(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket path)"),
+    file: Path = typer.Argument(..., help="a JSON Patch (a YAML list of operations) or a merge patch (a YAML mapping)"),
+    dry_run: bool = typer.Option(False, "--dry-run", help="validate and show the diff; change nothing"),
+) -> None:
+    """Change a running system: validated whole, applied at a cycle boundary, or refused."""
+    try:
+        text = file.read_text()
+    except OSError as error:
+        typer.echo(f"error: cannot read {file}: {error.strerror}", err=True)
+        raise typer.Exit(2) from None
+    reply = _ask(system, {"op": "patch", "text": text, "file": str(file), "dry_run": dry_run})
+    if not reply.get("ok"):
+        from hapticop.diagnostics import Diagnostic, Severity
+
+        for item in reply.get("diagnostics", []):
+            item = {**item, "severity": Severity(item["severity"]), "path": tuple(item["path"])}
+            typer.echo(Diagnostic(**item).to_text(), err=True)
+        typer.echo(f"{file}: {reply.get('error', 'refused')}; the system runs on unchanged", err=True)
+        raise typer.Exit(1)
+    typer.echo(reply["diff"], nl=False)
+    for line in reply["changes"]:
+        typer.echo(f"  {line}")
+    typer.echo("applied" if reply.get("applied") else "dry run: nothing applied")
+
+
+@app.command()
+def status(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket path)"),
+    json_output: bool = typer.Option(False, "--json", help="the whole status as JSON"),
+) -> None:
+    """LCSM states, selected schedules, flags, markings and timing of a running system."""
+    import json
+
+    reply = _ask(system, {"op": "status"})
+    if not reply.get("ok"):
+        typer.echo(f"error: {reply.get('error')}", err=True)
+        raise typer.Exit(1)
+    state = reply["status"]
+    if json_output:
+        typer.echo(json.dumps(state, indent=2))
+        return
+    typer.echo(f"{state['name']}: {state['clock']} clock, up {state['uptime_s']:.1f} s")
+    for name, t in state["threads"].items():
+        timing = state["timing"]["threads"][name]
+        failed = f" FAILED: {t['failed']}" if t["failed"] else ""
+        typer.echo(f"  thread {name}: {t['state']}, schedule {t['schedule']}, {timing['cycles']} cycles, "
+                   f"{timing['missed_deadlines']} missed{failed}")
+    for name, a in state["activities"].items():
+        failed = f" FAILED: {a['failed']}" if a["failed"] else ""
+        typer.echo(f"  activity {name}: {a['state']}{failed}")
+    for net, marking in state["markings"].items():
+        typer.echo(f"  net {net}: {marking}")
+    typer.echo(f"  flags set: {', '.join(state['flags'])}")
 
 
 @app.command()

@@ -213,6 +213,16 @@ class Coordination(Strict):
     flag_maps: dict[Name, FlagMap] = Field(default_factory=dict)
 
 
+class ScriptedPatch(Strict):
+    """A live patch the mediator applies by itself, this long after the start (scripted runs)."""
+
+    at: Duration = Field(description="time after the start, e.g. '10s'")
+    patch: list[dict[str, Any]] | dict[str, Any] = Field(
+        description="a JSON Patch (a list of operations) or a merge patch (a mapping)"
+    )
+    doc: str = ""
+
+
 class Composition(Strict):
     """A whole hapticop system: what runs, where, how it is wired and coordinated."""
 
@@ -223,6 +233,9 @@ class Composition(Strict):
     activities: dict[Name, Activity] = Field(min_length=1)
     streams: dict[Name, Stream] = Field(default_factory=dict)
     coordination: Coordination = Field(default_factory=Coordination)
+    patches: dict[Name, ScriptedPatch] = Field(
+        default_factory=dict, description="patches applied while running, at given times"
+    )
 
     @field_validator("version", mode="before")
     @classmethod
@@ -244,5 +257,6 @@ COLLECTIONS: tuple[tuple[str, ...], ...] = (
     ("coordination", "flags"),
     ("coordination", "nets"),
     ("coordination", "flag_maps"),
+    ("patches",),
 )
 RESERVED_NAMES = frozenset({"threads", "system", "flags"})

@@ -19,7 +19,7 @@ from hapticop.loader import Loaded, ResolvedActivity
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region
-from hapticop.runtime.streams import LatestSlot, SpscQueue
+from hapticop.runtime.streams import LatestSlot, SpscQueue, latest_nbytes, queue_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 
 
@@ -67,7 +67,7 @@ def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer
         mine = {}
         for name in members:
             resolved = loaded.activities[name]
-            mine[name] = runners[name] = _runner(name, resolved, composition, region, transports, clock, writer, seed)
+            mine[name] = runners[name] = make_runner(name, resolved, composition, region, transports, clock, writer, seed)
         log = writer.logger(f"thread-{thread_name}", Level[spec.log.upper()], clock.now_ns)
         threads[thread_name] = CyclicThread(thread_name, spec, region, mine, clock, log, apply_realtime)
     return Built(threads, runners)
@@ -75,32 +75,43 @@ def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer
 
 def _transports(loaded: Loaded, region: Region, owner: dict[str, str]) -> dict[str, list]:
     """Transport objects over the region's buffers, one set per stream."""
-    made: dict[str, list] = {}
-    layout = region.layout
-    for name, spec in loaded.composition.streams.items():
-        writer_activity, writer_port = spec.writer.split(".")
-        port = loaded.activities[writer_activity].interface.outputs[writer_port]
-        reader_threads = {owner.get(r.split(".")[0]) for r in spec.readers}
-        same_thread = reader_threads == {owner.get(writer_activity)}
-        objects = []
-        for transport in layout.transports[name]:
-            buffer = region.transport_buffer(transport)
-            if transport.kind == "latest":
-                synchronised = spec.policy.sync == "lock_free" and not same_thread
-                objects.append(LatestSlot(buffer, port, synchronised=synchronised))
-            else:
-                objects.append(SpscQueue(buffer, port, spec.policy.capacity, spec.policy.overflow))
-        made[name] = objects
-    return made
+    return {name: make_transports(loaded, region, name, owner) for name in loaded.composition.streams}
 
 
-def _runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
-            transports: dict[str, list], clock, writer: LogWriter, seed: int) -> ActivityRunner:
+def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str], allocate: bool = False) -> list:
+    """The transports of one stream: a latest slot, or one queue ring per reader.
+
+    `allocate` takes the buffers from the arena (a stream added to a running system)
+    instead of the layout computed at start.
+    """
+    spec = loaded.composition.streams[stream]
+    writer_activity, writer_port = spec.writer.split(".")
+    port = loaded.activities[writer_activity].interface.outputs[writer_port]
+    reader_threads = {owner.get(r.split(".")[0]) for r in spec.readers}
+    same_thread = reader_threads == {owner.get(writer_activity)}
+    if spec.policy.kind == "latest":
+        nbytes = latest_nbytes(port)
+        offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][0].offset
+        synchronised = spec.policy.sync == "lock_free" and not same_thread
+        return [LatestSlot(region.buffer_at(offset, nbytes), port, synchronised=synchronised)]
+    rings = []
+    for index in range(len(spec.readers)):
+        nbytes = queue_nbytes(port, spec.policy.capacity)
+        offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][index].offset
+        rings.append(SpscQueue(region.buffer_at(offset, nbytes), port, spec.policy.capacity, spec.policy.overflow))
+    return rings
+
+
+def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
+                transports: dict[str, list], clock, writer: LogWriter, seed: int) -> ActivityRunner:
+    """The block instance of one activity, its ports wired to the given transports."""
     iface = resolved.interface
     inputs = {p: InputPort(p, spec, clock.now_ns) for p, spec in iface.inputs.items()}
     outputs = {p: OutputPort(p, spec, clock.now_ns) for p, spec in iface.outputs.items()}
     for stream_name, spec in composition.streams.items():
-        objects = transports[stream_name]
+        objects = transports.get(stream_name)
+        if objects is None:
+            continue
         if spec.writer.split(".")[0] == name:
             outputs[spec.writer.split(".")[1]].transports.extend(objects)
         for index, reader in enumerate(spec.readers):

@@ -21,7 +21,7 @@ from hapticop.runtime.region import Region
 from hapticop.yamlsource import parse_text
 
 
-def process_main(text: str, file: str, region_name: str, thread: str, run_dir: str, seed: int) -> None:
+def process_main(text: str, file: str, region_name: str, thread: str, run_dir: str, seed: int, messages) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     loaded = load_tree(parse_text(text, file).tree)
     region = Region.attach(layout_of(loaded), region_name)
@@ -30,6 +30,8 @@ def process_main(text: str, file: str, region_name: str, thread: str, run_dir: s
     built = build(loaded, region, [thread], clock, writer, seed, apply_realtime=True)
     realtime.prepare_process([loaded.composition.threads[thread]], writer.logger("system", Level.INFO, clock.now_ns))
     index = region.layout.thread_index[thread]
+    loop = built.threads[thread]
+    loop.supervisor = _LiveChanges(loop, built, loaded, region, index, messages)
     try:
         while not region.go[index] and not region.system[Region.TERMINATE]:
             time.sleep(0.001)  # created early; runs once the mediator starts the thread
@@ -38,3 +40,29 @@ def process_main(text: str, file: str, region_name: str, thread: str, run_dir: s
         writer.stop()
         del built
         region.close()
+
+
+class _LiveChanges:
+    """Applies the parent's live changes between two cycles of this process's thread."""
+
+    def __init__(self, loop, built, loaded, region: Region, index: int, messages):
+        self.loop, self.built, self.loaded, self.region, self.index, self.messages = \
+            loop, built, loaded, region, index, messages
+        self.seen = 0
+
+    def __call__(self) -> None:
+        if self.region.control[self.index] == self.seen:
+            return  # the common case: one memory read
+        self.seen = int(self.region.control[self.index])
+        while self.messages.poll():
+            kind, *args = self.messages.recv()
+            if kind == "params":
+                name, params = args
+                runner = self.built.runners[name]
+                runner.block.params = runner.block.context.params = type(runner.block.params).model_validate(params)
+            elif kind == "schedules":
+                self.loop.replace_schedules({int(k): v for k, v in args[0].items()})
+            elif kind == "max_age":
+                reader, max_age = args
+                activity, port = reader.split(".")
+                getattr(self.built.runners[activity].block.inputs, port).max_age_ns = max_age

@@ -329,7 +329,7 @@ def validate_patched(new_tree: CommentedMap, file: str = "<patched>", state_limi
     `PatchError` with the validator's own diagnostics (rule ids and messages unchanged);
     warnings stay in the returned report.
     """
-    validated = validate_source(Source(file, _reread(new_tree, file)), state_limit)
+    validated = validate_source(Source(file, _reread(new_tree, file)), state_limit, scripted=False)
     if not validated.report.ok:
         errors = [d for d in validated.report.sorted() if d.severity is Severity.ERROR]
         raise PatchError(errors, f"the patched description is invalid ({len(errors)} "

@@ -20,6 +20,11 @@ from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
 
 ALIGN = 64
+# Room for what live patches add in the main process: activities with their flags and
+# the buffers of their streams. Children never see additions, so layouts still agree.
+SPARE_ACTIVITIES = 16
+SPARE_FLAGS = 1024
+ARENA_BYTES = 1 << 20
 
 
 def _align(n: int) -> int:
@@ -54,11 +59,37 @@ class Layout:
         self.owner_index = {**{f"threads.{n}": i for i, n in enumerate(self.threads)},
                             **{n: len(self.threads) + i for i, n in enumerate(self.activities)}}
         self.flag_index = {n: i for i, n in enumerate(self.flags)}
+        self.arena_used = 0
+
+    def add_activity(self, name: str, flags: list[str]) -> None:
+        """Give an activity added by a live patch its indices in the spare room."""
+        if len(self.activities) >= self.declared_activities + SPARE_ACTIVITIES:
+            raise ValueError(f"no room for another activity ({SPARE_ACTIVITIES} may be added to a running system)")
+        new_flags = [f for f in flags if f not in self.flag_index]
+        if len(self.flags) + len(new_flags) > self.declared_flags + SPARE_FLAGS:
+            raise ValueError("no room for more flags in the running system")
+        self.activity_index[name] = len(self.activities)
+        self.owner_index[name] = len(self.threads) + len(self.activities)
+        self.activities.append(name)
+        for flag in new_flags:
+            self.flag_index[flag] = len(self.flags)
+            self.flags.append(flag)
+
+    def allocate(self, nbytes: int) -> int:
+        """Offset of `nbytes` in the arena for a stream added live."""
+        offset = self.sections["arena"][0] + self.arena_used
+        if self.arena_used + nbytes > ARENA_BYTES:
+            raise ValueError(f"no room for another stream buffer ({ARENA_BYTES} bytes for live additions)")
+        self.arena_used = _align(self.arena_used + nbytes)
+        return offset
 
     @classmethod
     def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str]) -> "Layout":
         layout = cls(list(composition.threads), list(activities), sorted(flags))
-        threads, owners, acts = len(layout.threads), len(layout.owner_index), len(layout.activities)
+        layout.declared_activities, layout.declared_flags = len(layout.activities), len(layout.flags)
+        threads = len(layout.threads)
+        owners = len(layout.owner_index) + SPARE_ACTIVITIES
+        acts = len(layout.activities) + SPARE_ACTIVITIES
         offset = 0
 
         def section(name: str, shape: tuple[int, ...], dtype: str) -> None:
@@ -67,7 +98,7 @@ class Layout:
             offset = _align(offset + int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize)
 
         section("system", (8,), "int64")
-        section("flags", (max(1, len(layout.flags)),), "uint8")
+        section("flags", (len(layout.flags) + SPARE_FLAGS,), "uint8")
         section("state", (owners,), "uint8")
         section("failed", (owners,), "uint8")
         section("selected", (threads,), "int64")
@@ -78,8 +109,9 @@ class Layout:
         section("go", (threads,), "int64")  # the mediator started this thread
         section("latency_max", (threads,), "int64")
         section("latency", (threads, BINS), "int64")
-        section("compute_max", (max(1, acts),), "int64")
-        section("compute", (max(1, acts), BINS), "int64")
+        section("compute_max", (acts,), "int64")
+        section("compute", (acts, BINS), "int64")
+        section("arena", (ARENA_BYTES,), "uint8")
         for name, spec in composition.streams.items():
             writer_activity, writer_port = spec.writer.split(".")
             port = activities[writer_activity].interface.outputs[writer_port]
@@ -132,6 +164,9 @@ class Region:
     @property
     def name(self) -> str:
         return self.memory.name
+
+    def buffer_at(self, offset: int, nbytes: int) -> np.ndarray:
+        return np.ndarray((nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=offset)
 
     def transport_buffer(self, transport: Transport) -> np.ndarray:
         return np.ndarray((transport.nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=transport.offset)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import multiprocessing
+from collections import deque
 import signal
 import sys
 import threading
@@ -31,8 +32,11 @@ from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.coordinator import Coordinator
 from hapticop.runtime.lifecycle import OK
 from hapticop.runtime.logs import Level, LogWriter, default_run_dir
-from hapticop.runtime import realtime
+from hapticop.runtime import live, realtime
+from hapticop.runtime.control import ControlError, ControlServer, socket_path
+from hapticop.runtime.patching import PatchError, load_patch, prepare
 from hapticop.runtime.region import Region
+from hapticop.yamlsource import parse_text
 from hapticop.runtime.thread import CyclicThread
 from hapticop.units import format_duration
 
@@ -54,12 +58,14 @@ class RunOptions:
     run_dir: Path | None = None
     shutdown_timeout_ns: int = 5 * SECOND
     echo: bool = True  # errors and warnings to the console
+    control: str | None = None  # control socket name or path (default: the composition's name)
 
 
 @dataclass
 class _ProcessThread:
     name: str
     process: multiprocessing.Process
+    messages: object  # the sending end of a pipe: live changes for this thread
     reported: bool = False
 
 
@@ -100,6 +106,11 @@ class System:
         self.default_shutdown = not self._read_by_flag_map("system.shutdown_requested")
         self.exit_by_flag = self._written_by_flag_map("system.exit")
         self.main.supervisor = self.supervise
+        self.tree = parse_text(source_text, file).tree
+        self.pending: deque[live.PendingPatch] = deque()
+        self.scripted = sorted(((p.at, name, p) for name, p in self.composition.patches.items()),
+                               key=lambda item: (item[0], item[1]))
+        self.control: ControlServer | None = None
         for runner in self.built.runners.values():
             attach = getattr(runner.block, "attach_system", None)
             if attach is not None:
@@ -172,23 +183,40 @@ class System:
         from hapticop.runtime.child import process_main
 
         context = multiprocessing.get_context("spawn")
+        receiving, sending = context.Pipe(duplex=False)
         process = context.Process(
             target=process_main,
-            args=(self.text, self.file, self.region.name, name, str(self.run_dir), self.options.seed),
+            args=(self.text, self.file, self.region.name, name, str(self.run_dir), self.options.seed, receiving),
             name=f"hapticop-{name}", daemon=True,
         )
         process.start()
-        self.processes[name] = _ProcessThread(name, process)
+        receiving.close()
+        self.processes[name] = _ProcessThread(name, process, sending)
         self.log.info("thread '%s' runs in process %d", name, process.pid)
 
     def coordinate(self) -> None:
         """One coordination step (the mediator's compute)."""
         self.coordinator.step()
 
+    def send(self, thread: str, message: tuple) -> None:
+        """A live change for a thread in its own process; its loop notices the counter."""
+        self.processes[thread].messages.send(message)
+        self.region.control[self.layout.thread_index[thread]] += 1
+
+    @staticmethod
+    def resolve_block(name: str):
+        from hapticop.blocks.registry import resolve
+
+        return resolve(name)
+
     # -- supervision, every main-thread cycle -------------------------------------------
     def supervise(self) -> None:
         now = self.clock.now_ns()
         started = int(self.region.system[Region.STARTED_NS])
+        if self.pending:
+            self._apply_pending()
+        if self.scripted and now - started >= self.scripted[0][0]:
+            self._apply_scripted(self.scripted.pop(0))
         if self.options.duration_ns is not None and self.shutdown_at is None and now - started >= self.options.duration_ns:
             self.log.info("duration %s reached", format_duration(self.options.duration_ns))
             self.request_shutdown()
@@ -211,6 +239,37 @@ class System:
         self.shutdown_at = self.clock.now_ns()
         if "system.shutdown_requested" in self.flag_index:
             self.set_flag("system.shutdown_requested")
+
+    # -- live changes -------------------------------------------------------------------
+    def prepare_patch(self, patch, patch_file: str = "<patch>") -> "live.PendingPatch":
+        """Apply and validate a patch against the running description (any thread)."""
+        new_tree, new, plan, diff = prepare(self.tree, patch, old=self.composition, patch_file=patch_file,
+                                            name=Path(self.file).name)
+        resolved = live.check(self, plan, new)
+        pending = live.PendingPatch(plan, new, new_tree, resolved, threading.Event())
+        pending.diff = diff
+        return pending
+
+    def _apply_pending(self) -> None:
+        while self.pending:
+            pending = self.pending.popleft()
+            try:
+                live.apply(self, pending)
+            except Exception as error:  # noqa: BLE001 - reported to the client, the system runs on
+                pending.error = f"{type(error).__name__}: {error}"
+                self.log.error("patch not applied: %s", pending.error)
+            pending.applied.set()
+
+    def _apply_scripted(self, item) -> None:
+        at, name, scripted = item
+        try:
+            pending = self.prepare_patch(scripted.patch, patch_file=f"patches.{name}")
+            live.apply(self, pending)
+            self.log.always("scripted patch '%s' applied at %s", name, format_duration(at))
+        except PatchError as error:
+            message = f"scripted patch '{name}' refused: {error.diagnostics[0].message}"
+            self.reasons.append(message)
+            self.log.error(message)
 
     def _walk_down(self) -> None:
         """The runtime's own shutdown: activities, then threads, then the main thread."""
@@ -252,8 +311,59 @@ class System:
             self.set_flag(f"threads.{handle.name}.lost")
 
     # -- running ------------------------------------------------------------------------
+    # -- the control channel ------------------------------------------------------------
+    def handle(self, request: dict) -> dict:
+        """A request on the control socket (its own thread): status, or a patch."""
+        op = request.get("op")
+        if op == "status":
+            return {"ok": True, "status": self.status()}
+        if op != "patch":
+            return {"ok": False, "error": f"unknown request {op!r}; expected 'status' or 'patch'"}
+        try:
+            patch = load_patch(request.get("text", ""), request.get("file", "<patch>"))
+            pending = self.prepare_patch(patch, request.get("file", "<patch>"))
+        except PatchError as error:
+            return {"ok": False, "error": "patch refused", "diagnostics": [d.to_json() for d in error.diagnostics]}
+        result = {"ok": True, "diff": pending.diff, "changes": pending.plan.describe()}
+        if request.get("dry_run"):
+            return {**result, "applied": False}
+        self.pending.append(pending)
+        if not pending.applied.wait(timeout=5.0):
+            return {"ok": False, "error": "the main thread did not reach a cycle boundary within 5 s"}
+        if pending.error:
+            return {"ok": False, "error": f"patch not applied: {pending.error}"}
+        return {**result, "applied": True}
+
+    def status(self) -> dict:
+        from hapticop.runtime.report import timing
+
+        owners = {owner: {"state": self.state(owner).flag_name, "failed": self._failure(owner)
+                          if self.region.failed[i] != OK else None}
+                  for owner, i in self.layout.owner_index.items()}
+        return {
+            "name": self.composition.name or Path(self.file).stem,
+            "clock": "virtual" if self.virtual else "realtime",
+            "uptime_s": (self.clock.now_ns() - int(self.region.system[Region.STARTED_NS])) / SECOND,
+            "threads": {t: {**owners[f"threads.{t}"], "schedule": int(self.region.selected[i])}
+                        for t, i in self.layout.thread_index.items()},
+            "activities": {a: owners[a] for a in self.layout.activity_index},
+            "flags": sorted(name for name, i in self.flag_index.items() if self.region.flags[i]),
+            "markings": self.coordinator.markings(),
+            "timing": timing(self.region, self.composition),
+        }
+
+    def _start_control(self) -> None:
+        name = self.composition.name or Path(self.file).stem
+        try:
+            self.control = ControlServer(socket_path(self.options.control or name), self.handle).start()
+            self.log.info("control socket %s", self.control.path)
+        except (ControlError, OSError) as error:
+            self.log.warning("no control socket, so no live patches: %s", error)
+
     def run(self) -> Outcome:
         previous = self._install_signals()
+        if not self.virtual:
+            self._start_control()
         try:
             if self.virtual:
                 self._run_virtual()
@@ -306,6 +416,8 @@ class System:
             signal.signal(signum, handler)
 
     def _stop_everything(self) -> None:
+        if self.control is not None:
+            self.control.stop()
         self.region.system[Region.TERMINATE] = 1 if any(
             self.state(f"threads.{t}") is not State.DONE for t in self.composition.threads) else 0
         for os_thread in self.os_threads.values():

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hapticop.description import Composition
-from hapticop.diagnostics import Report
+from hapticop.diagnostics import Diagnostic, Report
 from hapticop.graph import CompositionGraph
 from hapticop.loader import Loaded, load_tree
 from hapticop.validation import coordination, structure
@@ -31,7 +31,8 @@ class Validated:
         return self.graph.loaded.composition if self.graph and self.report.ok else None
 
 
-def validate_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
+def validate_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT, scripted: bool = True) -> Validated:
+    """`scripted=False` skips replaying the file's own scripted patches (used on patched copies)."""
     report = Report(source.file)
     loaded: Loaded = load_tree(source.tree)
     report.extend(source.place(d, key=d.rule == "unknown-key") for d in loaded.diagnostics)
@@ -40,7 +41,26 @@ def validate_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> V
         for check in structure.CHECKS + coordination.CHECKS:
             found = check(cg, state_limit) if check is coordination.reachability else check(cg)
             report.extend(source.place(d) for d in found)
+        if scripted and report.ok and loaded.composition.patches:
+            report.extend(source.place(d) for d in _scripted_patches(source, loaded, state_limit))
     return Validated(report, source, cg)
+
+
+def _scripted_patches(source: Source, loaded: Loaded, state_limit: int):
+    """Replay the scripted patches in time order: each must apply, validate and be live-able."""
+    from hapticop.runtime.patching import PatchError, prepare
+
+    tree, composition = source.tree, loaded.composition
+    for name, scripted in sorted(composition.patches.items(), key=lambda item: (item[1].at, item[0])):
+        try:
+            tree, composition, _, _ = prepare(tree, scripted.patch, old=composition, patch_file=f"patches.{name}",
+                                              state_limit=state_limit)
+        except PatchError as error:
+            first = error.diagnostics[0]
+            detail = f"{first.dotted_path}: {first.message}" if first.path else first.message
+            yield Diagnostic(rule="scripted-patch", message=f"patch '{name}' would be refused: {detail}",
+                             path=("patches", name, "patch"))
+            return
 
 
 def validate_path(path: str | Path, state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
