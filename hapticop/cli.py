@@ -244,8 +244,13 @@ def schema(
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
+    from hapticop.runtime.system import ForcedExit
+
     try:
         app()
+    except ForcedExit as forced:
+        print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
+        sys.exit(int(forced.args[0]))
     except KeyboardInterrupt:
         sys.exit(130)
     except Exception as error:  # noqa: BLE001 - the last line of defence for the user interface

@@ -86,3 +86,27 @@ def test_sigterm_reports_termination(tmp_path):
     process.send_signal(signal.SIGTERM)
     _, err = process.communicate(timeout=30)
     assert process.returncode == 143, err
+
+
+IGNORES_SHUTDOWN = SIMPLE + """
+coordination:
+  nets:
+    ignore:
+      places: {IDLE: , S: , SEEN: }
+      transitions: {seen: {in: [IDLE, S], out: [SEEN]}}
+      marking: {IDLE: 1}
+      terminal: [SEEN]
+  flag_maps:
+    ignore: {net: ignore, tracking_sources: {system.shutdown_requested: S}}
+"""
+
+
+def test_a_second_ctrl_c_leaves_at_once(tmp_path):
+    """The nets never finish this shutdown; the second Ctrl+C does not wait for them."""
+    process = _compose_process(tmp_path, IGNORES_SHUTDOWN)
+    process.send_signal(signal.SIGINT)
+    time.sleep(0.5)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 130, err
+    assert "left at once" in err and "Traceback" not in err

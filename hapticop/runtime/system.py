@@ -43,6 +43,10 @@ from hapticop.units import format_duration
 SECOND = 1_000_000_000
 
 
+class ForcedExit(BaseException):
+    """A second Ctrl+C or SIGTERM: leave at once, without waiting for coordination."""
+
+
 class ExitStatus(IntEnum):
     SUCCESS = 0
     FAILURE = 1
@@ -403,7 +407,7 @@ class System:
         def handler(signum, _frame):
             if self.interrupted is not None:  # the second one: leave now
                 self.region.system[Region.TERMINATE] = 1
-                raise KeyboardInterrupt
+                raise ForcedExit(self.interrupted)
             self.interrupted = ExitStatus.INTERRUPTED if signum == signal.SIGINT else ExitStatus.TERMINATED
             self.log.always("%s: shutting down (again to force)", signal.Signals(signum).name)
             self.request_shutdown()
