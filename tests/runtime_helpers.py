@@ -43,4 +43,36 @@ streams:
 
 
 def pipeline(deploy: str = "thread") -> str:
+    """Seeded noise on a 1 kHz main thread, recorded on a 10 ms thread."""
     return PIPELINE.replace("DEPLOY", f"deploy: {deploy}")
+
+
+def counting(deploy: str = "thread") -> str:
+    """The same shape with built-in blocks only: a counter echoed on the slow thread."""
+    return (PIPELINE.replace("DEPLOY", f"deploy: {deploy}")
+            .replace('noise: {block: "tests.blocks:Noise"}', "noise: {block: counter}")
+            .replace('recorder: {block: "tests.blocks:Recorder"}', "recorder: {block: echo}")
+            .replace("{from: noise.sample, to: recorder.sample}", "{from: noise.count, to: recorder.input}"))
+
+
+COUNTER = """
+version: 1
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
+activities:
+  mediator: {block: mediator}
+  counter: {block: counter}
+"""
+
+# Coordination that sees the shutdown request and never finishes it.
+IGNORES_SHUTDOWN = """
+coordination:
+  nets:
+    ignore:
+      places: {IDLE: , S: , SEEN: }
+      transitions: {seen: {in: [IDLE, S], out: [SEEN]}}
+      marking: {IDLE: 1}
+      terminal: [SEEN]
+  flag_maps:
+    ignore: {net: ignore, tracking_sources: {system.shutdown_requested: S}}
+"""

@@ -5,12 +5,11 @@ import tracemalloc
 from hapticop.runtime.system import RunOptions, System
 from hapticop.validation import validate_text
 
-from .runtime_helpers import pipeline
+from .runtime_helpers import counting
 
 
 def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
-    text = pipeline("thread").replace('"tests.blocks:Recorder"', "echo").replace("recorder.sample", "recorder.input") \
-        .replace('"tests.blocks:Noise"', "counter").replace("noise.sample", "noise.count")
+    text = counting()
     validated = validate_text(text, "alloc.yaml")
     assert validated.report.ok, validated.report.diagnostics
     system = System(validated.graph.loaded, text, "alloc.yaml",

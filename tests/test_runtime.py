@@ -6,7 +6,7 @@ import pytest
 from hapticop.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
-from .runtime_helpers import compose, pipeline
+from .runtime_helpers import COUNTER, IGNORES_SHUTDOWN, compose, pipeline
 
 
 def test_a_run_walks_everything_to_done(tmp_path):
@@ -115,23 +115,17 @@ def test_shutdown_from_each_state(tmp_path, stuck_in):
 
 
 def test_shutdown_from_pausing(tmp_path):
-    text = """
-    version: 1
-    threads:
-      main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
-    activities:
-      mediator: {block: mediator}
-      counter: {block: counter}
-    coordination:
-      nets:
-        pause:
-          places: {A: , P: , PAUSED: }
-          transitions: {t: {in: [A], out: [P, PAUSED]}}
-          marking: {A: 1}
-          terminal: [PAUSED]
-      flag_maps:
-        pause: {net: pause, converting_sinks: {counter.lcsm.request_pausing: P}}
-    """
+    text = COUNTER + """
+coordination:
+  nets:
+    pause:
+      places: {A: , P: , PAUSED: }
+      transitions: {t: {in: [A], out: [P, PAUSED]}}
+      marking: {A: 1}
+      terminal: [PAUSED]
+  flag_maps:
+    pause: {net: pause, converting_sinks: {counter.lcsm.request_pausing: P}}
+"""
     result = compose(tmp_path, text, duration="100ms")
     assert result.outcome.status is ExitStatus.SUCCESS
     log = (tmp_path / "run-c" / "counter.log").read_text()
@@ -139,23 +133,7 @@ def test_shutdown_from_pausing(tmp_path):
 
 
 def test_coordination_that_never_finishes_is_forced(tmp_path):
-    text = """
-    version: 1
-    threads:
-      main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
-    activities:
-      mediator: {block: mediator}
-      counter: {block: counter}
-    coordination:
-      nets:
-        ignore:
-          places: {IDLE: , S: , SEEN: }
-          transitions: {seen: {in: [IDLE, S], out: [SEEN]}}
-          marking: {IDLE: 1}
-          terminal: [SEEN]
-      flag_maps:
-        ignore: {net: ignore, tracking_sources: {system.shutdown_requested: S}}
-    """
+    text = COUNTER + IGNORES_SHUTDOWN
     result = compose(tmp_path, text, duration="100ms", shutdown_timeout="50ms")
     assert result.outcome.status is ExitStatus.FAILURE
     assert any("did not finish the shutdown" in r for r in result.outcome.reasons)

@@ -16,7 +16,7 @@ from hapticop.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import ROOT
-from .runtime_helpers import compose, pipeline
+from .runtime_helpers import IGNORES_SHUTDOWN, compose, counting, pipeline
 
 
 def test_threads_in_the_main_process(tmp_path):
@@ -61,16 +61,14 @@ def _compose_process(tmp_path, text):
     run_dir = tmp_path / "run"
     process = subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", str(path), "--run-dir", str(run_dir)],
                                cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    log = run_dir / "counter.log"
+    log = run_dir / "noise.log"
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline and not (log.exists() and "-> running" in log.read_text()):
         time.sleep(0.02)
     return process
 
 
-SIMPLE = pipeline("thread").replace("noise", "counter").replace('"tests.blocks:Noise"', "counter") \
-    .replace("recorder", "echo").replace('"tests.blocks:Echo"', "echo").replace('"tests.blocks:Recorder"', "echo") \
-    .replace("counter.sample", "counter.count").replace("echo.sample", "echo.input")
+SIMPLE = counting()
 
 
 def test_ctrl_c_shuts_down_and_reports_interruption(tmp_path):
@@ -88,22 +86,9 @@ def test_sigterm_reports_termination(tmp_path):
     assert process.returncode == 143, err
 
 
-IGNORES_SHUTDOWN = SIMPLE + """
-coordination:
-  nets:
-    ignore:
-      places: {IDLE: , S: , SEEN: }
-      transitions: {seen: {in: [IDLE, S], out: [SEEN]}}
-      marking: {IDLE: 1}
-      terminal: [SEEN]
-  flag_maps:
-    ignore: {net: ignore, tracking_sources: {system.shutdown_requested: S}}
-"""
-
-
 def test_a_second_ctrl_c_leaves_at_once(tmp_path):
     """The nets never finish this shutdown; the second Ctrl+C does not wait for them."""
-    process = _compose_process(tmp_path, IGNORES_SHUTDOWN)
+    process = _compose_process(tmp_path, SIMPLE + IGNORES_SHUTDOWN)
     process.send_signal(signal.SIGINT)
     time.sleep(0.5)
     process.send_signal(signal.SIGINT)

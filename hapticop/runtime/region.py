@@ -168,12 +168,6 @@ class Region:
     def buffer_at(self, offset: int, nbytes: int) -> np.ndarray:
         return np.ndarray((nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=offset)
 
-    def transport_buffer(self, transport: Transport) -> np.ndarray:
-        return np.ndarray((transport.nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=transport.offset)
-
-    def flag(self, name: str) -> bool:
-        return bool(self.flags[self.layout.flag_index[name]])
-
     def close(self) -> None:
         for name in self.layout.sections:
             if hasattr(self, name):
