@@ -127,9 +127,9 @@ def main() -> None:
                 lines.append(row(f"cyclictest, {condition}", cyclictest(args.seconds)))
                 for deploy in ("thread", "process"):
                     data = hapticop(deploy, args.seconds, work)
+                    layout = "one process" if deploy == "thread" else "fieldbus in its own process"
                     for thread in ("main", "fieldbus", "scanner"):
-                        where = "main process" if deploy == "thread" or thread != "fieldbus" else "own process"
-                        lines.append(row(f"hapticop {thread} ({where}), {condition}", data["threads"][thread]))
+                        lines.append(row(f"hapticop {thread} [{layout}], {condition}", data["threads"][thread]))
             print("\n".join(lines), flush=True)
     text = "\n".join(lines) + "\n"
     if args.out:
