@@ -1,0 +1,1 @@
+"""Device libraries (protocols, kinematics, controllers, simulators) the device blocks build on."""
