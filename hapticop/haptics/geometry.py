@@ -1,0 +1,160 @@
+"""Robot footprint and the fixed beam geometry of a scan, shared by the M1 field and the governor.
+
+The thesis models the robot as a point at the LIDAR; the notes (hallway-experiment.md §1 item 4,
+§9) measure clearance from the robot's rectangular body instead: for a 0.6 m wide robot a wall
+0.3 m beside the scanner is touching. Beam directions depend only on the scan angles, so their
+cosines and sines are computed once; a scan then costs a few numpy passes into preallocated
+arrays. Robot frame: x forward, y left (REP 103), origin at the footprint centre.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """Rectangular robot body and where the LIDAR sits on it (notes §2; replace with the ropod's)."""
+
+    length_m: float = 0.70
+    """Along x."""
+    width_m: float = 0.60
+    """Along y."""
+    lidar_x_m: float = 0.25
+    """Scanner origin ahead of the footprint centre."""
+    lidar_y_m: float = 0.0
+    """Scanner origin left of the footprint centre."""
+
+
+def kth_smallest(work: NDArray[np.float64], k: int) -> float:
+    """k-th smallest value of ``work`` (``inf`` if fewer than k finite ones); destroys ``work``.
+
+    A robust minimum (notes §9: "never take a bare max over raw beams"): up to k − 1 outlier
+    beams cannot set it. Non-members must already be ``inf`` in ``work``. k passes of argmin:
+    for the small k used here this beats ``ndarray.partition``, which allocates per call.
+    """
+    value = math.inf
+    for _ in range(k):
+        i = int(work.argmin())
+        value = float(work[i])
+        work[i] = math.inf
+    return value
+
+
+class BeamGeometry:
+    """Points of one scan in the robot frame and the clearances M1 and S1 need.
+
+    ``angles`` are beam directions in the robot frame (rad, 0 ahead, + left); ranges are measured
+    from the scanner origin given by ``footprint``. Per scan: ``load``, then ``corridor_gap`` and
+    ``select_sides``; per servo cycle (depends on the robot's velocity): ``side_clearances``.
+    Invalid beams (NaN) are parked far away and excluded from every selection, so no NaN
+    reaches the arithmetic.
+    """
+
+    FAR_M = 1.0e6
+    """Where invalid beams are parked."""
+
+    def __init__(self, angles: ArrayLike, footprint: Footprint = Footprint()) -> None:
+        a = np.asarray(angles, dtype=np.float64)
+        n = a.shape[0]
+        self.footprint = footprint
+        self.n = n
+        self.half_length = footprint.length_m / 2.0
+        self.half_width = footprint.width_m / 2.0
+        self.cos = np.cos(a)
+        self.sin = np.sin(a)
+        self.ranges = np.full(n, self.FAR_M)
+        self.px = np.full(n, self.FAR_M)  # no scan yet: nothing near
+        self.py = np.full(n, self.FAR_M)
+        self._dx = np.empty(n)
+        self._dy = np.empty(n)
+        self._work = np.empty(n)
+        self._valid = np.empty(n, dtype=bool)
+        self._m1 = np.empty(n, dtype=bool)
+        self._m2 = np.empty(n, dtype=bool)
+        self._dy_shift = math.nan
+        self._left_penalty = np.full(n, math.inf)
+        self._right_penalty = np.full(n, math.inf)
+
+    def load(self, ranges: NDArray[np.floating]) -> None:
+        """Scan points in the robot frame into ``px``, ``py``."""
+        fp, r, valid = self.footprint, self.ranges, self._valid
+        np.copyto(r, ranges)  # float32 → float64 once, so no ufunc below needs a cast buffer
+        np.less(r, self.FAR_M, out=valid)  # False for NaN
+        np.logical_not(valid, out=self._m1)
+        np.copyto(r, self.FAR_M, where=self._m1)
+        np.multiply(r, self.cos, out=self.px)
+        self.px += fp.lidar_x_m
+        np.multiply(r, self.sin, out=self.py)
+        self.py += fp.lidar_y_m
+        self._dy_shift = math.nan  # new points: the cached lateral term is stale
+
+    def corridor_gap(self, margin_m: float, k: int) -> float:
+        """Robust distance from the footprint's front to the obstacles in the driving corridor.
+
+        Corridor (notes §9.1): ``|p_y| ≤ W/2 + margin`` and ``p_x > L/2``; the gap is the k-th
+        smallest ``p_x − L/2`` there, ``inf`` if fewer than k beams hit it.
+        """
+        inside, ahead, work = self._m1, self._m2, self._work
+        np.abs(self.py, out=self._dx)
+        np.less_equal(self._dx, self.half_width + margin_m, out=inside)
+        np.greater(self.px, self.half_length, out=ahead)
+        inside &= ahead
+        inside &= self._valid
+        np.logical_not(inside, out=inside)
+        np.subtract(self.px, self.half_length, out=work)
+        np.copyto(work, math.inf, where=inside)
+        return kth_smallest(work, k)
+
+    def select_sides(self, rear_m: float, ahead_m: float) -> None:
+        """Choose the side points for ``side_clearances``: beside or diagonal to the body now.
+
+        Left: ``p_y > W/2``, right: ``p_y < −W/2``, both inside the window
+        ``−L/2 − rear ≤ p_x ≤ L/2 + ahead`` (notes §9.1). Stored as additive penalties
+        (0 selected, inf not), so the per-cycle selection is one addition.
+        """
+        win, side, px, py = self._m1, self._m2, self.px, self.py
+        np.greater_equal(px, -self.half_length - rear_m, out=win)
+        np.less_equal(px, self.half_length + ahead_m, out=side)
+        win &= side
+        win &= self._valid
+        np.greater(py, self.half_width, out=side)
+        side &= win
+        self._left_penalty.fill(math.inf)
+        np.copyto(self._left_penalty, 0.0, where=side)
+        np.less(py, -self.half_width, out=side)
+        side &= win
+        self._right_penalty.fill(math.inf)
+        np.copyto(self._right_penalty, 0.0, where=side)
+
+    def side_clearances(self, shift_x_m: float, shift_y_m: float, k: int) -> tuple[float, float]:
+        """Robust footprint clearance on the left and the right after the robot translates by a shift.
+
+        The clearance ``‖max(|p − s| − h, 0)‖`` of each selected point is evaluated with the
+        points moved by ``−s``: the body's clearance after it translates by ``s``. ``s = v·T_p``
+        gives the notes' predicted clearance ``c + T_p·ċ`` exactly for a straight wall (and for a
+        parallel wall it stays constant, where a linearisation would not). Returns
+        ``(c_left, c_right)``, ``inf`` where fewer than k points are selected.
+        """
+        dx, dy, work = self._dx, self._dy, self._work
+        np.subtract(self.px, shift_x_m, out=dx)
+        np.abs(dx, out=dx)
+        dx -= self.half_length
+        np.maximum(dx, 0.0, out=dx)
+        dx *= dx
+        if shift_y_m != self._dy_shift:  # the car map never moves sideways: usually cached
+            np.subtract(self.py, shift_y_m, out=dy)
+            np.abs(dy, out=dy)
+            dy -= self.half_width
+            np.maximum(dy, 0.0, out=dy)
+            dy *= dy
+            self._dy_shift = shift_y_m
+        dx += dy  # squared clearance; the square root is taken of the k-th smallest only
+        np.add(dx, self._left_penalty, out=work)
+        left = kth_smallest(work, k)
+        np.add(dx, self._right_penalty, out=work)
+        return math.sqrt(left), math.sqrt(kth_smallest(work, k))

@@ -1,0 +1,97 @@
+"""S1, the robot-side speed governor: limit the commanded twist so the robot stops before obstacles.
+
+hallway-experiment.md §1 item 2 and §10: no handle force can stop an operator who keeps pushing,
+so safety needs a robot-side limit on the robot's own undelayed scan:
+
+    v_exec = min(v_cmd, √(2·a_b·g⁺))        g = front-of-footprint gap to obstacles − dist2
+
+and, near the side walls, ω clipped so the predicted clearance stays ≥ dist3. The governor only
+ever scales a command towards zero (it never reverses, never adds speed, never steers by itself),
+so the operator keeps authority whenever the command is safe.
+
+Turning bound: moving at v for T_p while turning at ω shifts the body sideways by about
+v·ω·T_p²/2 towards the side it turns to, so with c_S the side clearance after translating by
+v·T_p (``BeamGeometry.side_clearances``), c_L − v·ω·T_p²/2 ≥ dist3 gives
+ω ≤ 2(c_L − dist3)/(v·T_p²) and symmetrically ω ≥ −2(c_R − dist3)/(v·T_p²).
+Sideways speed (the ropod is holonomic) gets the braking law on the current side clearance.
+
+Limits: the LIDAR's 270° cannot see behind, so reversing is not limited; turning on the spot
+(v ≤ 0) is not limited (the swept corners are not modelled).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hapticop.haptics.geometry import BeamGeometry
+from hapticop.haptics.handle import TWIST_VX, TWIST_VY, TWIST_WZ
+
+
+@dataclass(frozen=True)
+class GovernorParams:
+    """S1 parameters (notes §2, §10)."""
+
+    brake_decel_mps2: float = 0.5
+    """a_b: planned deceleration; tune to the robot's real limits (§10)."""
+    stop_distance_m: float = 0.50
+    """dist2: the robot stops with this much front clearance."""
+    bumper_m: float = 0.10
+    """dist3: hard side clearance the turning bound keeps."""
+    lead_time_s: float = 1.5
+    """T_p: prediction horizon for the side clearance."""
+    corridor_margin_m: float = 0.10
+    """Stop-corridor half-width beyond the body (same choice as M1's m_c)."""
+    window_rear_m: float = 0.5
+    window_ahead_m: float = 1.5
+    robust_k: int = 3
+    """k-th smallest clearance: ignores up to k − 1 spurious beams."""
+
+
+def govern_twist(
+    twist_cmd: NDArray[np.float64],
+    ranges: NDArray[np.floating],
+    beams: BeamGeometry,
+    out: NDArray[np.float64],
+    params: GovernorParams = GovernorParams(),
+) -> NDArray[np.float64]:
+    """Write the executed twist ``[vx, vy, wz]`` for a commanded one into ``out``; allocation-free.
+
+    ``beams`` is a ``BeamGeometry`` for the scan's angles (robot frame) and footprint, built once.
+    Each output component has the command's sign and at most its magnitude.
+    """
+    p = params
+    a2 = 2.0 * p.brake_decel_mps2
+    beams.load(ranges)
+    vx = float(twist_cmd[TWIST_VX])
+    vy = float(twist_cmd[TWIST_VY])
+    wz = float(twist_cmd[TWIST_WZ])
+
+    if vx > 0.0:
+        gap = beams.corridor_gap(p.corridor_margin_m, p.robust_k) - p.stop_distance_m
+        vx = min(vx, math.sqrt(a2 * gap) if gap > 0.0 else 0.0)
+
+    if vy != 0.0 or (vx > 0.0 and wz != 0.0):
+        beams.select_sides(p.window_rear_m, p.window_ahead_m)
+    if vy != 0.0:
+        c_left, c_right = beams.side_clearances(0.0, 0.0, p.robust_k)
+        room = (c_left if vy > 0.0 else c_right) - p.bumper_m
+        v_side = math.sqrt(a2 * room) if room > 0.0 else 0.0
+        vy = math.copysign(min(abs(vy), v_side), vy)
+
+    if vx > 0.0 and wz != 0.0:
+        t = p.lead_time_s
+        c_left, c_right = beams.side_clearances(vx * t, vy * t, p.robust_k)
+        k = 2.0 / (vx * t * t)
+        if wz > 0.0:  # turning left, towards the left side
+            wz = min(wz, max(0.0, k * (c_left - p.bumper_m)))
+        else:
+            wz = max(wz, min(0.0, -k * (c_right - p.bumper_m)))
+
+    out[TWIST_VX] = vx
+    out[TWIST_VY] = vy
+    out[TWIST_WZ] = wz
+    return out

@@ -1,0 +1,167 @@
+"""The handle side: the PD that holds the handle at its origin, and the car-driving map to a twist.
+
+Thesis §5.2 (eq. 5.1, 5.2) and §5.3.1 (eq. 5.3, 5.4); hallway-experiment.md (notation, §1, §11).
+
+Axis conventions (the single place they are defined; every other module imports them)
+----------------------------------------------------------------------------------
+Handle: the Falcon device frame (libnifalcon), origin at the workspace centre, as seen by the
+operator facing the device. It is right-handed: ``+x`` is the operator's right, ``+y`` is up,
+``+z`` points towards the operator. Pushing the handle away from you ("forward") makes z
+negative (thesis §5.3.1), and ``x > 0`` means "turn right" (thesis fig. 5.5). Forces use the
+same axes: a positive ``F_z`` pushes the hand back towards the operator.
+
+Platform twist ``[vx, vy, wz]``: the ropod robot frame (REP 103, as the ropod block and
+ropod-controller.md use it): x forward, y left, ``wz`` counter-clockwise positive, so a
+left turn is ``wz > 0`` and the thesis's right turn for ``x > 0`` is ``wz < 0``.
+
+Hence ``vx = k1·dz(−z)``, ``vy = 0``, ``wz = −k2·dz(x)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+# Handle axes (indices into a position/force 3-vector, device frame).
+HANDLE_X = 0  # + operator's right: steer right
+HANDLE_Y = 1  # + up; not used for driving
+HANDLE_Z = 2  # + towards the operator; pushing forward makes it negative
+
+# Platform twist components (robot frame, REP 103).
+TWIST_VX = 0  # m/s, + forward
+TWIST_VY = 1  # m/s, + left (the car metaphor never commands it)
+TWIST_WZ = 2  # rad/s, + counter-clockwise (left turn)
+
+#: Forward speed grows with −z (thesis eq. 5.3: q1 = −z).
+FORWARD_PER_HANDLE_Z = -1.0
+#: Handle +x (operator's right) turns the robot right, i.e. clockwise: negative ``wz``.
+YAW_PER_HANDLE_X = -1.0
+#: Sign of a handle force along z that pushes the hand back (towards the operator): resists driving forward.
+BACKWARD_FORCE_Z = +1.0
+#: Sign of a handle force along x that pushes the hand to the operator's right: asks to steer right.
+RIGHTWARD_FORCE_X = +1.0
+
+
+@dataclass(frozen=True)
+class CentringParams:
+    """Gains of the centring PD (thesis §5.2, tuned on the real Falcon)."""
+
+    kp_n_per_m: float = 55.0
+    """Spring to the origin, N/m."""
+    kd_ns_per_m: float = 0.2
+    """Damper, N·s/m, on the handle velocity (see ``CentringPD`` for the eq. 5.2 ambiguity)."""
+    force_limit_n: float = 10.0
+    """Per-axis saturation: the Falcon renders about 10 N per axis."""
+    period_s: float = 0.001
+    """Servo period, used only to difference positions when no velocity is supplied."""
+
+
+class CentringPD:
+    """Holds the handle at its origin so that displacement means "velocity command" (thesis eq. 5.2).
+
+    ``F = sat(Kp·e + Kd·ė + F_env)`` with ``e = origin − p`` and ``ė = −ṗ``, saturated per axis
+    after adding the environmental force (eq. 5.1: the operator feels the sum, and the device
+    limit applies to the sum).
+
+    Eq. 5.2 literally reads ``Kd·(e_k − e_(k−1))`` with Kd = 0.2, i.e. per sample. The notes, the
+    block and the stability analysis (hallway-experiment.md §7.2) use Kd = 0.2 N·s/m on a velocity;
+    we follow them (the per-sample reading would be 1000× less damping at 1 kHz).
+    The velocity is the Falcon block's differentiated velocity when given, otherwise the backward
+    difference of successive positions (the same signal, per notes §2).
+    """
+
+    def __init__(self, params: CentringParams = CentringParams(), origin: ArrayLike = (0.0, 0.0, 0.0)) -> None:
+        self.params = params
+        self._origin = np.array(origin, dtype=np.float64).reshape(3)
+        self._prev = np.zeros(3)
+        self._vel = np.zeros(3)
+        self._damp = np.zeros(3)
+        self._primed = False
+
+    def reset(self) -> None:
+        """Forget the previous position (the next backward difference is zero)."""
+        self._primed = False
+
+    def compute(
+        self,
+        position: NDArray[np.float64],
+        out: NDArray[np.float64],
+        velocity: NDArray[np.float64] | None = None,
+        env_force: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.float64]:
+        """Write the saturated handle force for ``position`` (m, device frame) into ``out`` (N)."""
+        p = self.params
+        vel = velocity
+        if vel is None:
+            vel = self._vel
+            if self._primed:
+                np.subtract(position, self._prev, out=vel)
+                vel *= 1.0 / p.period_s
+            else:
+                vel.fill(0.0)
+            np.copyto(self._prev, position)
+            self._primed = True
+        # out = Kp·(origin − p) − Kd·ṗ (+ F_env), in place.
+        np.subtract(self._origin, position, out=out)
+        out *= p.kp_n_per_m
+        if p.kd_ns_per_m:
+            np.multiply(vel, p.kd_ns_per_m, out=self._damp)
+            out -= self._damp
+        if env_force is not None:
+            out += env_force
+        return saturate(out, p.force_limit_n)
+
+
+def saturate(force: NDArray[np.float64], limit_n: float) -> NDArray[np.float64]:
+    """Clip each axis to ±limit in place: the Falcon's limit is per translational axis, not a norm."""
+    np.minimum(force, limit_n, out=force)  # two ufuncs: np.clip's wrapper costs more than both
+    return np.maximum(force, -limit_n, out=force)
+
+
+def dead_zone(u: float, width: float, subtractive: bool = True) -> float:
+    """Ignore small displacements so the robot does not creep (thesis §5.3.1).
+
+    ``subtractive`` (default, the notes' recommendation): ``sign(u)·max(|u| − width, 0)``, continuous.
+    Otherwise the thesis's literal q: ``u`` if ``|u| > width`` else 0, which jumps by ``width`` at
+    the edge (0.14 m/s of forward speed with k1 = 28 and a 5 mm zone).
+    """
+    a = abs(u)
+    if a <= width:
+        return 0.0
+    if not subtractive:
+        return u
+    return math.copysign(a - width, u)
+
+
+@dataclass(frozen=True)
+class DrivingParams:
+    """Car-driving metaphor gains (thesis §5.3.1: ratio of robot top speed to handle reach)."""
+
+    k1_per_s: float = 28.0
+    """Forward speed per forward handle displacement, (m/s)/m."""
+    k2_rad_per_s_m: float = 10.0
+    """Turn rate per sideways handle displacement, (rad/s)/m."""
+    dead_zone_m: float = 0.005
+    """Dead zone on both x and z (thesis: z_dz = x_dz = 0.5 cm)."""
+    subtractive_dead_zone: bool = True
+    """True: continuous dead zone (notes). False: the thesis's literal, discontinuous one."""
+
+
+def handle_to_twist(
+    position: NDArray[np.float64], out: NDArray[np.float64], params: DrivingParams = DrivingParams()
+) -> NDArray[np.float64]:
+    """Platform twist ``[vx, vy, wz]`` for a handle position: position → velocity (rate) control.
+
+    ``vx = k1·dz(−z)`` (eq. 5.3), ``wz = −k2·dz(x)`` (eq. 5.4 with x > 0 = turn right), ``vy = 0``.
+    """
+    z = float(position[HANDLE_Z])
+    x = float(position[HANDLE_X])
+    dz = params.dead_zone_m
+    sub = params.subtractive_dead_zone
+    out[TWIST_VX] = params.k1_per_s * dead_zone(FORWARD_PER_HANDLE_Z * z, dz, sub)
+    out[TWIST_VY] = 0.0
+    out[TWIST_WZ] = YAW_PER_HANDLE_X * params.k2_rad_per_s_m * dead_zone(x, dz, sub)
+    return out

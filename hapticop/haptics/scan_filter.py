@@ -1,0 +1,133 @@
+"""Per-beam denoising of a LIDAR scan: the thesis's moving average, and a 5-beam median.
+
+Thesis §5.3.2: "a small moving average filter with a window of 3 samples (truncated endpoint)
+... resulting in a data output size of 809 points per scan ... and a small offset in the
+scanning angle". Truncated endpoints means only full windows are kept (811 − 3 + 1 = 809).
+Output ``i`` averages beams ``i .. i+w−1``, so it belongs to the centre beam ``i + (w−1)/2``.
+Pairing it with ``angles[i]`` (the first 809 angles) is the angle offset the thesis mentions:
+``(w−1)/2`` beam steps, 0.333° for the TiM561. ``MovingAverage.angles`` gives the centres.
+
+Invalid beams are NaN (the LIDAR block's convention). A window averages only its valid beams;
+it is NaN when fewer than ``min_valid`` are valid, so one dropout neither erases nor invents
+an obstacle.
+
+Both filters work into preallocated arrays: ``configure`` once per scan geometry, then
+``apply`` per scan allocates nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+class MovingAverage:
+    """NaN-aware moving average with truncated endpoints (n beams → n − w + 1)."""
+
+    def __init__(self, window: int = 3, min_valid: int = 1) -> None:
+        if window < 1:
+            raise ValueError("window must be at least 1")
+        if not 1 <= min_valid <= window:
+            raise ValueError("min_valid must be in 1..window")
+        self.window = window
+        self.min_valid = min_valid
+        self.angles: NDArray[np.float64] = np.zeros(0)
+        self.out: NDArray[np.float64] = np.zeros(0)
+
+    @property
+    def size(self) -> int:
+        """Number of filtered points (809 for an 811-beam scan and w = 3)."""
+        return self.out.shape[0]
+
+    @property
+    def centre_shift_beams(self) -> float:
+        """Output ``i`` is centred on input beam ``i + centre_shift_beams``: (w − 1)/2."""
+        return (self.window - 1) / 2.0
+
+    @property
+    def angle_offset_rad(self) -> float:
+        """Angle error made by pairing output ``i`` with ``angles[i]``: (w − 1)/2 beam steps."""
+        return self._offset
+
+    def configure(self, angles: ArrayLike) -> NDArray[np.float64]:
+        """Fix the scan geometry; returns the filtered points' angles (window centres)."""
+        a = np.asarray(angles, dtype=np.float64)
+        n = a.shape[0]
+        w = self.window
+        if n < w:
+            raise ValueError(f"a scan of {n} beams is shorter than the window {w}")
+        m = n - w + 1
+        self.n = n
+        self.angles = _window_mean(a, w)
+        self._offset = float(self.angles[0] - a[0])
+        self.out = np.empty(m)
+        self._values = np.empty(n)
+        self._valid = np.empty(n)
+        self._isnan = np.empty(n, dtype=bool)
+        self._count = np.empty(m)
+        self._empty = np.empty(m, dtype=bool)
+        return self.angles
+
+    def apply(self, ranges: NDArray[np.floating]) -> NDArray[np.float64]:
+        """Filter one scan; returns ``self.out`` (overwritten by the next call)."""
+        w, m = self.window, self.out.shape[0]
+        vals, valid, isnan, out, count = self._values, self._valid, self._isnan, self.out, self._count
+        np.copyto(vals, ranges)
+        np.isnan(vals, out=isnan)
+        np.logical_not(isnan, out=isnan)  # now: valid
+        np.copyto(valid, isnan)
+        np.logical_not(isnan, out=isnan)  # back to: invalid
+        np.copyto(vals, 0.0, where=isnan)
+        np.copyto(out, vals[:m])
+        np.copyto(count, valid[:m])
+        for j in range(1, w):
+            out += vals[j : j + m]
+            count += valid[j : j + m]
+        np.less(count, self.min_valid - 0.5, out=self._empty)
+        np.maximum(count, 1.0, out=count)
+        out /= count
+        np.copyto(out, np.nan, where=self._empty)
+        return out
+
+
+class MovingMedian:
+    """5-beam (odd ``window``) running median that keeps the scan length: rejects single-beam outliers.
+
+    hallway-experiment.md §9 "common preprocessing". The ``window // 2`` beams at each end are
+    passed through. NaN sorts last, so a window is NaN when most of it is invalid; with a
+    minority of NaN the result is an upper median of the valid beams.
+    """
+
+    def __init__(self, window: int = 5) -> None:
+        if window < 1 or window % 2 == 0:
+            raise ValueError("window must be odd and positive")
+        self.window = window
+        self.out: NDArray[np.float64] = np.zeros(0)
+
+    def configure(self, n: int) -> None:
+        """Allocate for scans of ``n`` beams."""
+        if n < self.window:
+            raise ValueError(f"a scan of {n} beams is shorter than the window {self.window}")
+        self.out = np.empty(n)
+        self._rows = np.empty((n - self.window + 1, self.window))
+
+    def apply(self, ranges: NDArray[np.floating]) -> NDArray[np.float64]:
+        """Filter one scan; returns ``self.out`` (overwritten by the next call)."""
+        w, h, out, rows = self.window, self.window // 2, self.out, self._rows
+        m = rows.shape[0]
+        np.copyto(out, ranges)
+        if w == 1:
+            return out
+        for j in range(w):
+            np.copyto(rows[:, j], out[j : j + m])
+        rows.partition(h, axis=1)
+        np.copyto(out[h : h + m], rows[:, h])
+        return out
+
+
+def _window_mean(a: NDArray[np.float64], w: int) -> NDArray[np.float64]:
+    m = a.shape[0] - w + 1
+    acc = a[:m].copy()
+    for j in range(1, w):
+        acc += a[j : j + m]
+    return acc / w

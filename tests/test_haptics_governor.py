@@ -1,0 +1,92 @@
+"""S1 speed governor (notes §10): never adds speed, stops before obstacles, keeps turns off the walls."""
+
+import math
+
+import numpy as np
+import pytest
+
+from hapticop.haptics.geometry import BeamGeometry
+from hapticop.haptics.governor import GovernorParams, govern_twist
+from hapticop.haptics.synthetic import hallway, robot_scan, tim561_angles
+
+from .test_haptics_handle import assert_no_allocation
+
+ANGLES = tim561_angles(811)
+BEAMS = BeamGeometry(ANGLES)
+
+
+def governed(cmd, segments, pose=(0.0, 0.0, 0.0), params=GovernorParams()):
+    return govern_twist(np.asarray(cmd, float), robot_scan(ANGLES, segments, pose), BEAMS, np.zeros(3), params)
+
+
+def test_free_space_leaves_the_command_alone():
+    cmd = np.array([1.0, 0.2, -0.7])
+    out = govern_twist(cmd, np.full(811, np.nan), BEAMS, np.zeros(3))
+    np.testing.assert_array_equal(out, cmd)
+    np.testing.assert_array_equal(governed(cmd, hallway(4.0, 30.0)), cmd)
+
+
+def test_never_increases_speed_or_changes_direction():
+    rng = np.random.default_rng(7)
+    out = np.zeros(3)
+    for _ in range(300):
+        segments = [((rng.uniform(-2, 4), rng.uniform(-3, 3)), (rng.uniform(-2, 4), rng.uniform(-3, 3)))
+                    for _ in range(4)]
+        pose = (0.0, 0.0, rng.uniform(-math.pi, math.pi))
+        cmd = rng.uniform([-0.5, -0.3, -1.0], [1.0, 0.3, 1.0])
+        ranges = robot_scan(ANGLES, segments, pose)
+        govern_twist(cmd, ranges, BEAMS, out)
+        assert np.all(np.abs(out) <= np.abs(cmd)), (cmd, out)
+        assert np.all(out * cmd >= 0.0), (cmd, out)
+
+
+def test_speed_limit_follows_the_braking_law():
+    # End wall 2.5 m ahead of the front: g = 2.0 m, v ≤ √(2·0.5·2.0).
+    wall = [((0.35 + 2.5, -5.0), (0.35 + 2.5, 5.0))]
+    assert governed([1.6, 0, 0], wall)[0] == pytest.approx(math.sqrt(2.0), abs=1e-9)
+    assert governed([0.8, 0, 0], wall)[0] == 0.8
+    assert governed([-0.5, 0, 0], wall)[0] == -0.5  # reversing away is not limited
+
+
+def test_an_operator_who_keeps_pushing_stops_at_dist2_before_the_end_wall():
+    segments = hallway(2.0, 6.0)
+    x, dt, v = 0.0, 0.01, 0.0
+    front_min = math.inf
+    for _ in range(3000):  # 30 s, full stick forward the whole time
+        v = governed([1.0, 0, 0], segments, (x, 0.0, 0.0))[0]
+        assert v <= 1.0
+        x += v * dt
+        front_min = min(front_min, 6.0 - (x + 0.35))
+    front = 6.0 - (x + 0.35)
+    assert v < 0.02
+    assert front == pytest.approx(0.50, abs=0.02)
+    assert front_min > 0.48  # no overshoot into the stop distance, far from the 0.10 m bumper
+
+
+def test_turns_towards_a_near_wall_are_clipped_and_turns_away_are_not():
+    near_left = [((-10.0, 0.38), (20.0, 0.38))]  # 0.08 m beside the body: inside dist3
+    narrow = GovernorParams(corridor_margin_m=0.05)  # keep the wall out of the stop corridor
+    assert governed([0.5, 0, 0.5], near_left, params=narrow)[2] == 0.0
+    assert governed([0.5, 0, -0.5], near_left, params=narrow)[2] == -0.5
+    # With the default margin (= dist3) a wall that close counts as ahead: the robot may not drive on.
+    assert governed([0.5, 0, 0.5], near_left)[0] == 0.0
+    # 0.2 m beside: turning left is allowed up to 2(c − dist3)/(v·T_p²).
+    left = [((-10.0, 0.5), (20.0, 0.5))]
+    assert governed([0.5, 0, 1.0], left)[2] == pytest.approx(2 * (0.2 - 0.1) / (0.5 * 1.5**2), abs=1e-9)
+    right = [((-10.0, -0.5), (20.0, -0.5))]
+    assert governed([0.5, 0, -1.0], right)[2] == pytest.approx(-2 * (0.2 - 0.1) / (0.5 * 1.5**2), abs=1e-9)
+    assert governed([0.5, 0, 1.0], right)[2] == 1.0
+
+
+def test_sideways_motion_brakes_for_the_side_wall():
+    left = [((-10.0, 0.5), (20.0, 0.5))]  # 0.2 m beside the body
+    assert governed([0.0, 0.5, 0], left)[1] == pytest.approx(math.sqrt(2 * 0.5 * (0.2 - 0.1)))
+    assert governed([0.0, -0.5, 0], left)[1] == -0.5
+    touching = [((-10.0, 0.35), (20.0, 0.35))]
+    assert governed([0.0, 0.5, 0], touching)[1] == 0.0
+
+
+def test_governor_allocates_nothing():
+    ranges = robot_scan(ANGLES, hallway(2.0, 4.0), (0.5, 0.3, math.radians(8))).astype(np.float32)
+    cmd, out = np.array([0.8, 0.05, 0.4]), np.zeros(3)
+    assert_no_allocation(lambda: govern_twist(cmd, ranges, BEAMS, out))
