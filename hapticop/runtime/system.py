@@ -225,6 +225,9 @@ class System:
             self.log.info("duration %s reached", format_duration(self.options.duration_ns))
             self.request_shutdown()
         self._watch_processes()
+        if self.exit_by_flag and self.flag("system.exit"):
+            self._finish()  # the nets ended the run (after a shutdown request, or on their own)
+            return
         if self.shutdown_at is None:
             return
         if self.default_shutdown or self.forced:
@@ -234,8 +237,6 @@ class System:
             self.reasons.append(f"coordination did not finish the shutdown within "
                                 f"{format_duration(self.options.shutdown_timeout_ns)}; forced")
             self.log.error(self.reasons[-1])
-        if self.exit_by_flag and self.flag("system.exit"):
-            self._finish()
 
     def request_shutdown(self) -> None:
         if self.shutdown_at is not None:
