@@ -9,10 +9,14 @@ from __future__ import annotations
 
 from typing import Literal
 
+import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.haptics.governor import govern_twist
+from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
+from hapticop.haptics.scan_filter import MovingAverage
 
 
 class HapticControllerParams(Params):
@@ -22,7 +26,11 @@ class HapticControllerParams(Params):
     k1: float = Field(28.0, description="forward speed per handle displacement, (m/s)/m")
     k2: float = Field(10.0, description="turn rate per handle displacement, (rad/s)/m")
     dead_zone_m: float = Field(0.005, ge=0)
-    force_model: Literal["none", "thesis", "braking_field"] = "thesis"
+    force_model: Literal["none", "thesis", "thesis_corrected", "braking_field"] = Field(
+        "braking_field", description="thesis: equations 5.5/5.6 literally; thesis_corrected: their z branch "
+        "centring; braking_field: footprint braking-distance risk with lateral clearance (hallway-experiment.md §9)")
+    governor: bool = Field(False, description="limit the commanded twist to what can stop before obstacles")
+    centred_within_m: float = Field(0.005, gt=0, description="capability configuration ends with the handle this close")
     k3_n_per_m: float = Field(100.0, ge=0, description="environmental force scale, z (eq. 5.5)")
     k4_n_per_m: float = Field(100.0, ge=0, description="environmental force scale, x (eq. 5.6)")
     d_max_m: float = Field(2.0, gt=0, description="range beyond which obstacles exert no force")
@@ -33,6 +41,8 @@ class HapticControllerParams(Params):
 class HapticController(Block):
     Params = HapticControllerParams
     flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running"}
+    capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
+                                   "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor"})
 
     @classmethod
     def interface(cls, params: HapticControllerParams) -> Interface:
@@ -48,7 +58,91 @@ class HapticController(Block):
             outputs={
                 "force": Port("float64", (3,), "N", "force for the Falcon"),
                 "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "platform twist [vx, vy, wz]"),
+                "environment_force": Port("float64", (3,), "N", "the obstacle part of the force"),
             },
             flags_read=dict(cls.flags_read),
             rate=RateRange(500.0, 2000.0, "the haptic loop renders stiff forces only near 1 kHz"),
         )
+
+    # -- life cycle -------------------------------------------------------------------------
+    def configure_resources(self) -> bool:
+        """Wait until the Falcon, the LIDAR and the ropod controller run (the mediator says so)."""
+        return self.flags["resources_ready"]
+
+    def configure_capabilities(self) -> bool:
+        """Build the control laws, then hold the handle at its origin before commanding motion."""
+        if not hasattr(self, "pd") or self.reconfigure:
+            self._build()
+        self._centre_only()
+        return bool(self.inputs.handle_position.valid
+                    and np.linalg.norm(self.inputs.handle_position.value) < self.params.centred_within_m)
+
+    def compute(self) -> None:
+        p_in = self.inputs
+        out = self.outputs
+        if p_in.ranges.fresh:
+            self.model.update_scan(self.filter.apply(p_in.ranges.value))  # NaN beams are free space
+        if p_in.ranges.valid:
+            self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
+                              scan_age_s=p_in.ranges.age_ns() / 1e9)
+        else:
+            out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
+        self.pd.compute(p_in.handle_position.value, out.force.value, p_in.handle_velocity.value,
+                        out.environment_force.value)
+        handle_to_twist(p_in.handle_position.value, out.velocity_setpoint.value, self.driving)
+        if self.params.governor and p_in.ranges.valid:
+            govern_twist(out.velocity_setpoint.value, self.filter.out, self.beams, out.velocity_setpoint.value,
+                         self.governor)
+        out.force.publish()
+        out.environment_force.publish()
+        out.velocity_setpoint.publish()
+
+    def pausing(self) -> None:
+        self._centre_only()
+
+    def clean(self) -> None:
+        for port in ("force", "velocity_setpoint", "environment_force"):
+            getattr(self.outputs, port).value[:] = 0.0
+            getattr(self.outputs, port).publish()
+
+    # -- helpers ------------------------------------------------------------------------------
+    def create(self) -> None:
+        self.reconfigure = False
+
+    def twist_measured(self):
+        platform = self.inputs.platform_velocity
+        return platform.value if platform.valid else self.outputs.velocity_setpoint.value
+
+    def _build(self) -> None:
+        from hapticop.haptics.force_models import BrakingFieldParams, ThesisParams, make_force_model
+
+        p = self.params
+        self.pd = CentringPD(CentringParams(kp_n_per_m=p.kp_n_per_m, kd_ns_per_m=p.kd_ns_per_m,
+                                            force_limit_n=p.force_limit_n))
+        self.driving = DrivingParams(k1_per_s=p.k1, k2_rad_per_s_m=p.k2, dead_zone_m=p.dead_zone_m)
+        self.filter = MovingAverage(window=p.moving_average)
+        angles = self.filter.configure(self.inputs.angles.value if self.inputs.angles.valid
+                                       else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))
+        params = {"thesis": ThesisParams, "thesis_corrected": ThesisParams}.get(p.force_model)
+        model_params = params(k3_n_per_m=p.k3_n_per_m, k4_n_per_m=p.k4_n_per_m, d_max_m=p.d_max_m) if params else (
+            BrakingFieldParams() if p.force_model == "braking_field" else None)
+        self.model = make_force_model(p.force_model, angles, model_params)
+        if p.governor:
+            from hapticop.haptics.geometry import BeamGeometry, Footprint
+            from hapticop.haptics.governor import GovernorParams
+
+            self.beams, self.governor = BeamGeometry(angles, Footprint()), GovernorParams()
+        self.reconfigure = False
+
+    def _centre_only(self) -> None:
+        """The PD alone: no obstacle force and no motion while not running."""
+        out, p_in = self.outputs, self.inputs
+        out.environment_force.value[:] = 0.0
+        out.velocity_setpoint.value[:] = 0.0
+        if hasattr(self, "pd") and p_in.handle_position.valid:
+            self.pd.compute(p_in.handle_position.value, out.force.value, p_in.handle_velocity.value)
+        else:
+            out.force.value[:] = 0.0
+        out.force.publish()
+        out.environment_force.publish()
+        out.velocity_setpoint.publish()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Literal
 
+import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
@@ -24,6 +25,7 @@ class MountPose(Params):
 
 class LidarParams(Params):
     driver: Literal["sim", "tcp"] = Field("sim", description="'sim': a CoLa A server on loopback")
+    scene: str = Field("hallway", description="the simulated world to scan (sim driver)")
     host: str = Field("127.0.0.1", description="scanner address (the TiM's factory default is 192.168.0.1)")
     port: int = Field(2112, ge=0, le=65535, description="CoLa port; 0 lets the simulator pick a free one")
     points: int = Field(811, ge=2, le=10_000, description="points per scan")
@@ -51,3 +53,72 @@ class Lidar(Block):
             flags_written=dict(cls.flags_written),
             rate=RateRange(params.scan_rate_hz, 1000.0, "the thread must poll at least as fast as the scanner scans"),
         )
+
+    # -- life cycle -------------------------------------------------------------------------
+    def configure_resources(self) -> bool:
+        """Connect a CoLa A client; with the sim driver, first start a TiM561 simulator on loopback."""
+        from hapticop.devices.sick.client import ColaClient
+
+        p = self.params
+        host, port = p.host, p.port
+        self.simulator = None
+        if p.driver == "sim":
+            self.simulator = self._simulator()
+            if self.simulator is None:
+                return False  # the world activity has not opened the simulated world yet
+            host, port = "127.0.0.1", self.simulator.port
+        self.client = ColaClient(host, port, backoff=p.reconnect_backoff_s, clock_ns=self.clock.now_ns, points=p.points)
+        self.ranges = np.zeros(p.points, dtype=np.float32)
+        self.angles = np.zeros(p.points, dtype=np.float32)
+        self.yaw = np.radians(p.mount.yaw_deg)
+        self.connected = False
+        return True
+
+    def _simulator(self):
+        from hapticop.devices.sick.simulator import ANGLES_RAD, TiMSimulator
+        from hapticop.sim.scene import find_scene
+
+        scene = find_scene(self.params.scene)
+        if scene is None:
+            return None
+        lidar = scene.geometry.lidar
+        world, mount = scene.world, np.asarray(lidar.mount, dtype=float)
+        angles = np.asarray(ANGLES_RAD, dtype=float)
+        cast = np.zeros(len(angles))
+
+        def ranges_m(_now_ns: int) -> np.ndarray:
+            world.raycast(scene.pose, mount, angles, cast, max_range=lidar.max_range_m, min_range=lidar.min_range_m)
+            np.nan_to_num(cast, copy=False, nan=0.0)  # no echo: the TiM reports 0
+            return cast
+
+        simulator = TiMSimulator("127.0.0.1", 0, ranges_m=ranges_m, noise_std_m=lidar.noise_sigma_m, rng=self.rng,
+                                 clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
+        if not self.clock.virtual:
+            simulator.start()  # its own thread; under the virtual clock compute() steps it
+        return simulator
+
+    def compute(self) -> None:
+        now = self.clock.now_ns()
+        if self.simulator is not None and self.clock.virtual:
+            self.simulator.step(now)
+        if self.client.poll(now) and self.client.latest_scan(self.ranges, self.angles):
+            out = self.outputs
+            np.copyto(out.ranges.value, self.ranges)
+            np.add(self.angles, self.yaw, out=out.angles.value)  # sensor frame to robot frame
+            out.ranges.publish()
+            out.angles.publish()
+            self.flags["new_scan"] = True
+        connected = self.client.scans > 0 and self.client.state.name == "STREAMING"
+        if connected != self.connected:
+            (self.log.info if connected else self.log.warning)(
+                "LIDAR %s%s", "streaming" if connected else "not streaming",
+                "" if connected else f" ({self.client.last_error or 'starting'})")
+            self.connected = connected
+
+    def clean(self) -> None:
+        if getattr(self, "client", None) is not None:
+            self.client.close()
+        if getattr(self, "simulator", None) is not None:
+            if not self.clock.virtual:
+                self.simulator.stop()
+            self.simulator.close()

@@ -21,6 +21,7 @@ BUILTIN: dict[str, str] = {
     "ethercat_watchdog": "hapticop.blocks.ethercat:EthercatWatchdog",
     "ropod_controller": "hapticop.blocks.ropod:RopodController",
     "haptic_controller": "hapticop.blocks.haptic:HapticController",
+    "hallway_world": "hapticop.blocks.world:HallwayWorld",
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
 }

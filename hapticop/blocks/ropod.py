@@ -7,6 +7,7 @@ gain / PI / lead-lag / low-pass chain at 1 kHz, with the thesis's Appendix D val
 
 from __future__ import annotations
 
+import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
@@ -54,6 +55,7 @@ class RopodControllerParams(Params):
 
 class RopodController(Block):
     Params = RopodControllerParams
+    capability_params = frozenset({"platform_xy", "platform_theta", "wheel"})
 
     @classmethod
     def interface(cls, params: RopodControllerParams) -> Interface:
@@ -70,3 +72,42 @@ class RopodController(Block):
             flags_read={"stop": "hold zero velocity (a wheel is not operational)"},
             rate=RateRange(1000.0, 1000.0, "the discretised controllers are tuned for Ts = 1 ms"),
         )
+
+    def configure_resources(self) -> None:
+        from hapticop.devices.ropod import Geometry, LinearControllerParams, PlatformControllerParams
+        from hapticop.devices.ropod import PlatformVelocityController
+
+        p = self.params
+        gains = {name: LinearControllerParams(**getattr(p, name).model_dump())
+                 for name in ("platform_xy", "platform_theta", "wheel")}
+        geometry = Geometry(wheel_radius_m=p.geometry.wheel_radius_m, caster_offset_m=p.geometry.caster_offset_m,
+                            wheel_distance_m=p.geometry.wheel_distance_m, pivots_m=p.geometry.pivots_m)
+        self.controller = PlatformVelocityController(PlatformControllerParams(
+            **gains, geometry=geometry, torque_constant_nm_per_a=p.torque_constant_nm_per_a,
+            current_limit_a=p.current_limit_a, pivot_offsets_rad=p.pivot_offsets_rad))
+        self.zero = np.zeros(3)
+
+    def configure_capabilities(self) -> None:
+        self.controller.reset()  # new gains, or a restart: no stale integrator
+
+    def compute(self) -> None:
+        sensors, setpoint = self.inputs.wheel_sensors, self.inputs.velocity_setpoint
+        if sensors.seq == 0:
+            return  # no process data yet: nothing to control
+        stop = self.flags["stop"] or not setpoint.valid  # a stale setpoint is no setpoint
+        commands, velocity = self.outputs.wheel_commands, self.outputs.platform_velocity
+        self.controller.step(self.zero if stop else setpoint.value, sensors.value, commands.value, velocity.value,
+                             stop=stop)
+        commands.publish()
+        velocity.publish()
+
+    def pausing(self) -> None:
+        self._safe()
+
+    def clean(self) -> None:
+        self._safe()
+
+    def _safe(self) -> None:
+        if hasattr(self, "controller"):
+            self.controller.write_safe_commands(self.outputs.wheel_commands.value)
+            self.outputs.wheel_commands.publish()

@@ -1,0 +1,117 @@
+"""The simulated hallway: the world the simulated devices share, and the judge of the run.
+
+It opens the scene the simulated ropod, LIDAR and Falcon (with its blind operator) work
+in, records the run (robot pose and velocity, handle, forces, clearance) and raises
+`finished` when the operator is done, the robot crashes, or time is up, so the mediator can
+end the run. When it is cleaned it leaves the trajectory, the metrics of
+hallway-experiment.md section 5 and a picture of the run in the run directory.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Params, Port
+
+
+class HallwayWorldParams(Params):
+    hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] = Field("H1", description="hallway of hallway-experiment.md §2")
+    operator: Literal["cautious", "nominal", "aggressive", "tremor", "hands_off"] = "nominal"
+    variation: int | None = Field(None, ge=0, description="seed of a varied operator; none: the exact profile")
+    scene: str = Field("hallway", description="name the simulated devices find this world by")
+    time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
+    plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
+
+
+class HallwayWorld(Block):
+    Params = HallwayWorldParams
+    inputs = {
+        "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
+        "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
+    }
+    flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
+    flags_read = {"operator_go": "the haptic loop runs: the operator may start driving"}
+
+    def create(self) -> None:
+        from hapticop.sim.hallway import HallwayGeometry, World
+        from hapticop.sim.metrics import TrajectoryRecorder
+        from hapticop.sim.operator import BlindOperator
+        from hapticop.sim.scene import Scene, open_scene
+
+        p = self.params
+        self.geometry = HallwayGeometry.named(p.hallway)
+        operator = BlindOperator.variant(p.operator, seed=p.variation, t_max_s=p.time_limit_s)
+        self.scene = open_scene(Scene(p.scene, self.geometry, World.from_geometry(self.geometry), operator))
+        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000,
+                                           meta={"hallway": p.hallway, "operator": p.operator,
+                                                 "variation": p.variation})
+        self.ended = ""
+        self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
+        self.command = np.zeros(2)
+
+    def compute(self) -> None:
+        now = self.clock.now_ns()
+        scene = self.scene
+        if scene.operator_since_ns is None:
+            if not self.flags["operator_go"]:
+                return
+            scene.operator_since_ns = now
+            self.log.info("the operator starts driving")
+        t = scene.operator_time(now)
+        force = self.inputs.environment_force
+        np.copyto(scene.environment_force, force.value if force.valid else 0.0)
+        clearance, crashed = scene.world.clearance(scene.pose, self.geometry.footprint)
+        if not self.ended:
+            self.velocity[0], self.velocity[1] = scene.twist[0], scene.twist[2]
+            setpoint = self.inputs.velocity_setpoint.value
+            self.command[0], self.command[1] = setpoint[0], setpoint[2]
+            self.recorder.append(t, scene.pose, robot_velocity=self.velocity, cmd=self.command,
+                                 handle_position=scene.handle_position, handle_velocity=scene.handle_velocity,
+                                 force_env=scene.environment_force, force_hand=scene.hand_force,
+                                 force_device=scene.device_force, clearance=clearance)
+            if crashed:
+                self.ended = "crash"
+            elif scene.operator.done(t):
+                self.ended = "operator done"
+            elif t >= self.params.time_limit_s:
+                self.ended = "time limit"
+            if self.ended:
+                self.log.always("run ended at %.2f s: %s", t, self.ended)
+                self.flags["finished"] = True
+
+    def clean(self) -> None:
+        from hapticop.sim.metrics import compute_metrics
+        from hapticop.sim.scene import close_scene
+
+        close_scene(self.params.scene)
+        if self.recorder.n < 2:
+            return
+        self.recorder.save(self.run_dir / "trajectory.npz")
+        metrics = compute_metrics(self.recorder, self.geometry)
+        (self.run_dir / "metrics.json").write_text(json.dumps(_plain(asdict(metrics)), indent=2))
+        if self.params.plot:
+            try:
+                from hapticop.sim.plot import plot_run
+
+                plot_run(self.recorder, self.geometry, self.run_dir / "run.png",
+                         title=f"{self.params.hallway}, {self.params.operator} operator")
+            except RuntimeError as error:  # matplotlib missing: the numbers are still there
+                self.log.warning("no picture of the run: %s", error)
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return None if not np.isfinite(value) else float(value)
+    if isinstance(value, (np.integer, int, bool, np.bool_)) and not isinstance(value, str):
+        return value.item() if hasattr(value, "item") else value
+    return value if isinstance(value, (str, type(None))) else str(value)
