@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -93,7 +94,7 @@ def compose(
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_timing
+    from hapticop.runtime.report import print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = validate_path(file)
@@ -110,9 +111,14 @@ def compose(
     def announce(system) -> None:
         console.print(f"[bold]{system.composition.name or file}[/]: running ({clock.value} clock); "
                       f"logs in {system.run_dir}")
+        if console.is_terminal:
+            from hapticop.runtime.report import progress_line
+
+            threading.Thread(target=progress_line, args=(system, console), daemon=True).start()
 
     result = run_system(validated.graph.loaded, validated.source.text, str(file), options, on_start=announce)
     print_timing(result.timing, console, result.virtual)
+    print_results(result.outcome.run_dir, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")

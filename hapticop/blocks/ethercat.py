@@ -2,8 +2,8 @@
 
 The master exchanges the raw process-data images (168 bytes in, 36 bytes out per wheel,
 packed little endian) every cycle; what the bytes mean is the business of the block that
-reads them. Driver `sim` exchanges them with a simulated ropod in the shared simulated
-world. The watchdog watches slave states and working counters and raises flags.
+reads them. Driver `sim` exchanges them with a simulated ropod and publishes where that
+robot truly is, for the simulated world. The watchdog watches slave states and working counters and raises flags.
 """
 
 from __future__ import annotations
@@ -50,7 +50,6 @@ class EthercatMasterParams(Params):
     slaves: dict[str, SlaveSpec] = Field(
         default_factory=_ropod_segment, description="expected slaves in bus order"
     )
-    scene: str = Field("hallway", description="the simulated world to drive (sim driver)")
 
     @property
     def wheels(self) -> int:
@@ -64,27 +63,27 @@ class EthercatMaster(Block):
     @classmethod
     def interface(cls, params: EthercatMasterParams) -> Interface:
         wheels, slaves = params.wheels, len(params.slaves)
+        outputs = {
+            "wheel_sensors": Port("uint8", (wheels, SMARTWHEEL_INPUT_BYTES), "1", "TxPDO image per wheel"),
+            "slave_states": Port("uint8", (slaves,), "1", "AL state per slave, bus order"),
+            "working_counter": Port("int32", (), "1", "working counter of the last exchange"),
+        }
+        if params.driver == "sim":  # the simulated robot's true motion, for the simulated world
+            outputs["robot_pose"] = Port("float64", (3,), "m, m, rad", "pose from where it started [x, y, theta]")
+            outputs["robot_twist"] = Port("float64", (3,), "m/s, m/s, rad/s", "true twist [vx, vy, wz]")
         return Interface(
             inputs={"wheel_commands": Port("uint8", (wheels, SMARTWHEEL_OUTPUT_BYTES), "1", "RxPDO image per wheel")},
-            outputs={
-                "wheel_sensors": Port("uint8", (wheels, SMARTWHEEL_INPUT_BYTES), "1", "TxPDO image per wheel"),
-                "slave_states": Port("uint8", (slaves,), "1", "AL state per slave, bus order"),
-                "working_counter": Port("int32", (), "1", "working counter of the last exchange"),
-            },
+            outputs=outputs,
             flags_written=dict(cls.flags_written),
             rate=RateRange(100.0, 4000.0, "smart-wheel drives expect a steady cycle near 1 kHz"),
         )
 
-    def configure_resources(self) -> bool:
+    def configure_resources(self) -> None:
         if self.params.driver == "pysoem":
             raise RuntimeError("the pysoem driver is not part of this hapticop yet; use driver: sim")
         from hapticop.devices.ropod.plant import PlantParams, RopodPlant
-        from hapticop.sim.scene import find_scene
 
-        self.scene = find_scene(self.params.scene)
-        if self.scene is None:
-            return False  # the world activity has not opened the simulated world yet
-        self.plant = RopodPlant(PlantParams(initial_pose=tuple(self.scene.geometry.start)), rng=self.rng)
+        self.plant = RopodPlant(PlantParams(), rng=self.rng)  # its pose counts from where it starts
         self.rx = self.inputs.wheel_commands.value
         self.tx = self.outputs.wheel_sensors.value
         self.plant.write_sensors(self.tx)
@@ -100,8 +99,11 @@ class EthercatMaster(Block):
         self.last_ns = now
         if dt > 0:
             self.plant.step(self.rx, dt, self.tx)
-        np.copyto(self.scene.pose, self.plant.pose)
-        np.copyto(self.scene.twist, self.plant.twist)
+        out = self.outputs
+        np.copyto(out.robot_pose.value, self.plant.pose)
+        np.copyto(out.robot_twist.value, self.plant.twist)
+        out.robot_pose.publish()
+        out.robot_twist.publish()
         self.outputs.wheel_sensors.publish()
         self.outputs.slave_states.publish()
         self.outputs.working_counter.publish()

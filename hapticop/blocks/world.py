@@ -32,6 +32,8 @@ class HallwayWorldParams(Params):
 class HallwayWorld(Block):
     Params = HallwayWorldParams
     inputs = {
+        "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
+        "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),
         "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
         "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
     }
@@ -55,9 +57,23 @@ class HallwayWorld(Block):
         self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
         self.command = np.zeros(2)
 
+    def _place_robot(self) -> None:
+        """The robot's pose in the hallway: its start composed with how far it has moved."""
+        pose, scene = self.inputs.robot_pose, self.scene
+        if pose.seq == 0:
+            return
+        sx, sy, st = self.geometry.start
+        rx, ry, rt = pose.value
+        c, s = np.cos(st), np.sin(st)
+        scene.pose[0] = sx + c * rx - s * ry
+        scene.pose[1] = sy + s * rx + c * ry
+        scene.pose[2] = st + rt
+        np.copyto(scene.twist, self.inputs.robot_twist.value)
+
     def compute(self) -> None:
         now = self.clock.now_ns()
         scene = self.scene
+        self._place_robot()  # the LIDAR sees the robot where it is, even before the operator drives
         if scene.operator_since_ns is None:
             if not self.flags["operator_go"]:
                 return
@@ -103,6 +119,34 @@ class HallwayWorld(Block):
                          title=f"{self.params.hallway}, {self.params.operator} operator")
             except RuntimeError as error:  # matplotlib missing: the numbers are still there
                 self.log.warning("no picture of the run: %s", error)
+        self._results(metrics)
+
+
+    def _results(self, m) -> None:
+        """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
+        from hapticop.sim.metrics import Targets, targets_met
+
+        g = self.geometry
+        checks = targets_met(m, Targets.for_variant(self.params.operator)).checks
+
+        def row(name, value, unit, target, check):
+            return {"metric": name, "value": None if value is None or value != value else round(float(value), 3),
+                    "unit": unit, "target": target, "ok": checks.get(check) if check else None}
+
+        rows = [
+            row("ended by", None, m.ended_by, "stopped", "completed"),
+            row(f"collisions (clearance under dist3 = {g.dist3_m} m)", m.n_collisions, "", "0", "no_crash"),
+            row(f"stop error against dist2 = {g.dist2_m} m (+ early)", m.e_stop_m, "m", "-0.05 to +0.10", "e_stop"),
+            row(f"least side clearance (dist1 = {g.dist1_m} m)", m.side_clearance_min_m, "m",
+                f">= {g.dist1_m - 0.10:.2f}", "side_clearance"),
+            row("completion time", m.completion_time_s, "s", "", None),
+            row("peak force", m.force_peak_n, "N", "<= 8", "force_peak"),
+            row("rms force", m.force_rms_n, "N", "", None),
+            row("rms force rate", m.force_rate_rms_nps, "N/s", "<= 30", "force_rate"),
+        ]
+        results = {"title": f"hallway {self.params.hallway}, {self.params.operator} operator",
+                   "rows": rows, "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
+        (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
 
 
 def _plain(value):

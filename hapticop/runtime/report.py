@@ -64,3 +64,36 @@ def write_timing(data: dict, run_dir: Path) -> Path:
     path = run_dir / "timing.json"
     path.write_text(json.dumps(data, indent=2))
     return path
+
+
+def print_results(run_dir: Path, console: Console) -> None:
+    """Tables that activities left as results*.json in the run directory (metrics of a run)."""
+    for path in sorted(run_dir.glob("results*.json")):
+        data = json.loads(path.read_text())
+        table = Table(title=data.get("title", path.stem), title_justify="left")
+        for column in ("metric", "value", "target", "ok"):
+            table.add_column(column, justify="left" if column == "metric" else "right")
+        for row in data["rows"]:
+            value = "-" if row["value"] is None else f"{row['value']:g} {row['unit']}".strip()
+            if row["value"] is None and row["unit"]:
+                value = row["unit"]
+            ok = {True: "[green]yes[/]", False: "[red]no[/]", None: ""}[row["ok"]]
+            table.add_row(row["metric"], value, row["target"], ok)
+        console.print(table)
+        if data.get("picture"):
+            console.print(f"picture: {run_dir / data['picture']}")
+
+
+def progress_line(system, console: Console, every_s: float = 0.5) -> None:
+    """One updating status line while a system runs (a daemon thread: never the cycle's business)."""
+    import time
+
+    region, layout = system.region, system.layout
+    started = int(region.system[region.STARTED_NS])
+    while system.built is not None and not system.finished:
+        seconds = (system.clock.now_ns() - started) / 1e9
+        running = sum(1 for i in layout.owner_index.values() if int(region.state[i]) == 4)
+        missed = int(region.missed.sum())
+        console.print(f"  t {seconds:7.1f} s   {running}/{len(layout.owner_index)} running   "
+                      f"{missed} missed deadlines", end="\r", highlight=False)
+        time.sleep(every_s)

@@ -115,6 +115,7 @@ class System:
         self.scripted = sorted(((p.at, name, p) for name, p in self.composition.patches.items()),
                                key=lambda item: (item[0], item[1]))
         self.control: ControlServer | None = None
+        self.finished = False
         for runner in self.built.runners.values():
             attach = getattr(runner.block, "attach_system", None)
             if attach is not None:
@@ -375,6 +376,7 @@ class System:
             else:
                 self._run_realtime()
         finally:
+            self.finished = True
             self._restore_signals(previous)
             self._stop_everything()
         return Outcome(self._status(), self.run_dir, self.reasons)
