@@ -11,8 +11,9 @@ owner:
 - `threads.<thread>.lcsm.*` likewise for a thread's LCSM; `threads.<thread>.schedule.<id>`
   (level: that schedule is selected), `threads.<thread>.select_schedule.<id>` (request),
   `threads.<thread>.deadline_missed` (event), `threads.<thread>.lost` (level: its process died).
-- `system.shutdown_requested` (event: Ctrl+C or SIGTERM) and `system.exit` (read by the
-  runtime: leave the process).
+- `system.shutdown_requested` (event: Ctrl+C or SIGTERM), `system.stop` (read by the runtime:
+  shut down as if Ctrl+C had been pressed, so a net can end a run) and `system.exit` (read by
+  the runtime: leave the process).
 - `flags.<name>`: coupling flags declared under `coordination.flags`, written by one flag
   map and read by another, as the thesis couples its three nets.
 """
@@ -73,6 +74,7 @@ def system_flags() -> dict[str, FlagInfo]:
     return {
         "system.shutdown_requested": FlagInfo("system.shutdown_requested", writers=[RUNTIME], declared_by=RUNTIME),
         "system.exit": FlagInfo("system.exit", readers=[RUNTIME], declared_by=RUNTIME),
+        "system.stop": FlagInfo("system.stop", readers=[RUNTIME], declared_by=RUNTIME),
     }
 
 

@@ -88,7 +88,7 @@ CASES = [
     ("invalid-input-unconnected.yaml", "input-unconnected", 15, "required input 'haptic.handle_velocity'", None),
     ("invalid-stream-sync-none.yaml", "stream-thread-safety", 20, "with 'sync: none'", None),
     ("invalid-block-flag-never-written.yaml", "flag-no-writer", 15,
-     "activity 'haptic' reads flag 'haptic.resources_ready' but no flag map writes it", None),
+     "activity 'haptic' waits for flag 'haptic.resources_ready' but no flag map writes it", None),
     # coordination: nets
     ("invalid-marking-undeclared-place.yaml", "unknown-place", 18, "initial marking of undeclared place 'BEGIN'", None),
     ("invalid-terminal-undeclared-place.yaml", "unknown-place", 19, "terminal undeclared place 'END'", None),

@@ -39,6 +39,7 @@ class Block:
     outputs: ClassVar[dict[str, Port]] = {}
     flags_written: ClassVar[dict[str, str]] = {}
     flags_read: ClassVar[dict[str, str]] = {}
+    awaits: ClassVar[frozenset[str]] = frozenset()  # read flags the block waits for: someone must write them
     rate: ClassVar[RateRange | None] = None
     # Parameters a live patch may change with only capability configuration (gains, limits);
     # a change to any other parameter takes the activity through resource configuration.

@@ -41,6 +41,7 @@ class HapticControllerParams(Params):
 class HapticController(Block):
     Params = HapticControllerParams
     flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running"}
+    awaits = frozenset({"resources_ready"})
     capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
                                    "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor"})
 

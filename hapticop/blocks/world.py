@@ -39,6 +39,7 @@ class HallwayWorld(Block):
     }
     flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
     flags_read = {"operator_go": "the haptic loop runs: the operator may start driving"}
+    awaits = frozenset({"operator_go"})
 
     def create(self) -> None:
         from hapticop.sim.hallway import HallwayGeometry, World
@@ -134,7 +135,7 @@ class HallwayWorld(Block):
                     "unit": unit, "target": target, "ok": checks.get(check) if check else None}
 
         rows = [
-            row("ended by", None, m.ended_by, "stopped", "completed"),
+            {"metric": "ended by", "value": m.ended_by, "unit": "", "target": "stopped", "ok": checks.get("completed")},
             row(f"collisions (clearance under dist3 = {g.dist3_m} m)", m.n_collisions, "", "0", "no_crash"),
             row(f"stop error against dist2 = {g.dist2_m} m (+ early)", m.e_stop_m, "m", "-0.05 to +0.10", "e_stop"),
             row(f"least side clearance (dist1 = {g.dist1_m} m)", m.side_clearance_min_m, "m",

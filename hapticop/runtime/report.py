@@ -74,9 +74,8 @@ def print_results(run_dir: Path, console: Console) -> None:
         for column in ("metric", "value", "target", "ok"):
             table.add_column(column, justify="left" if column == "metric" else "right")
         for row in data["rows"]:
-            value = "-" if row["value"] is None else f"{row['value']:g} {row['unit']}".strip()
-            if row["value"] is None and row["unit"]:
-                value = row["unit"]
+            raw = row["value"]
+            value = "-" if raw is None else (raw if isinstance(raw, str) else f"{raw:g} {row['unit']}".strip())
             ok = {True: "[green]yes[/]", False: "[red]no[/]", None: ""}[row["ok"]]
             table.add_row(row["metric"], value, row["target"], ok)
         console.print(table)

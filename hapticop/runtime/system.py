@@ -226,6 +226,9 @@ class System:
             self.log.info("duration %s reached", format_duration(self.options.duration_ns))
             self.request_shutdown()
         self._watch_processes()
+        if self.shutdown_at is None and self.flag("system.stop"):
+            self.log.info("the coordination asked to stop")
+            self.request_shutdown()
         if self.exit_by_flag and self.flag("system.exit"):
             self._finish()  # the nets ended the run (after a shutdown request, or on their own)
             return

@@ -115,9 +115,16 @@ def flags(cg: G.CompositionGraph) -> Check:
         coordination_broken = any(c.startswith("coordination") for c, _ in cg.loaded.broken)
         if owner_reads and not owner_writes and not sink_writes and info and info.declared_by.startswith("activity") \
                 and not name.split(".")[1] == "lcsm" and not coordination_broken:
-            yield Diagnostic("flag-no-writer", f"activity '{name.split('.')[0]}' reads flag '{name}' but no flag map "
-                             "writes it, so it would wait on it for ever", ("activities", name.split(".")[0]),
-                             hint=f"add a sink for '{name}' to a flag map")
+            activity_name, flag_name = name.split(".", 1)
+            resolved = cg.loaded.activities.get(activity_name)
+            if resolved is not None and flag_name in resolved.block.awaits:
+                yield Diagnostic("flag-no-writer", f"activity '{activity_name}' waits for flag '{name}' but no flag "
+                                 "map writes it, so it would wait for ever", ("activities", activity_name),
+                                 hint=f"add a sink for '{name}' to a flag map")
+            else:
+                yield Diagnostic("flag-no-writer", f"activity '{activity_name}' reads flag '{name}' but no flag map "
+                                 "writes it, so it stays false", ("activities", activity_name),
+                                 severity=Severity.WARNING, hint=f"add a sink for '{name}' to a flag map")
 
 
 def start_on_request(cg: G.CompositionGraph) -> Check:

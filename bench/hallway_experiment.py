@@ -1,0 +1,118 @@
+"""The hallway experiment: force models against operator profiles, under the virtual clock.
+
+Each run is systems/hallway.yaml with a merge patch choosing the force model, the operator
+profile and a seeded operator variation; it runs to its end in simulated time and the
+world activity's metrics are collected. Results are appended as JSON lines, so an
+interrupted sweep keeps what it measured; `--summary` turns them into the README table.
+
+    python bench/hallway_experiment.py --variations 50 --workers 2
+    python bench/hallway_experiment.py --summary
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "bench" / "results" / "hallway-experiment.jsonl"
+
+
+def run_one(model: str, profile: str, variation: int, hallway: str) -> dict:
+    from hapticop.runtime.patching import apply_patch
+    from hapticop.runtime.system import RunOptions, run_system
+    from hapticop.validation import validate_source
+    from hapticop.yamlsource import Source, read_file
+
+    source = read_file(ROOT / "systems" / "hallway.yaml")
+    patch = {"activities": {"haptic": {"params": {"force_model": model}},
+                            "world": {"params": {"hallway": hallway, "operator": profile, "variation": variation,
+                                                 "plot": False}}}}
+    tree = apply_patch(source.tree, patch)
+    validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
+    assert validated.report.ok, [d.to_text() for d in validated.report.errors]
+    from ruamel.yaml import YAML
+    import io
+
+    text = io.StringIO()
+    YAML().dump(tree, text)
+    with tempfile.TemporaryDirectory() as run_dir:
+        started = time.perf_counter()
+        result = run_system(validated.graph.loaded, text.getvalue(), "hallway.yaml",
+                            RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
+        wall = time.perf_counter() - started
+        metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
+        results = json.loads((Path(run_dir) / "results.json").read_text())
+    ok = {row["metric"].split(" (")[0]: row["ok"] for row in results["rows"]}
+    activities = result.timing["activities"]
+    return {"model": model, "profile": profile, "variation": variation, "hallway": hallway, "wall_s": round(wall, 2),
+            "ended_by": metrics["ended_by"], "crash": metrics["crash"], "collisions": metrics["n_collisions"],
+            "e_stop_m": metrics["e_stop_m"], "side_clearance_min_m": metrics["side_clearance_min_m"],
+            "completion_time_s": metrics["completion_time_s"], "force_peak_n": metrics["force_peak_n"],
+            "force_rms_n": metrics["force_rms_n"], "force_rate_rms_nps": metrics["force_rate_rms_nps"],
+            "stop_ok": ok.get("stop error against dist2 = 0.5 m"),
+            "haptic_compute_us": activities["haptic"]["compute_us"], "ropod_compute_us": activities["ropod"]["compute_us"]}
+
+
+def _median(values: list, scale: float = 1.0, digits: int = 1) -> str:
+    import statistics
+
+    values = [v for v in values if v is not None]
+    return f"{scale * statistics.median(values):.{digits}f}" if values else "-"
+
+
+def summarise(path: Path) -> str:
+    runs = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for run in runs:
+        groups[(run["model"], run["profile"])].append(run)
+    lines = ["| force model | operator | runs | crashes | runs with collisions | stop error within -5/+10 cm | "
+             "median stop error (cm) | median time (s) | median peak force (N) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for (model, profile), group in sorted(groups.items()):
+        lines.append(
+            f"| {model} | {profile} | {len(group)} | {sum(r['crash'] for r in group)} | "
+            f"{sum(1 for r in group if r['collisions'])} | {sum(1 for r in group if r['stop_ok'])} | "
+            f"{_median([r['e_stop_m'] for r in group], 100)} | {_median([r['completion_time_s'] for r in group])} | "
+            f"{_median([r['force_peak_n'] for r in group], digits=2)} |")
+    haptic = [r["haptic_compute_us"]["p50"] for r in runs]
+    ropod = [r["ropod_compute_us"]["p50"] for r in runs]
+    lines += ["", f"1 kHz step compute time (median over runs of each run's median, virtual clock, one process): "
+                  f"haptic controller {_median(haptic, digits=0)} us, ropod controller {_median(ropod, digits=0)} us."]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--models", nargs="+", default=["none", "thesis", "braking_field"])
+    parser.add_argument("--profiles", nargs="+", default=["cautious", "nominal", "aggressive"])
+    parser.add_argument("--variations", type=int, default=50)
+    parser.add_argument("--hallway", default="H1")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--summary", action="store_true", help="only summarise what --out holds")
+    args = parser.parse_args()
+    if not args.summary:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        done = set()
+        if args.out.exists():
+            done = {(r["model"], r["profile"], r["variation"], r["hallway"])
+                    for r in map(json.loads, args.out.read_text().splitlines()) if r}
+        jobs = [(m, p, v, args.hallway) for v in range(args.variations) for m in args.models for p in args.profiles
+                if (m, p, v, args.hallway) not in done]
+        with ProcessPoolExecutor(args.workers) as pool, args.out.open("a") as out:
+            for record in pool.map(run_one, *zip(*jobs)) if jobs else []:
+                out.write(json.dumps(record) + "\n")
+                out.flush()
+                print(record["model"], record["profile"], record["variation"], record["ended_by"],
+                      record["e_stop_m"], record["wall_s"], flush=True)
+    print(summarise(args.out))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,118 @@
+"""`hapticop lidar ...` and `hapticop falcon ...`: looking at captures and devices by hand."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import typer
+
+lidar = typer.Typer(help="SICK TiM5xx telegrams.", no_args_is_help=True, add_completion=False)
+falcon = typer.Typer(help="Novint Falcon kinematics (libnifalcon geometry).", no_args_is_help=True,
+                     add_completion=False)
+
+
+def _plain(value):
+    if isinstance(value, bytes):
+        return value.decode("latin-1")
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if dataclasses.is_dataclass(value):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+@lidar.command("decode")
+def lidar_decode(
+    file: Path = typer.Argument(..., help="one LMDscandata telegram (sRA or sSN, with or without STX/ETX)"),
+    json_output: bool = typer.Option(False, "--json", help="every field and every range as JSON"),
+) -> None:
+    """Print a telegram's header fields and its ranges in metres (NaN: no valid echo)."""
+    from hapticop.devices.sick.cola import ColaError, parse_scan
+
+    try:
+        body = file.read_bytes()
+        header = parse_scan(body, None)
+        points = header.dist.count if hasattr(header.dist, "count") else None
+        ranges = np.zeros(points or 10_000, dtype=np.float64)
+        angles = np.zeros_like(ranges)
+        header = parse_scan(body, ranges, angles)
+    except OSError as error:
+        typer.echo(f"error: cannot read {file}: {error.strerror}", err=True)
+        raise typer.Exit(2) from None
+    except ColaError as error:
+        typer.echo(f"error: {file} is not a scan telegram: {error}", err=True)
+        raise typer.Exit(1) from None
+    n = points or len(ranges)
+    ranges, angles = ranges[:n], angles[:n]
+    if json_output:
+        typer.echo(json.dumps({"header": _plain(header), "angles_rad": angles.tolist(),
+                               "ranges_m": [None if np.isnan(r) else r for r in ranges.tolist()]}, indent=1))
+        return
+    for field in dataclasses.fields(header):
+        value = _plain(getattr(header, field.name))
+        if field.name != "dist":
+            typer.echo(f"{field.name:24s} {value}")
+    valid = ~np.isnan(ranges)
+    typer.echo(f"{'points':24s} {n} over {np.degrees(angles[-1] - angles[0]):.1f} deg, {int(valid.sum())} valid")
+    if valid.any():
+        typer.echo(f"{'range min / max':24s} {np.nanmin(ranges):.3f} / {np.nanmax(ranges):.3f} m")
+    for i in range(0, n, max(1, n // 9)):
+        typer.echo(f"  [{i:4d}] {np.degrees(angles[i]):8.3f} deg  {ranges[i]:.3f} m")
+
+
+def _kinematics():
+    from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics
+
+    return FalconKinematics(), np.asarray(WORKSPACE_CENTRE_M)
+
+
+@falcon.command("fk", context_settings={"ignore_unknown_options": True})
+def falcon_fk(
+    e1: int = typer.Argument(..., help="encoder counts of leg 1"),
+    e2: int = typer.Argument(..., help="leg 2"),
+    e3: int = typer.Argument(..., help="leg 3"),
+    json_output: bool = typer.Option(False, "--json"),
+) -> None:
+    """Handle position (m, device frame) of three encoder counts, solved to 1e-10 m."""
+    kinematics, centre = _kinematics()
+    position, angles = np.zeros(3), np.zeros(3)
+    kinematics.angles_from_counts([e1, e2, e3], angles)
+    if not kinematics.forward([e1, e2, e3], position):
+        typer.echo(f"error: counts ({e1}, {e2}, {e3}) are outside the Falcon's reachable workspace", err=True)
+        raise typer.Exit(1)
+    data = {"counts": [e1, e2, e3], "thigh_angles_rad": angles.tolist(), "position_m": position.tolist(),
+            "from_workspace_centre_m": (position - centre).tolist(), "iterations": kinematics.iterations}
+    if json_output:
+        typer.echo(json.dumps(data, indent=1))
+        return
+    typer.echo(f"position      x {position[0]:+.6f}  y {position[1]:+.6f}  z {position[2]:+.6f} m")
+    typer.echo(f"from centre   x {position[0] - centre[0]:+.6f}  y {position[1] - centre[1]:+.6f}  "
+               f"z {position[2] - centre[2]:+.6f} m")
+    typer.echo(f"thigh angles  {' '.join(f'{a:+.6f}' for a in angles)} rad  ({kinematics.iterations} iterations)")
+
+
+@falcon.command("ik", context_settings={"ignore_unknown_options": True})
+def falcon_ik(
+    x: float = typer.Argument(..., help="handle position x, m (device frame)"),
+    y: float = typer.Argument(..., help="y, m"),
+    z: float = typer.Argument(..., help="z, m (the workspace centre is at z = 0.125)"),
+    json_output: bool = typer.Option(False, "--json"),
+) -> None:
+    """Thigh angles and encoder counts of a handle position."""
+    kinematics, _ = _kinematics()
+    angles, counts = np.zeros(3), np.zeros(3, dtype=np.int64)
+    if not kinematics.inverse([x, y, z], angles):
+        typer.echo(f"error: ({x}, {y}, {z}) m is outside the Falcon's reachable workspace", err=True)
+        raise typer.Exit(1)
+    kinematics.counts_from_angles(angles, counts)
+    data = {"position_m": [x, y, z], "thigh_angles_rad": angles.tolist(), "counts": counts.tolist()}
+    if json_output:
+        typer.echo(json.dumps(data, indent=1))
+        return
+    typer.echo(f"thigh angles  {' '.join(f'{a:+.6f}' for a in angles)} rad")
+    typer.echo(f"counts        {' '.join(str(int(c)) for c in counts)}")

@@ -1,0 +1,86 @@
+"""The hallway application end to end, in simulated time, through the real protocol code."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from hapticop.cli import app
+from hapticop.lcsm import State
+from hapticop.runtime.system import ExitStatus
+
+from .conftest import CORPUS, SYSTEMS
+from .runtime_helpers import compose
+
+
+@pytest.fixture(scope="module")
+def hallway_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("hallway")
+    result = compose(tmp, (SYSTEMS / "hallway.yaml").read_text(), duration=None, name="hallway", seed=0)
+    return result, tmp / "run-hallway"
+
+
+def test_the_run_finishes_by_itself_and_meets_the_targets(hallway_run):
+    result, run = hallway_run
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert all(state is State.DONE for state in result.states.values())
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["ended_by"] == "stopped" and not metrics["crash"] and metrics["n_collisions"] == 0
+    assert -0.05 <= metrics["e_stop_m"] <= 0.10  # hallway-experiment.md §6, braking field
+    results = json.loads((run / "results.json").read_text())
+    assert all(row["ok"] is not False for row in results["rows"])
+    assert (run / "run.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_every_device_went_through_its_protocol(hallway_run):
+    _, run = hallway_run
+    assert "homed after" in (run / "falcon.log").read_text()  # 16-byte frames, homing bit, FK
+    assert "LIDAR streaming" in (run / "lidar.log").read_text()  # CoLa A start-up over loopback TCP
+    assert "all 7 slaves operational" in (run / "ethercat_watchdog.log").read_text()  # PDO images, AL states
+    trajectory = np.load(run / "trajectory.npz")
+    assert trajectory["pose"][-1, 0] > 8.0  # the robot really drove down the 10 m hallway
+    assert np.abs(trajectory["force_env"]).max() > 0.5  # and the operator felt the end wall coming
+
+
+def test_same_seed_same_run(tmp_path, hallway_run):
+    _, run = hallway_run
+    text = (SYSTEMS / "hallway.yaml").read_text().replace("time_limit_s: 90.0", "time_limit_s: 4.0")
+    a = compose(tmp_path, text, duration=None, name="a", seed=5)
+    b = compose(tmp_path, text, duration=None, name="b", seed=5)
+    assert a.outcome.status is ExitStatus.SUCCESS
+    pa, pb = (np.load(tmp_path / f"run-{n}" / "trajectory.npz")["pose"] for n in "ab")
+    assert pa.shape == pb.shape and pa.tobytes() == pb.tobytes()
+
+
+def test_desk_renders_the_surroundings_without_moving_the_robot(tmp_path):
+    text = (SYSTEMS / "desk.yaml").read_text().replace("time_limit_s: 20.0", "time_limit_s: 5.0")
+    result = compose(tmp_path, text, duration=None, name="desk")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    trajectory = np.load(tmp_path / "run-desk" / "trajectory.npz")
+    assert np.ptp(trajectory["pose"], axis=0).max() == 0.0  # the robot's threads stayed on schedule 0
+    assert np.abs(trajectory["force_env"]).max() > 0.1  # yet the walls are felt
+    assert result.states["ropod"] is State.DONE
+    assert "-> running" not in (tmp_path / "run-desk" / "ropod.log").read_text()  # only cleaned at the end
+
+
+runner = CliRunner()
+
+
+def test_lidar_decode_cli():
+    capture = CORPUS.parent / "fixtures" / "sick" / "cola_a" / "tim561_sRA_LMDscandata_sim00.bin"
+    result = runner.invoke(app, ["lidar", "decode", str(capture), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert len(data["ranges_m"]) == 811 and data["ranges_m"][0] == pytest.approx(1.598)
+    garbage = runner.invoke(app, ["lidar", "decode", str(CORPUS / "invalid" / "invalid-empty-file.yaml")])
+    assert garbage.exit_code == 1 and "not a scan telegram" in garbage.output
+
+
+def test_falcon_ik_fk_cli_round_trip():
+    ik = runner.invoke(app, ["falcon", "ik", "0.01", "-0.02", "0.13", "--json"])
+    counts = json.loads(ik.output)["counts"]
+    fk = runner.invoke(app, ["falcon", "fk", *map(str, counts), "--json"])
+    assert fk.exit_code == 0, fk.output
+    assert json.loads(fk.output)["position_m"] == pytest.approx([0.01, -0.02, 0.13], abs=2e-4)  # one count
+    assert runner.invoke(app, ["falcon", "ik", "1", "1", "1"]).exit_code == 1
