@@ -67,7 +67,14 @@ class Lidar(Block):
             if self.simulator is None:
                 return False  # the world activity has not opened the simulated world yet
             host, port = "127.0.0.1", self.simulator.port
-        self.client = ColaClient(host, port, backoff=p.reconnect_backoff_s, clock_ns=self.clock.now_ns, points=p.points)
+        from hapticop.devices.sick.cola import OutputRange, startup_sequence
+
+        # The SICK frame counts from the sensor's right side: robot-frame -135 deg is SICK -45 deg.
+        output_range = OutputRange(start=round((p.angle_min_deg + 90.0) * 10_000),
+                                   stop=round((p.angle_max_deg + 90.0) * 10_000))
+        self.client = ColaClient(host, port, backoff=p.reconnect_backoff_s, clock_ns=self.clock.now_ns,
+                                 points=p.points, min_range_m=p.min_range_m,
+                                 startup=startup_sequence(output_range=output_range))
         self.ranges = np.zeros(p.points, dtype=np.float32)
         self.angles = np.zeros(p.points, dtype=np.float32)
         self.yaw = np.radians(p.mount.yaw_deg)
