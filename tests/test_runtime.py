@@ -150,3 +150,10 @@ def test_hallway_coordination_runs_its_course(tmp_path):
     assert all(state is State.DONE for state in result.states.values())
     lidar_thread = (tmp_path / "run-hallway" / "thread-lidar.log").read_text()
     assert "schedule 0 -> 1" in lidar_thread
+
+
+def test_a_virtual_run_without_duration_lasts_as_long_as_the_composition_wants(tmp_path):
+    """No time limit of its own: this one ends after 100 simulated seconds, by its net."""
+    result = compose(tmp_path, SWITCH.replace("stop_after: 100", "stop_after: 100000"), duration=None)
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert result.timing["activities"]["counter"]["steps"] >= 100_000

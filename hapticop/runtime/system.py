@@ -392,10 +392,14 @@ class System:
         order = {name: i for i, name in enumerate(self.composition.threads)}
         queue = self.virtual_queue
         heapq.heappush(queue, (0, order[self.main_name], self.main_name))
-        limit = (self.options.duration_ns or 0) + 2 * self.options.shutdown_timeout_ns + 60 * SECOND
+        # With a duration, a run that outlives it by far has a shutdown that never ends; without
+        # one it runs until the composition ends it (or Ctrl+C), as on the wall clock.
+        limit = None
+        if self.options.duration_ns is not None:
+            limit = self.options.duration_ns + 2 * self.options.shutdown_timeout_ns + 60 * SECOND
         while queue:
             deadline, rank, name = heapq.heappop(queue)
-            if deadline > limit:
+            if limit is not None and deadline > limit:
                 self.reasons.append("the virtual run did not end within its time limit")
                 break
             self.clock.advance_to(deadline)
@@ -442,7 +446,7 @@ class System:
         failed = [owner for owner, index in self.layout.owner_index.items() if self.region.failed[index] != OK]
         for owner in failed:
             self.reasons.append(f"'{owner}' failed ({self._failure(owner)})")
-        if self.forced or failed or any(h.reported for h in self.processes.values()):
+        if self.reasons:  # forced shutdown, lost thread, refused scripted patch, failed owner...
             return ExitStatus.FAILURE
         if self.interrupted is not None:
             return self.interrupted
