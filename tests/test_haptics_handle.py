@@ -5,9 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.haptics.bench import allocation_stats
+from hapticop.measure import allocation_stats
 from hapticop.haptics.handle import (
-    HANDLE_X,
     HANDLE_Z,
     TWIST_VX,
     TWIST_VY,

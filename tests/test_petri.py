@@ -1,6 +1,5 @@
 """Petri-net firing and the reachability analysis on small nets."""
 
-import numpy as np
 import pytest
 
 from hapticop.description import PetriNet

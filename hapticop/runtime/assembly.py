@@ -55,7 +55,6 @@ class Built:
 def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer: LogWriter, seed: int,
           apply_realtime: bool) -> Built:
     composition = loaded.composition
-    layout = region.layout
     owner = thread_of(composition)
     transports = _transports(loaded, region, owner)
     runners: dict[str, ActivityRunner] = {}

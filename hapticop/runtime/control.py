@@ -20,7 +20,7 @@ import stat
 import struct
 import threading
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 MAX_REQUEST_BYTES = 1 << 20  # a patch is at most a composition's size (1 MiB)
 MAX_REPLY_BYTES = 16 << 20

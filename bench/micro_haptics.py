@@ -1,6 +1,6 @@
 """Hand micro-benchmark of the haptic control laws: µs per call with 809 beams, and allocations.
 
-Run ``python -m hapticop.haptics.bench [--calls N]``. Not a test: timings depend on the machine.
+Run ``python bench/micro_haptics.py [--calls N]``. Not a test: timings depend on the machine.
 The scene is the H2 hallway start (notes §2): 2 m wide, robot 0.3 m off-centre, end wall 9.5 m
 ahead (within the 10 m range), moving at 0.5 m/s with the handle pushed forward and sideways.
 """
@@ -8,8 +8,6 @@ ahead (within the 10 m range), moving at 0.5 m/s with the handle pushed forward 
 from __future__ import annotations
 
 import argparse
-import time
-import tracemalloc
 from collections.abc import Callable
 
 import numpy as np
@@ -20,35 +18,7 @@ from hapticop.haptics.governor import govern_twist
 from hapticop.haptics.handle import CentringPD, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
 from hapticop.haptics.synthetic import cast, hallway, tim561_angles
-
-
-def allocation_stats(fn: Callable[[], object], calls: int = 1000) -> tuple[int, int]:
-    """(bytes still allocated after ``calls`` calls, peak bytes allocated during them), traced by tracemalloc."""
-    for _ in range(10):
-        fn()
-    tracemalloc.start()
-    try:
-        before, _ = tracemalloc.get_traced_memory()
-        tracemalloc.reset_peak()
-        for _ in range(calls):
-            fn()
-        after, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    return after - before, peak - before
-
-
-def time_per_call(fn: Callable[[], object], calls: int = 5000) -> tuple[float, float]:
-    """(median, p99) µs per call."""
-    for _ in range(200):
-        fn()
-    samples = np.empty(calls)
-    clock = time.perf_counter_ns
-    for i in range(calls):
-        t0 = clock()
-        fn()
-        samples[i] = clock() - t0
-    return float(np.median(samples)) / 1e3, float(np.percentile(samples, 99)) / 1e3
+from hapticop.measure import allocation_stats, time_per_call
 
 
 def cases() -> dict[str, Callable[[], object]]:

@@ -1,6 +1,6 @@
 """Hand micro-benchmark (not a test): microseconds to parse one 811-point scan, and per client poll.
 
-    python -m hapticop.devices.sick.bench [telegram.bin ...]
+    python bench/micro_sick.py [telegram.bin ...]
 
 Without arguments it times a telegram the simulator builds (a room, 3-4 hex digits per value,
 like the real captures); with files, it times those (e.g. tests/fixtures/sick/cola_a/*.bin).
@@ -19,17 +19,7 @@ import numpy as np
 from hapticop.devices.sick import cola
 from hapticop.devices.sick.client import ColaClient
 from hapticop.devices.sick.simulator import TiMSimulator
-
-
-def _per_call_us(fn, calls: int, repeats: int = 7) -> tuple[float, float]:
-    """Median and best of `repeats` runs of `calls` calls, in microseconds per call."""
-    runs = []
-    for _ in range(repeats):
-        start = time.perf_counter_ns()
-        for _ in range(calls):
-            fn()
-        runs.append((time.perf_counter_ns() - start) / calls / 1e3)
-    return statistics.median(runs), min(runs)
+from hapticop.measure import time_per_call
 
 
 def _parse(name: str, telegram: bytes) -> None:
@@ -45,9 +35,9 @@ def _parse(name: str, telegram: bytes) -> None:
     ):
         if label.endswith("rssi") and rssi is None:
             continue
-        median, best = _per_call_us(call, 2000)
+        median, p99 = time_per_call(call, 2000)
         print(f"parse_scan {name} ({count} points, {len(telegram)} B), {label:22s} "
-              f"median {median:6.1f} µs  best {best:6.1f} µs")
+              f"median {median:6.1f} µs  p99 {p99:6.1f} µs")
 
 
 def _poll_costs(seconds: float = 2.0) -> None:

@@ -1,6 +1,6 @@
 """Hand micro-benchmark (not a test): microseconds per controller cycle and per simulator step.
 
-    python -m hapticop.devices.ropod.bench [cycles]
+    python bench/micro_ropod.py [cycles]
 
 Runs controller and plant in closed loop at 1 kHz (a turning 0.3 m/s setpoint), then times
 each `step` alone on the warmed-up state. Numbers depend on the machine; use them to compare
@@ -9,26 +9,14 @@ changes, not as real-time claims.
 
 from __future__ import annotations
 
-import statistics
 import sys
-import time
 
 import numpy as np
 
 from hapticop.devices.ropod.controller import PlatformVelocityController
-from hapticop.devices.ropod.plant import RopodPlant
 from hapticop.devices.ropod.pdo import new_rx_image, new_tx_image
-
-
-def _per_call_us(fn, calls: int, repeats: int = 5) -> tuple[float, float]:
-    """Median and best of `repeats` runs of `calls` calls, in microseconds per call."""
-    runs = []
-    for _ in range(repeats):
-        start = time.perf_counter_ns()
-        for _ in range(calls):
-            fn()
-        runs.append((time.perf_counter_ns() - start) / calls / 1e3)
-    return statistics.median(runs), min(runs)
+from hapticop.devices.ropod.plant import RopodPlant
+from hapticop.measure import time_per_call
 
 
 def main(cycles: int = 2000) -> None:
@@ -47,8 +35,8 @@ def main(cycles: int = 2000) -> None:
     }
     print(f"numpy {np.__version__}, {cycles} calls x 5 runs")
     for name, fn in rows.items():
-        median, best = _per_call_us(fn, cycles)
-        print(f"{name:32s} median {median:7.1f} us   best {best:7.1f} us")
+        median, p99 = time_per_call(fn, cycles)
+        print(f"{name:32s} median {median:7.1f} us   p99 {p99:7.1f} us")
 
 
 if __name__ == "__main__":
