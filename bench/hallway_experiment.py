@@ -71,7 +71,7 @@ def summarise(path: Path) -> str:
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for run in runs:
         groups[(run["model"], run["profile"])].append(run)
-    lines = ["| force model | operator | runs | crashes | runs with collisions | stop error within -5/+10 cm | "
+    lines = ["| force model | operator | runs | crashes | runs with collisions | stop error on target (-5/+10 cm; cautious -5/+25) | "
              "median stop error (cm) | median time (s) | median peak force (N) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for (model, profile), group in sorted(groups.items()):

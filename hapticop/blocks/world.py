@@ -55,6 +55,7 @@ class HallwayWorld(Block):
                                            meta={"hallway": p.hallway, "operator": p.operator,
                                                  "variation": p.variation})
         self.ended = ""
+        self.still_since: float | None = None
         self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
         self.command = np.zeros(2)
 
@@ -92,9 +93,13 @@ class HallwayWorld(Block):
                                  handle_position=scene.handle_position, handle_velocity=scene.handle_velocity,
                                  force_env=scene.environment_force, force_hand=scene.hand_force,
                                  force_device=scene.device_force, clearance=clearance)
+            g = self.geometry
+            moving = abs(scene.twist[0]) >= g.still_speed_mps or abs(scene.twist[1]) >= g.still_speed_mps
+            self.still_since = None if moving else (t if self.still_since is None else self.still_since)
+            still = self.still_since is not None and t - self.still_since >= g.still_time_s
             if crashed:
                 self.ended = "crash"
-            elif scene.operator.done(t):
+            elif scene.operator.done(t) and still:  # the judge's rule: stopped, and still for a while
                 self.ended = "operator done"
             elif t >= self.params.time_limit_s:
                 self.ended = "time limit"
