@@ -6,6 +6,7 @@ removed), what was expected, and a hint such as the key that was probably meant.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import re
 import types
@@ -45,7 +46,7 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
     value = item.get("input")
     path = prefix + loc
     name = str(item["loc"][-1]) if item["loc"] else "<document>"
-    if kind == "extra_forbidden":
+    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
         allowed = allowed_keys(model, tuple(loc[:-1]))
         close = difflib.get_close_matches(name, allowed, n=1, cutoff=0.6)
         hint = f"did you mean '{close[0]}'?" if close else ""
@@ -115,19 +116,24 @@ def allowed_keys(model: type[BaseModel], path: Path) -> list[str]:
         annotation = _step(annotation, part)
         if annotation is None:
             return []
-    models = [m for m in _models_in(annotation)]
     keys: list[str] = []
-    for m in models:
-        for name, info in m.model_fields.items():
-            key = info.alias or name
+    for m in _models_in(annotation):
+        for key in _fields(m):
             if key not in keys:
                 keys.append(key)
     return keys
 
 
+def _fields(model: type) -> dict[str, Any]:
+    """Key -> annotation of a pydantic model or a dataclass (block parameters may nest either)."""
+    if isinstance(model, type) and issubclass(model, BaseModel):
+        return {info.alias or name: info.annotation for name, info in model.model_fields.items()}
+    return {f.name: f.type for f in dataclasses.fields(model)}
+
+
 def _models_in(annotation: Any) -> list[type[BaseModel]]:
     annotation = _unwrap(annotation)
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+    if isinstance(annotation, type) and (issubclass(annotation, BaseModel) or dataclasses.is_dataclass(annotation)):
         return [annotation]
     if typing.get_origin(annotation) in (typing.Union, types.UnionType):
         return [m for arg in typing.get_args(annotation) for m in _models_in(arg)]
@@ -143,9 +149,9 @@ def _unwrap(annotation: Any) -> Any:
 def _step(annotation: Any, part: Any) -> Any:
     annotation = _unwrap(annotation)
     for model in _models_in(annotation):
-        for name, info in model.model_fields.items():
-            if part in (name, info.alias):
-                return info.annotation
+        found = _fields(model).get(part)
+        if found is not None:
+            return found
     origin = typing.get_origin(annotation)
     if origin is dict:
         return typing.get_args(annotation)[1]

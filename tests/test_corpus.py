@@ -20,6 +20,7 @@ VALID = CORPUS / "valid"
 
 # (file, rule, line, substring of the message, substring of the hint or None)
 CASES = [
+    ("invalid-nested-param-key.yaml", "unknown-key", 18, "unknown key 'fz_maxx'", "did you mean 'fz_max_n'?"),
     # found while writing the corpus: each once gave a crash, a second error or a wrong line
     ("invalid-arc-undeclared-place.yaml", "unknown-place", 21, "arc to undeclared place 'EXTRA' of net 'boot'", None),
     ("invalid-mediator-off-main.yaml", "mediator", 12, "scheduled on thread 'sensors'", None),

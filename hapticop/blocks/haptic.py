@@ -14,6 +14,7 @@ from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.haptics.force_models import BrakingFieldParams
 from hapticop.haptics.governor import govern_twist
 from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage
@@ -29,6 +30,8 @@ class HapticControllerParams(Params):
     force_model: Literal["none", "thesis", "thesis_corrected", "braking_field"] = Field(
         "braking_field", description="thesis: equations 5.5/5.6 literally; thesis_corrected: their z branch "
         "centring; braking_field: footprint braking-distance risk with lateral clearance (hallway-experiment.md §9)")
+    braking_field: BrakingFieldParams = Field(
+        default_factory=BrakingFieldParams, description="parameters of the braking_field model (hallway-experiment.md §9.1)")
     governor: bool = Field(False, description="limit the commanded twist to what can stop before obstacles")
     centred_within_m: float = Field(0.005, gt=0, description="capability configuration ends with the handle this close")
     k3_n_per_m: float = Field(100.0, ge=0, description="environmental force scale, z (eq. 5.5)")
@@ -43,7 +46,8 @@ class HapticController(Block):
     flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running"}
     awaits = frozenset({"resources_ready"})
     capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
-                                   "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor"})
+                                   "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor", "braking_field",
+                                   "force_model"})
 
     @classmethod
     def interface(cls, params: HapticControllerParams) -> Interface:
@@ -72,8 +76,9 @@ class HapticController(Block):
 
     def configure_capabilities(self) -> bool:
         """Build the control laws, then hold the handle at its origin before commanding motion."""
-        if not hasattr(self, "pd") or self.reconfigure:
+        if getattr(self, "built_for", None) is not self.params:  # first time, or a patch changed them
             self._build()
+            self.built_for = self.params
         self._centre_only()
         return bool(self.inputs.handle_position.valid
                     and np.linalg.norm(self.inputs.handle_position.value) < self.params.centred_within_m)
@@ -107,15 +112,12 @@ class HapticController(Block):
             getattr(self.outputs, port).publish()
 
     # -- helpers ------------------------------------------------------------------------------
-    def create(self) -> None:
-        self.reconfigure = False
-
     def twist_measured(self):
         platform = self.inputs.platform_velocity
         return platform.value if platform.valid else self.outputs.velocity_setpoint.value
 
     def _build(self) -> None:
-        from hapticop.haptics.force_models import BrakingFieldParams, ThesisParams, make_force_model
+        from hapticop.haptics.force_models import ThesisParams, make_force_model
 
         p = self.params
         self.pd = CentringPD(CentringParams(kp_n_per_m=p.kp_n_per_m, kd_ns_per_m=p.kd_ns_per_m,
@@ -126,14 +128,13 @@ class HapticController(Block):
                                        else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))
         params = {"thesis": ThesisParams, "thesis_corrected": ThesisParams}.get(p.force_model)
         model_params = params(k3_n_per_m=p.k3_n_per_m, k4_n_per_m=p.k4_n_per_m, d_max_m=p.d_max_m) if params else (
-            BrakingFieldParams() if p.force_model == "braking_field" else None)
+            p.braking_field if p.force_model == "braking_field" else None)
         self.model = make_force_model(p.force_model, angles, model_params)
         if p.governor:
             from hapticop.haptics.geometry import BeamGeometry, Footprint
             from hapticop.haptics.governor import GovernorParams
 
             self.beams, self.governor = BeamGeometry(angles, Footprint()), GovernorParams()
-        self.reconfigure = False
 
     def _centre_only(self) -> None:
         """The PD alone: no obstacle force and no motion while not running."""
