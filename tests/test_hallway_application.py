@@ -83,3 +83,19 @@ def test_falcon_ik_fk_cli_round_trip():
     assert fk.exit_code == 0, fk.output
     assert json.loads(fk.output)["position_m"] == pytest.approx([0.01, -0.02, 0.13], abs=2e-4)  # one count
     assert runner.invoke(app, ["falcon", "ik", "1", "1", "1"]).exit_code == 1
+
+
+def test_the_readme_command_runs_the_hallway_in_real_time(tmp_path):
+    """`hapticop compose systems/hallway.yaml` on the wall clock, fieldbus in its own process."""
+    import subprocess
+    import sys
+
+    from .conftest import ROOT
+
+    run = tmp_path / "run"
+    result = subprocess.run([sys.executable, "-m", "hapticop.cli", "compose", "systems/hallway.yaml",
+                             "--run-dir", str(run)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "hallway H1, nominal operator" in result.stderr and "Traceback" not in result.stderr
+    assert json.loads((run / "metrics.json").read_text())["ended_by"] in ("stopped", "crash", "timeout")
+    assert "runs in process" in (run / "system.log").read_text()
