@@ -5,11 +5,18 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# The suite is deterministic: property tests draw the same examples on every run and keep
+# no example database between runs (a found counterexample becomes a plain test).
+settings.register_profile("hapticop", derandomize=True, database=None)
+settings.load_profile("hapticop")
 
 ROOT = Path(__file__).resolve().parent.parent
 SYSTEMS = ROOT / "systems"
 CORPUS = Path(__file__).resolve().parent / "corpus"
 SHARED_TESTDATA = ROOT.parent / "shared" / "testdata"
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
 
 @pytest.fixture

@@ -15,10 +15,11 @@ from hapticop.devices.falcon.codec import (
     is_valid_frame, new_frame,
 )
 
-from .conftest import SHARED_TESTDATA
+from .conftest import FIXTURES, SHARED_TESTDATA
 
-DATA = SHARED_TESTDATA / "falcon"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared Falcon reference data not present")
+# The full reference data when ../shared is present, else the small copies the project ships.
+DATA = SHARED_TESTDATA / "falcon" if (SHARED_TESTDATA / "falcon").is_dir() else FIXTURES / "falcon"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="no Falcon reference data")
 
 
 def _load(name: str) -> dict:
@@ -197,9 +198,13 @@ def test_reader_resyncs_after_an_extra_byte(k, i, extra):
     data = b"".join(frames)
     at = 16 * k + i
     reader = FrameReader()
-    got = _read_all(reader, data[:at] + bytes([extra]) + data[at:], [])
-    assert got == frames[:k] + frames[k + 1:]
-    assert reader.discarded == 17
+    damaged = data[:at] + bytes([extra]) + data[at:]
+    got = _read_all(reader, damaged, [])
+    if frames[k] in damaged:  # e.g. a '<' right after the start: the frame is still whole, one byte later
+        assert got == frames and reader.discarded == 1
+    else:
+        assert got == frames[:k] + frames[k + 1:]  # exactly the damaged frame is lost
+        assert reader.discarded == 17
 
 
 def test_reader_skips_garbage_between_frames_and_counts_it():
