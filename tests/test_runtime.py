@@ -79,14 +79,7 @@ def test_schedule_switch_and_a_net_that_ends_the_run(tmp_path):
     assert result.markings["switch"]["DONE"] == 1
 
 
-FAILING = """
-version: 1
-threads:
-  main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
-activities:
-  mediator: {block: mediator}
-  counter: {block: counter, params: {fail_at: 50}}
-"""
+FAILING = COUNTER.replace("counter: {block: counter}", "counter: {block: counter, params: {fail_at: 50}}")
 
 
 def test_a_failing_activity_is_reported_and_fails_the_run(tmp_path):
