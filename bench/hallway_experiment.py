@@ -1,6 +1,7 @@
 """The hallway experiment: force models against operator profiles, under the virtual clock.
 
-Each run is systems/hallway.yaml with a merge patch choosing the force model, the operator
+Each run is systems/hallway.yaml with a merge patch choosing the force model (``MODEL+governor``
+adds the robot-side speed governor S1), the operator
 profile and a seeded operator variation; it runs to its end in simulated time and the
 world activity's metrics are collected. Results are appended as JSON lines, so an
 interrupted sweep keeps what it measured; `--summary` turns them into the README table.
@@ -23,14 +24,20 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results" / "hallway-experiment.jsonl"
 
 
-def run_one(model: str, profile: str, variation: int, hallway: str) -> dict:
+def run_one(model: str, profile: str, variation: int, hallway: str, braking_field: dict | None = None) -> dict:
+    """One seeded run. ``braking_field+governor`` is the hallway's own tuning; ``braking_field`` alone
+    drops that tuning (a precursor for the governor) and runs M1 with the notes' parameters."""
     from hapticop.runtime.patching import apply_patch
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.validation import validate_source
     from hapticop.yamlsource import Source, read_file
 
     source = read_file(ROOT / "systems" / "hallway.yaml")
-    patch = {"activities": {"haptic": {"params": {"force_model": model}},
+    force_model, _, robot_side = model.partition("+")
+    governor = robot_side == "governor"
+    haptic = {"force_model": force_model, "governor": governor,
+              "braking_field": braking_field or ({} if governor else None)}
+    patch = {"activities": {"haptic": {"params": haptic},
                             "world": {"params": {"hallway": hallway, "operator": profile, "variation": variation,
                                                  "plot": False}}}}
     tree = apply_patch(source.tree, patch)
@@ -89,7 +96,7 @@ def summarise(path: Path) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--models", nargs="+", default=["none", "thesis", "braking_field"])
+    parser.add_argument("--models", nargs="+", default=["none", "thesis", "braking_field+governor"])
     parser.add_argument("--profiles", nargs="+", default=["cautious", "nominal", "aggressive"])
     parser.add_argument("--variations", type=int, default=50)
     parser.add_argument("--hallway", default="H1")
