@@ -16,6 +16,7 @@ from hapticop.loader import Loaded, load_tree
 from hapticop.validation import coordination, structure
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 from hapticop.yamlsource import Source, SourceError, parse_text, read_file
+from hapticop.layers import resolve
 
 
 @dataclass
@@ -65,7 +66,7 @@ def _scripted_patches(source: Source, loaded: Loaded, state_limit: int):
 
 def validate_path(path: str | Path, state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
     try:
-        source = read_file(path)
+        source = resolve(read_file(path))
     except SourceError as error:
         return Validated(Report(str(path), [error.diagnostic]))
     return validate_source(source, state_limit)
@@ -73,7 +74,7 @@ def validate_path(path: str | Path, state_limit: int = DEFAULT_STATE_LIMIT) -> V
 
 def validate_text(text: str, file: str = "<string>", state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
     try:
-        source = parse_text(text, file)
+        source = resolve(parse_text(text, file))
     except SourceError as error:
         return Validated(Report(file, [error.diagnostic]))
     return validate_source(source, state_limit)

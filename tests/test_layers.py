@@ -1,0 +1,83 @@
+"""`extends`: a composition written as the differences from another."""
+
+from __future__ import annotations
+
+import textwrap
+
+from hapticop.validation import validate_path
+
+BASE = """\
+version: 1
+name: base
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, source]}}
+  slow: {period: 10ms, schedules: {0: [sink]}}
+activities:
+  mediator: {block: mediator}
+  source: {block: counter}
+  sink: {block: echo}
+streams:
+  count: {from: source.count, to: sink.input}
+"""
+
+
+def write(tmp_path, name: str, text: str):
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_the_extending_file_merges_onto_its_base(tmp_path):
+    write(tmp_path, "base.yaml", BASE)
+    path = write(tmp_path, "variant.yaml", """\
+        extends: base.yaml
+        name: variant
+        threads:
+          slow: {period: 5ms}
+          probe: {period: 1ms, schedules: {0: []}}
+        """)
+    validated = validate_path(path)
+    assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    composition = validated.composition
+    assert composition.name == "variant"
+    assert composition.threads["slow"].period == 5_000_000 and composition.threads["slow"].schedules == {0: ["sink"]}
+    assert "probe" in composition.threads
+
+
+def test_findings_are_placed_in_the_file_that_wrote_the_value(tmp_path):
+    base = write(tmp_path, "base.yaml", BASE.replace("period: 10ms", "period: 10parsecs"))
+    variant = write(tmp_path, "variant.yaml", """\
+        extends: base.yaml
+        threads:
+          main: {priority: 99}
+        """)
+    report = validate_path(variant).report
+    where = {d.dotted_path: (d.file, d.line) for d in report.errors}
+    assert where["threads.main.priority"] == (str(variant), 3)
+    assert where["threads.slow.period"] == (str(base), 5)
+
+
+def test_a_missing_or_circular_base_is_a_located_error(tmp_path):
+    missing = write(tmp_path, "missing.yaml", "# variant\nextends: nowhere.yaml\n")
+    [finding] = validate_path(missing).report.errors
+    assert (finding.rule, finding.line) == ("extends", 2) and "nowhere.yaml" in finding.message
+    write(tmp_path, "a.yaml", "extends: b.yaml\n")
+    loop = write(tmp_path, "b.yaml", "extends: a.yaml\n")
+    [finding] = validate_path(loop).report.errors
+    assert finding.rule == "extends" and "extends itself" in finding.message
+
+
+def test_the_bench_extends_the_hallway():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    bench = validate_path(root / "systems" / "bench.yaml")
+    assert bench.report.ok
+    hallway = validate_path(root / "systems" / "hallway.yaml").composition
+    composition = bench.composition
+    assert set(composition.threads) == set(hallway.threads) | {"probe_above", "probe_below"}
+    top = max(t.priority for t in hallway.threads.values() if t.priority)
+    low = min(t.priority for t in hallway.threads.values() if t.priority)
+    assert composition.threads["probe_above"].priority > top and composition.threads["probe_below"].priority < low
+    assert composition.activities.keys() == hallway.activities.keys()
+    assert composition.duration and len(composition.latencies) == 3
