@@ -113,6 +113,8 @@ def compose(
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
                          control=control)
     console = Console(stderr=True)
+    if not console.is_terminal:
+        console.width = 160  # a log or a pipe: no need to wrap the tables
 
     def announce(system) -> None:
         console.print(f"[bold]{system.composition.name or file}[/]: running ({clock.value} clock); "
@@ -229,6 +231,41 @@ def graph(
             typer.echo(f"error: {error}", err=True)
             raise typer.Exit(1) from None
     typer.echo(f"wrote {target}")
+
+
+@app.command()
+def bench(
+    file: Path = typer.Argument(Path("systems/bench.yaml"), help="composition to measure"),
+    duration: str = typer.Option("30s", help="how long each condition runs"),
+    out: Optional[Path] = typer.Option(None, help="report directory (default: ./hapticop-bench-DATE)"),
+    load: bool = typer.Option(True, help="also run under load on every core"),
+) -> None:
+    """Measure a composition idle and under load beside cyclictest; write report.md and latency.png."""
+    import time
+
+    from hapticop.benchmark import report, runner
+
+    seconds = _duration(duration, "--duration") / 1e9
+    validated = validate_path(file)
+    for diagnostic in validated.report.sorted():
+        typer.echo(diagnostic.to_text(), err=True)
+    if not validated.report.ok:
+        typer.echo(f"{file}: not measured: {len(validated.report.errors)} errors", err=True)
+        raise typer.Exit(1)
+    out = out or Path(f"hapticop-bench-{time.strftime('%Y%m%d-%H%M%S')}")
+    out.mkdir(parents=True, exist_ok=True)
+    conditions = ("idle", "loaded") if load else ("idle",)
+    try:
+        result = runner.run(str(file), seconds, out, conditions, say=lambda text: typer.echo(text, err=True))
+    except RuntimeError as error:
+        typer.echo(f"bench failed: {error}", err=True)
+        raise typer.Exit(1) from None
+    text = report.markdown(result)
+    (out / "report.md").write_text(text)
+    picture = report.histogram_png(result, out / "latency.png")
+    typer.echo(text)
+    typer.echo(f"report: {out / 'report.md'}" + (f", histogram: {picture}" if picture else
+                                                  " (no histogram: pip install matplotlib)"), err=True)
 
 
 @app.command()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from hapticop.units import Duration
@@ -57,9 +57,27 @@ class Thread(Strict):
     schedules: dict[Annotated[int, Field(ge=0, le=255)], list[Name]] = Field(
         description="activity-scheduler sets by ID; ID 0 is selected at start"
     )
+    phase: Duration | Literal["auto"] = Field(
+        "auto",
+        description="offset of the first deadline within the period; 'auto' staggers the real-time "
+        "threads of equal period evenly, highest priority first, so their wake-ups do not collide",
+    )
+    busy_wait: Duration = Field(
+        0, description="spin this long before each deadline instead of sleeping through it: "
+        "lower wake-up latency for a core's worth of CPU, e.g. '50us'; 0 sleeps all the way",
+    )
     start: StartPolicy = Field("auto", description=START_DOC)
     log: LogLevel = Field("info", description="the most detailed level written to this thread's log")
     doc: str = ""
+
+    @field_validator("phase", "busy_wait")
+    @classmethod
+    def _within_period(cls, value: int | str, info: ValidationInfo) -> int | str:
+        period = info.data.get("period")
+        if value != "auto" and period is not None and value >= period:
+            raise PydanticCustomError("longer_than_period", "{field} must be shorter than the period ({period} ns)",
+                                      {"field": info.field_name, "period": period})
+        return value
 
     @field_validator("priority")
     @classmethod
@@ -223,6 +241,19 @@ class ScriptedPatch(Strict):
     doc: str = ""
 
 
+MAX_LATENCIES = 5
+"""End-to-end latencies a composition may track (each sample carries one origin stamp per latency)."""
+
+
+class Latency(Strict):
+    """An end-to-end latency measured while running: from a sample leaving an output port to
+    the first step of the reading activity that consumes something derived from it."""
+
+    source: PortRef = Field(alias="from", description="the output port where the measured path starts")
+    sink: PortRef = Field(alias="to", description="the input port where it ends")
+    doc: str = ""
+
+
 class Composition(Strict):
     """A whole hapticop system: what runs, where, how it is wired and coordinated."""
 
@@ -235,6 +266,15 @@ class Composition(Strict):
     coordination: Coordination = Field(default_factory=Coordination)
     patches: dict[Name, ScriptedPatch] = Field(
         default_factory=dict, description="patches applied while running, at given times"
+    )
+    latencies: dict[Name, Latency] = Field(
+        default_factory=dict, max_length=MAX_LATENCIES,
+        description="end-to-end latencies to measure and report, e.g. handle displacement to wheel command",
+    )
+    duration: Duration | None = Field(None, description="the system stops by itself after this long, e.g. '60s'")
+    cpu_dma_latency: int | None = Field(
+        0, ge=0, le=1_000_000, description="while real-time threads run, hold /dev/cpu_dma_latency at this many "
+        "microseconds so deep CPU idle states do not delay wake-ups; null leaves power management alone",
     )
 
     @field_validator("version", mode="before")
@@ -258,5 +298,6 @@ COLLECTIONS: tuple[tuple[str, ...], ...] = (
     ("coordination", "nets"),
     ("coordination", "flag_maps"),
     ("patches",),
+    ("latencies",),
 )
 RESERVED_NAMES = frozenset({"threads", "system", "flags"})

@@ -218,3 +218,20 @@ def _find_key(mapping: CommentedMap, part: Any) -> Any:
         if str(candidate) == str(part):
             return candidate
     return _MISSING
+
+
+def plain(node: Any) -> Any:
+    """The tree as plain dicts, lists and scalars: cheap to pickle and to load without ruamel."""
+    if isinstance(node, dict):
+        return {key: plain(value) for key, value in node.items()}
+    if isinstance(node, list):
+        return [plain(value) for value in node]
+    if isinstance(node, str):
+        return str(node)
+    if isinstance(node, bool) or node is None:
+        return node
+    if isinstance(node, int):
+        return int(node)
+    if isinstance(node, float):
+        return float(node)
+    return node

@@ -112,6 +112,7 @@ class Lidar(Block):
             out = self.outputs
             np.copyto(out.ranges.value, self.ranges)
             np.add(self.angles, self.yaw, out=out.angles.value)  # sensor frame to robot frame
+            out.ranges.origin_ns = out.angles.origin_ns = self.client.scan_host_ns  # when its last byte was read
             out.ranges.publish()
             out.angles.publish()
             self.flags["new_scan"] = True

@@ -14,8 +14,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from hapticop.description import Composition
-from hapticop.graph import CompositionGraph
 from hapticop.loader import Loaded, ResolvedActivity
+from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region
@@ -24,11 +24,13 @@ from hapticop.runtime.thread import ActivityRunner, CyclicThread
 
 
 def flag_names(loaded: Loaded) -> list[str]:
+    from hapticop.graph import CompositionGraph  # networkx: not needed by a process that is handed the flags
+
     return [node[1] for node, _ in CompositionGraph(loaded).nodes_of("flag")]
 
 
-def layout_of(loaded: Loaded) -> Layout:
-    return Layout.build(loaded.composition, loaded.activities, flag_names(loaded))
+def layout_of(loaded: Loaded, flags: list[str] | None = None) -> Layout:
+    return Layout.build(loaded.composition, loaded.activities, flag_names(loaded) if flags is None else flags)
 
 
 def thread_of(composition: Composition) -> dict[str, str]:
@@ -105,8 +107,19 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
                 transports: dict[str, list], clock, writer: LogWriter, seed: int) -> ActivityRunner:
     """The block instance of one activity, its ports wired to the given transports."""
     iface = resolved.interface
-    inputs = {p: InputPort(p, spec, clock.now_ns) for p, spec in iface.inputs.items()}
-    outputs = {p: OutputPort(p, spec, clock.now_ns) for p, spec in iface.outputs.items()}
+    track = bool(composition.latencies)
+    inputs = {p: InputPort(p, spec, clock.now_ns, track) for p, spec in iface.inputs.items()}
+    outputs = {p: OutputPort(p, spec, clock.now_ns, track) for p, spec in iface.outputs.items()}
+    sinks = []
+    for slot, latency in enumerate(composition.latencies.values()):
+        activity, port = latency.source.split(".")
+        if activity == name:
+            outputs[port].origin_slots += (slot,)
+        activity, port = latency.sink.split(".")
+        if activity == name:
+            sinks.append((inputs[port], slot))
+    relay = (OriginRelay(list(inputs.values()), list(outputs.values()), sinks, region, clock.now_ns)
+             if track else None)
     for stream_name, spec in composition.streams.items():
         objects = transports.get(stream_name)
         if objects is None:
@@ -126,4 +139,4 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
                               clock, log, activity_rng(seed, name), writer.run_dir)
     block = resolved.block(context)
-    return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log)
+    return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)

@@ -56,6 +56,14 @@ class RealtimeClock:
             pass  # a signal (Ctrl+C) woke us: the deadline is absolute, so just sleep again
 
 
+    @staticmethod
+    def spin_until(deadline_ns: int) -> None:
+        """Busy-wait the last stretch: no scheduler wake-up latency, at the price of a busy core."""
+        now = time.monotonic_ns
+        while now() < deadline_ns:
+            pass
+
+
 class VirtualClock:
     """Simulated time: set by the scheduler, read by everyone."""
 
@@ -74,3 +82,5 @@ class VirtualClock:
 
     def sleep_until(self, deadline_ns: int) -> None:
         self.advance_to(max(deadline_ns, self._now))
+
+    spin_until = sleep_until

@@ -17,17 +17,20 @@ import numpy as np
 
 from hapticop.blocks.interface import Params, Port
 from hapticop.runtime.logs import Logger
+from hapticop.runtime.streams import ORIGINS
 
 
 class InputPort:
     """The reader's side of a stream: `value`, and how fresh it is."""
 
-    __slots__ = ("name", "spec", "value", "meta", "max_age_ns", "transport", "queue", "fresh", "_clock")
+    __slots__ = ("name", "spec", "value", "meta", "origins", "max_age_ns", "transport", "queue", "fresh", "_clock")
 
-    def __init__(self, name: str, spec: Port, clock: Callable[[], int]):
+    def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
         self.value = np.zeros(spec.shape, dtype=spec.dtype)
         self.meta = np.zeros(2, dtype=np.int64)  # [sample sequence number, write time ns]
+        # when the data behind the sample entered the system, per measured latency (None: not measured)
+        self.origins = np.zeros(ORIGINS, dtype=np.int64) if track_origins else None
         self.max_age_ns = 0
         self.transport: Any = None  # a LatestSlot or SpscQueue; None while unconnected
         self.queue = False
@@ -39,11 +42,11 @@ class InputPort:
             self.fresh = False
             return
         before = self.meta[0]
-        self.fresh = self.transport.read_into(self.value, self.meta) and self.meta[0] != before
+        self.fresh = self.transport.read_into(self.value, self.meta, self.origins) and self.meta[0] != before
 
     def pop(self) -> bool:
         """Take the next queued sample into `value`; False when the queue is empty."""
-        return self.transport is not None and self.transport.pop_into(self.value, self.meta)
+        return self.transport is not None and self.transport.pop_into(self.value, self.meta, self.origins)
 
     @property
     def seq(self) -> int:
@@ -65,23 +68,37 @@ class InputPort:
 
 
 class OutputPort:
-    """The writer's side: fill `value`, then `publish()`."""
+    """The writer's side: fill `value`, then `publish()`.
 
-    __slots__ = ("name", "spec", "value", "transports", "published", "_clock")
+    Where a measured latency starts at this port (`origin_slots`), each sample is stamped as
+    an origin: at `origin_ns` if the block set it (e.g. when a telegram's last byte arrived),
+    else at publication.
+    """
 
-    def __init__(self, name: str, spec: Port, clock: Callable[[], int]):
+    __slots__ = ("name", "spec", "value", "transports", "published", "origins", "origin_slots", "origin_ns",
+                 "_clock")
+
+    def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
         self.value = np.zeros(spec.shape, dtype=spec.dtype)
         self.transports: list = []
         self.published = 0
+        self.origins = np.zeros(ORIGINS, dtype=np.int64) if track_origins else None
+        self.origin_slots: tuple[int, ...] = ()
+        self.origin_ns = 0
 
     def publish(self) -> None:
         now = self._clock()
+        origins = self.origins
+        if self.origin_slots:
+            for slot in self.origin_slots:
+                origins[slot] = self.origin_ns or now
+            self.origin_ns = 0
         for transport in self.transports:
             if hasattr(transport, "push"):
-                transport.push(self.value, now)
+                transport.push(self.value, now, origins)
             else:
-                transport.write(self.value, now)
+                transport.write(self.value, now, origins)
         self.published += 1
 
 

@@ -69,3 +69,21 @@ def apply(spec: Thread, log: Logger) -> None:
             os.sched_setaffinity(0, spec.cpus)
         except OSError as error:
             _warn_once(f"cpus{spec.cpus}", log, "cannot set CPU affinity %s: %s", spec.cpus, error.strerror)
+
+
+def hold_cpu_dma_latency(microseconds: int, log: Logger):
+    """Keep the CPUs out of idle states slower to leave than `microseconds` while the file is open.
+
+    The kernel's PM QoS honours the request only as long as the returned file stays open;
+    closing it (or exiting) restores the default. Returns None where the file is not there
+    or not writable, after saying so once.
+    """
+    try:
+        handle = open("/dev/cpu_dma_latency", "wb", buffering=0)  # noqa: SIM115 - held for the whole run
+        handle.write(int(microseconds).to_bytes(4, "little", signed=True))
+    except OSError as error:
+        _warn_once("cpu_dma_latency", log, "cannot hold /dev/cpu_dma_latency at %d us (%s): deep CPU idle states "
+                   "may delay wake-ups", microseconds, error.strerror)
+        return None
+    log.info("/dev/cpu_dma_latency held at %d us", microseconds)
+    return handle

@@ -111,6 +111,11 @@ class Layout:
         section("latency", (threads, BINS), "int64")
         section("compute_max", (acts,), "int64")
         section("compute", (acts, BINS), "int64")
+        section("cpu_ns", (threads,), "int64")  # CPU time each thread's loop has used
+        section("cpu_base", (threads,), "int64")  # ... and had used when timing started
+        section("cycles_base", (threads,), "int64")  # cycles before timing started
+        section("e2e_max", (st.ORIGINS,), "int64")  # end-to-end latencies, one per `latencies` entry
+        section("e2e", (st.ORIGINS, BINS), "int64")
         section("arena", (ARENA_BYTES,), "uint8")
         for name, spec in composition.streams.items():
             writer_activity, writer_port = spec.writer.split(".")
@@ -136,6 +141,8 @@ class Region:
     # system[] slots
     TERMINATE = 0  # set by the main process: every loop leaves at once (forced exit)
     STARTED_NS = 1
+    EPOCH_NS = 2  # every real-time loop's deadlines are counted from here (deadlines.py)
+    OPERATING_NS = 3  # every thread had cycled: timing statistics count from here (0: not yet)
 
     def __init__(self, layout: Layout, memory: shared_memory.SharedMemory, owner: bool):
         self.layout = layout

@@ -14,22 +14,44 @@ from hapticop.runtime.timing import Summary
 from hapticop.units import format_duration
 
 
-def timing(region: Region, composition) -> dict:
+def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
+    """Every figure of a run, from the region's counters. `elapsed_ns` (wall time the loops ran)
+    turns each thread's CPU time into a share of one core; histograms are kept, sparse, so a
+    report can be drawn from the file alone."""
     layout = region.layout
     threads = {}
     for name, index in layout.thread_index.items():
         summary = Summary.of(region.latency[index], int(region.latency_max[index]))
+        cycles = int(region.cycles[index] - region.cycles_base[index])
+        missed = int(region.missed[index])
+        cpu_ns = int(region.cpu_ns[index] - region.cpu_base[index])
         threads[name] = {
             "period": format_duration(composition.threads[name].period),
-            "cycles": int(region.cycles[index]),
-            "missed_deadlines": int(region.missed[index]),
+            "priority": composition.threads[name].priority,
+            "deploy": composition.threads[name].deploy,
+            "cycles": cycles,
+            "missed_deadlines": missed,
+            "missed_percent": round(100.0 * missed / (cycles + missed), 3) if cycles + missed else None,
+            "cpu_percent": round(100.0 * cpu_ns / elapsed_ns, 1) if elapsed_ns and cpu_ns else None,
             "wakeup_latency_us": _numbers(summary),
+            "histogram_us": sparse(region.latency[index]),
         }
     activities = {}
     for name, index in layout.activity_index.items():
         summary = Summary.of(region.compute[index], int(region.compute_max[index]))
         activities[name] = {"steps": summary.count, "compute_us": _numbers(summary)}
-    return {"threads": threads, "activities": activities}
+    latencies = {}
+    for slot, (name, spec) in enumerate(composition.latencies.items()):
+        summary = Summary.of(region.e2e[slot], int(region.e2e_max[slot]))
+        latencies[name] = {"from": spec.source, "to": spec.sink, "samples": summary.count,
+                           "latency_us": _numbers(summary), "histogram_us": sparse(region.e2e[slot])}
+    return {"elapsed_s": round(elapsed_ns / 1e9, 3) if elapsed_ns else None, "threads": threads,
+            "activities": activities, "latencies": latencies}
+
+
+def sparse(histogram) -> dict[str, int]:
+    """A 1 us histogram as {bin: count} for its non-empty bins (JSON keys are strings)."""
+    return {str(int(b)): int(histogram[b]) for b in histogram.nonzero()[0]}
 
 
 def _numbers(summary: Summary) -> dict:
@@ -44,13 +66,24 @@ def _cell(value) -> str:
 
 def print_timing(data: dict, console: Console, virtual: bool) -> None:
     table = Table(title="threads" + (" (virtual clock: no wake-up latency)" if virtual else ""), title_justify="left")
-    for column in ("thread", "period", "cycles", "wake p50 us", "p99", "p99.9", "max", "missed"):
+    for column in ("thread", "period", "cycles", "wake p50 us", "p99", "p99.9", "max", "missed", "CPU %"):
         table.add_column(column, justify="right" if column != "thread" else "left")
     for name, t in data["threads"].items():
         lat = t["wakeup_latency_us"]
+        missed = str(t["missed_deadlines"]) + (f" ({t['missed_percent']:g} %)" if t.get("missed_percent") else "")
         table.add_row(name, t["period"], str(t["cycles"]), _cell(lat["p50"]), _cell(lat["p99"]),
-                      _cell(lat["p99.9"]), _cell(lat["max"]), str(t["missed_deadlines"]))
+                      _cell(lat["p99.9"]), _cell(lat["max"]), missed, _cell(t.get("cpu_percent")))
     console.print(table)
+    if data.get("latencies"):
+        table = Table(title="end-to-end latencies", title_justify="left")
+        for column in ("path", "from", "to", "samples", "p50 us", "p99", "p99.9", "max"):
+            table.add_column(column, justify="right" if column in ("samples", "p50 us", "p99", "p99.9", "max")
+                             else "left")
+        for name, e in data["latencies"].items():
+            lat = e["latency_us"]
+            table.add_row(name, e["from"], e["to"], str(e["samples"]), _cell(lat["p50"]), _cell(lat["p99"]),
+                          _cell(lat["p99.9"]), _cell(lat["max"]))
+        console.print(table)
     table = Table(title="activities", title_justify="left")
     for column in ("activity", "steps", "compute p50 us", "p99", "max"):
         table.add_column(column, justify="right" if column != "activity" else "left")

@@ -28,15 +28,19 @@ MAX_RETRIES = 1000
 Buffer = memoryview | np.ndarray
 
 # One sample: header and payload; the payload starts right after the header.
+ORIGINS = 5
+"""Origin stamps per sample: one per end-to-end latency a composition measures."""
+
 SLOT_HEADER = np.dtype(
     {
-        "names": ["seq", "count", "stamp_ns"],
-        "formats": ["<u8", "<u8", "<i8"],
-        "offsets": [0, 8, 16],
-        "itemsize": 32,
+        "names": ["seq", "count", "stamp_ns", "origins_ns"],
+        "formats": ["<u8", "<u8", "<i8", ("<i8", (ORIGINS,))],
+        "offsets": [0, 8, 16, 24],
+        "itemsize": 64,
     }
 )
-"""`seq` is odd while a write is in progress; `count` is the sample's number (1 = first)."""
+"""`seq` is odd while a write is in progress; `count` is the sample's number (1 = first);
+`origins_ns` say when the data this sample derives from entered the system (0: unknown)."""
 
 # A queue's indices: the producer's and the consumer's on separate cache lines.
 QUEUE_HEADER = np.dtype(
@@ -52,6 +56,7 @@ QUEUE_HEADER = np.dtype(
 _SEQ = SLOT_HEADER.fields["seq"][1] // 8
 _COUNT = SLOT_HEADER.fields["count"][1] // 8
 _STAMP = SLOT_HEADER.fields["stamp_ns"][1] // 8
+_ORIGINS = SLOT_HEADER.fields["origins_ns"][1]
 _W = QUEUE_HEADER.fields["write_index"][1] // 8
 _DROP_NEW = QUEUE_HEADER.fields["dropped_newest"][1] // 8
 _R = QUEUE_HEADER.fields["read_index"][1] // 8
@@ -90,13 +95,14 @@ def _raw(buffer: Buffer, nbytes: int) -> np.ndarray:
 class _Slot:
     """Views over one sample in the buffer: header words and the payload (typed and raw)."""
 
-    __slots__ = ("words", "stamps", "payload", "payload_bytes")
+    __slots__ = ("words", "stamps", "origins", "payload", "payload_bytes")
 
     def __init__(self, raw: np.ndarray, port: Port) -> None:
         head = raw[: SLOT_HEADER.itemsize]
         body = raw[SLOT_HEADER.itemsize : SLOT_HEADER.itemsize + port.nbytes]
         self.words = memoryview(head).cast("Q")
         self.stamps = memoryview(head).cast("q")
+        self.origins = head[_ORIGINS : _ORIGINS + 8 * ORIGINS].view("<i8")
         self.payload = body.view(port.dtype).reshape(port.shape)
         self.payload_bytes = memoryview(body)
 
@@ -104,13 +110,13 @@ class _Slot:
         self.words.release()
         self.stamps.release()
         self.payload_bytes.release()
-        self.payload = None
+        self.payload = self.origins = None
 
 
-def _scratch(port: Port) -> tuple[np.ndarray, memoryview]:
+def _scratch(port: Port) -> tuple[np.ndarray, memoryview, np.ndarray]:
     """A private copy target, so a torn copy is caught before it reaches the caller's array."""
     raw = np.zeros(port.nbytes, dtype=np.uint8)
-    return raw.view(port.dtype).reshape(port.shape), memoryview(raw)
+    return raw.view(port.dtype).reshape(port.shape), memoryview(raw), np.zeros(ORIGINS, dtype=np.int64)
 
 
 # Why the seqlock is sound here (x86-64, CPython): a writer makes the sequence odd, copies
@@ -146,7 +152,7 @@ class LatestSlot:
         """Samples written so far."""
         return self._slot.words[_COUNT]
 
-    def write(self, value: np.ndarray, stamp_ns: int) -> None:
+    def write(self, value: np.ndarray, stamp_ns: int, origins: np.ndarray | None = None) -> None:
         """Publish `value` (cast like `np.copyto`) as the newest sample, taken at `stamp_ns`."""
         words = self._slot.words
         seq = words[_SEQ]
@@ -155,12 +161,15 @@ class LatestSlot:
         try:
             np.copyto(self._slot.payload, value)
             self._slot.stamps[_STAMP] = stamp_ns
+            if origins is not None:
+                np.copyto(self._slot.origins, origins)
             words[_COUNT] = words[_COUNT] + 1
         finally:  # a failed copy must not leave the slot locked for ever
             words[_SEQ] = seq + 2
 
-    def read_into(self, out: np.ndarray, meta: np.ndarray) -> bool:
-        """Copy the newest sample into `out`, its number and stamp into `meta[0:2]`.
+    def read_into(self, out: np.ndarray, meta: np.ndarray, origins: np.ndarray | None = None) -> bool:
+        """Copy the newest sample into `out`, its number and stamp into `meta[0:2]` (and its
+        origins into `origins` when given).
 
         False, with `out` and `meta` untouched, if nothing was written yet or the writer
         kept the slot busy for `MAX_RETRIES` attempts.
@@ -174,11 +183,13 @@ class LatestSlot:
             np.copyto(out, slot.payload)
             meta[0] = count
             meta[1] = slot.stamps[_STAMP]
+            if origins is not None:
+                np.copyto(origins, slot.origins)
             return True
         scratch = self._scratches.get(get_ident())
         if scratch is None:  # this thread's first read
             scratch = self._scratches.setdefault(get_ident(), _scratch(self.port))
-        scratch_array, scratch_bytes = scratch
+        scratch_array, scratch_bytes, scratch_origins = scratch
         tries = MAX_RETRIES
         while tries:
             tries -= 1
@@ -190,10 +201,14 @@ class LatestSlot:
             count = words[_COUNT]
             stamp = slot.stamps[_STAMP]
             scratch_bytes[:] = slot.payload_bytes
+            if origins is not None:
+                np.copyto(scratch_origins, slot.origins)
             if words[_SEQ] == seq:
                 np.copyto(out, scratch_array)
                 meta[0] = count
                 meta[1] = stamp
+                if origins is not None:
+                    np.copyto(origins, scratch_origins)
                 return True
         return False
 
@@ -241,7 +256,7 @@ class SpscQueue:
         self._slots = [
             _Slot(raw[start + k * stride : start + (k + 1) * stride], port) for k in range(capacity)
         ]
-        self._scratch, self._scratch_bytes = _scratch(port)
+        self._scratch, self._scratch_bytes, self._scratch_origins = _scratch(port)
 
     @property
     def dropped(self) -> int:
@@ -253,7 +268,7 @@ class SpscQueue:
         head = self._head
         return min(head[_W] - head[_R], self.capacity)
 
-    def push(self, value: np.ndarray, stamp_ns: int) -> bool:
+    def push(self, value: np.ndarray, stamp_ns: int, origins: np.ndarray | None = None) -> bool:
         """Append a sample (producer only); False if refused because the ring is full."""
         head = self._head
         w = head[_W]
@@ -267,13 +282,15 @@ class SpscQueue:
         try:
             np.copyto(slot.payload, value)
             slot.stamps[_STAMP] = stamp_ns
+            if origins is not None:
+                np.copyto(slot.origins, origins)
             words[_COUNT] = w + 1
         finally:
             words[_SEQ] = seq + 2
         head[_W] = w + 1
         return True
 
-    def pop_into(self, out: np.ndarray, meta: np.ndarray) -> bool:
+    def pop_into(self, out: np.ndarray, meta: np.ndarray, origins: np.ndarray | None = None) -> bool:
         """Take the oldest sample still held into `out`, its number and stamp into `meta`.
 
         Sample numbers start at 1 and have gaps where samples were dropped. False, with
@@ -300,6 +317,7 @@ class SpscQueue:
                 continue
             stamp = slot.stamps[_STAMP]
             self._scratch_bytes[:] = slot.payload_bytes
+            np.copyto(self._scratch_origins, slot.origins)
             if words[_SEQ] != seq:  # overwritten while we copied
                 head[_DROP_OLD] = head[_DROP_OLD] + 1
                 r += 1
@@ -308,6 +326,8 @@ class SpscQueue:
             np.copyto(out, self._scratch)
             meta[0] = r + 1
             meta[1] = stamp
+            if origins is not None:
+                np.copyto(origins, self._scratch_origins)
             return True
         head[_R] = r
         return False

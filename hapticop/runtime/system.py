@@ -14,6 +14,7 @@ the same run.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import multiprocessing
 from collections import deque
@@ -35,8 +36,9 @@ from hapticop.runtime.logs import Level, LogWriter, default_run_dir
 from hapticop.runtime import live, realtime
 from hapticop.runtime.control import ControlError, ControlServer, socket_path
 from hapticop.runtime.patching import PatchError, load_patch, prepare
+from hapticop.runtime.deadlines import first_deadline, phases
 from hapticop.runtime.region import Region
-from hapticop.yamlsource import parse_text
+from hapticop.yamlsource import parse_text, plain
 from hapticop.runtime.thread import CyclicThread
 from hapticop.units import format_duration
 
@@ -82,8 +84,10 @@ class Outcome:
 
 class System:
     def __init__(self, loaded: Loaded, source_text: str, file: str, options: RunOptions):
-        self.loaded, self.text, self.file, self.options = loaded, source_text, file, options
         self.composition = loaded.composition
+        if options.duration_ns is None and self.composition.duration is not None:
+            options = dataclasses.replace(options, duration_ns=self.composition.duration)
+        self.loaded, self.text, self.file, self.options = loaded, source_text, file, options
         self.virtual = options.clock == "virtual"
         self.clock = VirtualClock() if self.virtual else RealtimeClock()
         self.run_dir = options.run_dir or default_run_dir(self.composition.name or Path(file).stem)
@@ -116,6 +120,7 @@ class System:
                                key=lambda item: (item[0], item[1]))
         self.control: ControlServer | None = None
         self.finished = False
+        self.operating_ns: int | None = None
         for runner in self.built.runners.values():
             attach = getattr(runner.block, "attach_system", None)
             if attach is not None:
@@ -127,7 +132,7 @@ class System:
                 if spec.deploy == "process":
                     self._spawn(name)
             realtime.prepare_process([self.composition.threads[t] for t in local], self.log)
-        self.region.system[Region.STARTED_NS] = self.clock.now_ns()
+        self.region.system[Region.STARTED_NS] = self.region.system[Region.EPOCH_NS] = self.clock.now_ns()
         self._warn_declaration_only_blocks()
 
     # -- what the flag maps say ---------------------------------------------------------
@@ -170,7 +175,7 @@ class System:
                 self.region.go[self.layout.thread_index[name]] = 1
             else:
                 thread = self.built.threads[name]
-                os_thread = threading.Thread(target=thread.run_realtime, args=(self._first_deadline(), self._never),
+                os_thread = threading.Thread(target=thread.run_realtime, args=(self._first_deadline(name), self._never),
                                              name=f"hapticop-{name}", daemon=True)
                 self.os_threads[name] = os_thread
                 os_thread.start()
@@ -181,8 +186,9 @@ class System:
     def _never() -> bool:
         return False
 
-    def _first_deadline(self) -> int:
-        return self.clock.now_ns() + 2_000_000
+    def _first_deadline(self, thread: str) -> int:
+        return first_deadline(int(self.region.system[Region.EPOCH_NS]), self.composition.threads[thread].period,
+                              phases(self.composition)[thread], self.clock.now_ns())
 
     def _spawn(self, name: str) -> None:
         from hapticop.runtime.child import process_main
@@ -191,7 +197,8 @@ class System:
         receiving, sending = context.Pipe(duplex=False)
         process = context.Process(
             target=process_main,
-            args=(self.text, self.file, self.region.name, name, str(self.run_dir), self.options.seed, receiving),
+            args=(plain(self.tree), self.layout.flags[: self.layout.declared_flags], self.region.name, name,
+                  str(self.run_dir), self.options.seed, receiving),
             name=f"hapticop-{name}", daemon=True,
         )
         process.start()
@@ -222,7 +229,10 @@ class System:
             self._apply_pending()
         if self.scripted and now - started >= self.scripted[0][0]:
             self._apply_scripted(self.scripted.pop(0))
-        if self.options.duration_ns is not None and self.shutdown_at is None and now - started >= self.options.duration_ns:
+        if self.operating_ns is None and not self.virtual:
+            self._watch_start(now, started)
+        counted_from = started if self.virtual else (self.operating_ns or now)
+        if self.options.duration_ns is not None and self.shutdown_at is None and now - counted_from >= self.options.duration_ns:
             self.log.info("duration %s reached", format_duration(self.options.duration_ns))
             self.request_shutdown()
         self._watch_processes()
@@ -241,6 +251,24 @@ class System:
             self.reasons.append(f"coordination did not finish the shutdown within "
                                 f"{format_duration(self.options.shutdown_timeout_ns)}; forced")
             self.log.error(self.reasons[-1])
+
+    def _watch_start(self, now: int, started: int) -> None:
+        """Once every thread has cycled (processes take a while to start), timing restarts there.
+
+        The start-up's slow first cycles say nothing about how the system keeps time, so the
+        statistics are cleared, the cycle and CPU counters noted, and a real-time `duration`
+        counts from this moment. A thread that never starts does not hold this up past a minute.
+        """
+        region = self.region
+        if not (region.cycles > 0).all() and now - started < 60 * SECOND:
+            return
+        self.operating_ns = now
+        for name in ("latency", "latency_max", "compute", "compute_max", "missed", "e2e", "e2e_max"):
+            getattr(region, name)[...] = 0
+        region.cycles_base[:] = region.cycles
+        region.cpu_base[:] = region.cpu_ns
+        region.system[Region.OPERATING_NS] = now
+        self.log.info("every thread runs, %.1f s after start: timing is counted from here", (now - started) / SECOND)
 
     def request_shutdown(self) -> None:
         if self.shutdown_at is not None:
@@ -385,7 +413,15 @@ class System:
         return Outcome(self._status(), self.run_dir, self.reasons)
 
     def _run_realtime(self) -> None:
-        self.main.run_realtime(self._first_deadline(), self._never)
+        hold = None
+        wanted = self.composition.cpu_dma_latency
+        if wanted is not None and any(spec.priority is not None for spec in self.composition.threads.values()):
+            hold = realtime.hold_cpu_dma_latency(wanted, self.log)
+        try:
+            self.main.run_realtime(self._first_deadline(self.main_name), self._never)
+        finally:
+            if hold is not None:
+                hold.close()
 
     def _run_virtual(self) -> None:
         """Step every started thread at its deadlines, earliest first, ties in file order."""
@@ -486,7 +522,11 @@ def run_system(loaded: Loaded, text: str, file: str, options: RunOptions,
         if on_start is not None:
             on_start(system)
         outcome = system.run()
-        data = timing(system.region, system.composition)
+        elapsed = None
+        if not system.virtual:
+            since = int(system.region.system[Region.OPERATING_NS]) or int(system.region.system[Region.STARTED_NS])
+            elapsed = system.clock.now_ns() - since
+        data = timing(system.region, system.composition, elapsed)
         write_timing(data, system.run_dir)
         states = {owner: system.state(owner) for owner in system.layout.owner_index}
         flags = {name for name, i in system.flag_index.items() if system.region.flags[i]}

@@ -17,6 +17,7 @@ from hapticop.blocks.base import Block
 from hapticop.description import Thread
 from hapticop.lcsm import State
 from hapticop.runtime import realtime
+from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
@@ -26,8 +27,10 @@ from hapticop.runtime.timing import record
 class ActivityRunner:
     """One activity on its thread: the block, its LCSM and its ports."""
 
-    def __init__(self, name: str, block: Block, region: Region, start_on_request: bool, log: Logger):
+    def __init__(self, name: str, block: Block, region: Region, start_on_request: bool, log: Logger,
+                 relay: OriginRelay | None = None):
         self.name, self.block, self.region, self.log = name, block, region, log
+        self.relay = relay
         layout = region.layout
         self.index = layout.activity_index[name]
         self.inputs = [port for port in vars(block.inputs).values()]
@@ -45,9 +48,14 @@ class ActivityRunner:
     def step(self) -> None:
         for port in self.inputs:
             port.refresh()
+        relay = self.relay
+        if relay is not None:
+            relay.before_step()
         started = time.perf_counter_ns()
         self.lifecycle.step()
         record(self.region.compute, self.region.compute_max, self.index, time.perf_counter_ns() - started)
+        if relay is not None:
+            relay.after_step()
 
 
 class CyclicThread:
@@ -150,11 +158,17 @@ class CyclicThread:
         region, index, period = self.region, self.index, self.period
         deadline = first_deadline_ns
         clock = self.clock
+        spin = self.spec.busy_wait
         while not region.system[Region.TERMINATE] and not should_stop():
-            clock.sleep_until(deadline)
+            if spin:
+                clock.sleep_until(deadline - spin)
+                clock.spin_until(deadline)
+            else:
+                clock.sleep_until(deadline)
             woke = clock.now_ns()
             record(region.latency, region.latency_max, index, woke - deadline)
             self.cycle()
+            region.cpu_ns[index] = time.thread_time_ns()
             if self.done:
                 break
             deadline += period

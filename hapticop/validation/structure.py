@@ -10,6 +10,8 @@ import difflib
 from collections import defaultdict
 from typing import Iterator
 
+import networkx as nx
+
 from hapticop import graph as G
 from hapticop.description import RESERVED_NAMES
 from hapticop.diagnostics import Diagnostic, Severity
@@ -215,4 +217,45 @@ def cpus(cg: G.CompositionGraph) -> Check:
                                  data["path"] + ("cpus", index), severity=Severity.WARNING)
 
 
-CHECKS = (unknown_activities, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus)
+def dataflow(cg: G.CompositionGraph) -> "nx.DiGraph":
+    """Where samples can travel: output port -> stream -> input port -> its activity -> its outputs."""
+    flow = nx.DiGraph()
+    for u, v, _ in list(cg.edges_of("writes")) + list(cg.edges_of("reads")):
+        flow.add_edge(u, v)
+    for act, pnode, _ in cg.edges_of("has_port"):
+        direction = cg.g.nodes[pnode].get("direction")
+        if direction == "input":
+            flow.add_edge(pnode, act)
+        elif direction == "output":
+            flow.add_edge(act, pnode)
+    return flow
+
+
+def latencies(cg: G.CompositionGraph) -> Check:
+    """Each measured latency runs from an output port to an input port that data can reach."""
+    flow = None
+    for name, spec in cg.loaded.composition.latencies.items():
+        ends = []
+        for key, ref, direction in (("from", spec.source, "output"), ("to", spec.sink, "input")):
+            path = ("latencies", name, key)
+            act, pname = ref.split(".")
+            if act not in cg.loaded.activities:
+                if act not in cg.loaded.composition.activities:
+                    yield Diagnostic("unknown-activity", f"no activity '{act}'", path,
+                                     hint=_suggest(act, cg.loaded.composition.activities))
+                continue
+            ports = getattr(cg.loaded.activities[act].interface, f"{direction}s")
+            if pname not in ports:
+                yield Diagnostic("unknown-port", f"activity '{act}' has no {direction} port '{pname}'", path,
+                                 expected=", ".join(ports) or "(none)", hint=_suggest(pname, ports))
+                continue
+            ends.append(G.port(act, pname))
+        if len(ends) == 2:
+            flow = dataflow(cg) if flow is None else flow
+            if not (ends[0] in flow and ends[1] in flow and nx.has_path(flow, ends[0], ends[1])):
+                yield Diagnostic("latency-unreachable", f"no stream path carries data from '{spec.source}' to "
+                                 f"'{spec.sink}', so this latency could never be measured", ("latencies", name),
+                                 hint="check the streams between the two activities")
+
+
+CHECKS = (unknown_activities, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus, latencies)

@@ -1,0 +1,53 @@
+"""End-to-end latencies: how long data takes from where it enters to where it leaves.
+
+A composition names its paths (`latencies: {handle_to_wheel: {from: falcon.position, to:
+ethercat.wheel_commands}}`). Every sample carries one origin stamp per path: the source port
+stamps it when it publishes, and each activity passes on the newest origin among its inputs
+to everything it writes. When the sink's activity has stepped with an origin it has not
+seen before, the time since that origin is counted in the path's histogram, so the figure
+includes every hop, queue and cycle phase on the way and the sink's own step.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from hapticop.runtime.context import InputPort, OutputPort
+from hapticop.runtime.region import Region
+from hapticop.runtime.streams import ORIGINS
+from hapticop.runtime.timing import record
+
+
+class OriginRelay:
+    """One activity's share: merge its inputs' origins into its outputs, time its sinks."""
+
+    __slots__ = ("inputs", "outputs", "sinks", "region", "now_ns", "newest", "seen")
+
+    def __init__(self, inputs: list[InputPort], outputs: list[OutputPort], sinks: list[tuple[InputPort, int]],
+                 region: Region, now_ns: Callable[[], int]):
+        self.inputs = [port for port in inputs if port.origins is not None]
+        self.outputs = [port for port in outputs if port.origins is not None]
+        self.sinks = sinks
+        self.region, self.now_ns = region, now_ns
+        self.newest = np.zeros(ORIGINS, dtype=np.int64)
+        self.seen = np.zeros(ORIGINS, dtype=np.int64)
+
+    def before_step(self) -> None:
+        newest = self.newest
+        newest.fill(0)
+        for port in self.inputs:
+            np.maximum(newest, port.origins, out=newest)
+        for port in self.outputs:
+            np.copyto(port.origins, newest)
+
+    def after_step(self) -> None:
+        if not self.sinks:
+            return
+        region, seen, now = self.region, self.seen, self.now_ns()
+        for port, slot in self.sinks:
+            origin = int(port.origins[slot])
+            if origin > seen[slot]:
+                seen[slot] = origin
+                record(region.e2e, region.e2e_max, slot, now - origin)
