@@ -1,0 +1,100 @@
+"""The bench's statistics and report, on timing recorded from real runs (no timing is asserted)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hapticop.benchmark import cyclictest, report
+from hapticop.benchmark.runner import BenchRun, Condition
+from hapticop.benchmark.stats import Distribution, Goal, missed_percent, thread_goals
+from hapticop.runtime.report import sparse
+from hapticop.runtime.timing import BINS, percentile_us, record
+
+FIXTURES = Path(__file__).parent / "fixtures" / "bench"
+
+
+def recorded_timing() -> dict:
+    return json.loads((FIXTURES / "timing-bench-idle.json").read_text())
+
+
+def test_percentiles_are_exact_to_the_bin():
+    d = Distribution(np.array([0, 50, 40, 9, 0, 1], dtype=np.int64))  # 100 samples
+    assert d.count == 100
+    assert d.percentile(50) == 1 and d.percentile(90) == 2 and d.percentile(99) == 3 and d.percentile(99.9) == 5
+    assert d.percentile(100) == 5 and d.maximum == 5
+    assert math.isnan(Distribution(np.zeros(3, dtype=np.int64)).percentile(50))
+
+
+def test_sparse_histograms_round_trip_and_agree_with_the_runtime():
+    histogram = np.zeros((1, BINS), dtype=np.int64)
+    maximum = np.zeros(1, dtype=np.int64)
+    rng = np.random.default_rng(1)
+    for value_ns in rng.gamma(2.0, 20_000.0, size=5000).astype(np.int64):
+        record(histogram, maximum, 0, int(value_ns))
+    d = Distribution.from_sparse(sparse(histogram[0]), maximum[0] / 1000)
+    for q in (50, 99, 99.9):
+        assert d.percentile(q) == percentile_us(histogram[0], q)
+    assert d.maximum == maximum[0] / 1000
+
+
+def test_recorded_run_summaries_match_their_histograms():
+    for name, thread in recorded_timing()["threads"].items():
+        d = report.thread_distribution(thread)
+        assert d.count == sum(thread["histogram_us"].values()), name
+        for q, key in ((50, "p50"), (99, "p99"), (99.9, "p99.9")):
+            assert d.percentile(q) == thread["wakeup_latency_us"][key], (name, key)
+
+
+def test_missed_deadlines_count_skipped_periods():
+    assert missed_percent(9995, 5) == pytest.approx(0.05)
+    assert missed_percent(1000, 0) == 0.0
+    assert math.isnan(missed_percent(0, 0))
+
+
+def test_cyclictest_output_is_parsed_across_threads():
+    d = cyclictest.parse((FIXTURES / "cyclictest-2s.txt").read_text())
+    assert d.count == 4000  # "# Total: 000002000 000002000": two CPUs, 2 s at 1 kHz
+    assert d.maximum == 257  # the larger of the two threads' maxima
+    assert 17 <= d.percentile(50) <= d.percentile(99) <= d.percentile(99.9) <= 257
+
+
+def test_cyclictest_overflows_land_in_the_last_bin():
+    text = "000010 000003\t000001\n# Max Latencies: 00010 25000\n# Histogram Overflows: 00000 00002\n"
+    d = cyclictest.parse(text)
+    assert d.count == 6 and d.counts[-1] == 2 and d.maximum == 25000
+
+
+def test_goals_compare_with_the_machine_and_say_by_how_much():
+    goals = thread_goals("main", {"p99": 90.0, "p99.9": 500.0}, 0.1, {"p99": 50.0, "p99.9": 200.0})
+    by_name = {g.what: g for g in goals}
+    assert by_name["main: wake-up p99 (us)"].limit == 75.0 and not by_name["main: wake-up p99 (us)"].met
+    assert by_name["main: wake-up p99.9 (us)"].by == pytest.approx(1.25)
+    assert not by_name["main: missed deadlines %"].met
+    assert Goal("x", 0.04, 0.05).met and not Goal("x", math.nan, 1.0).met
+    assert [g.what for g in thread_goals("t", {"p99": 1, "p99.9": 1}, 0.0, None)] == ["t: missed deadlines %"]
+
+
+def test_report_has_every_table_and_a_histogram(tmp_path):
+    timing = recorded_timing()
+    baseline = cyclictest.parse((FIXTURES / "cyclictest-2s.txt").read_text())
+    bench = BenchRun("systems/bench.yaml", 10.0, {"host": "h", "kernel": "k", "cpus": 2, "python": "3.11",
+                                                    "date": "d", "root": True},
+                     [Condition("idle", timing, baseline, 0, tmp_path)])
+    text = report.markdown(bench)
+    assert "| cyclictest (the machine's limit) | 80 | | 4000 |" in text
+    for thread in timing["threads"]:
+        assert f"| {thread} |" in text
+    for path in timing["latencies"]:
+        assert f"| {path} |" in text
+    assert "probe below minus probe above" in text
+    main = timing["threads"]["main"]
+    assert f"| idle main: wake-up p99 (us) | {main['wakeup_latency_us']['p99']:.0f} |" in text
+    assert "## goals" in text
+    pytest.importorskip("matplotlib")
+    picture = report.histogram_png(bench, tmp_path / "latency.png")
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
