@@ -22,6 +22,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results" / "hallway-experiment.jsonl"
+TIME_LIMIT_S = 50.0
+"""Every operator reaches the end wall well before this (the slowest cautious run so far stopped
+at 36 s); an operator who never lets go of the handle would otherwise hold the run to 90 s."""
 
 
 def run_one(model: str, profile: str, variation: int, hallway: str, braking_field: dict | None = None) -> dict:
@@ -39,7 +42,7 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
               "braking_field": braking_field or ({} if governor else None)}
     patch = {"activities": {"haptic": {"params": haptic},
                             "world": {"params": {"hallway": hallway, "operator": profile, "variation": variation,
-                                                 "plot": False}}}}
+                                                 "plot": False, "time_limit_s": TIME_LIMIT_S}}}}
     tree = apply_patch(source.tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
