@@ -127,8 +127,9 @@ class Falcon(Block):
         """
         from hapticop.devices.falcon import Homing
         from hapticop.devices.falcon.firmware import read_firmware
-        from hapticop.devices.falcon.usb_driver import connect, system_backend
+        from hapticop.devices.falcon.usb_driver import FalconUsbError, connect, system_backend
 
+        self._usb_error = FalconUsbError
         if getattr(self, "_connecting", None) is None:
             p = self.params
             image = read_firmware(p.firmware, p.firmware_sha256)
@@ -207,6 +208,11 @@ class Falcon(Block):
             self.hand[:] = 0.0
             self._exchange(self.hand, forces=False)  # a last frame with zero forces
             self.flags["frames_ok"] = False
+        connecting = getattr(self, "_connecting", None)
+        if connecting is not None:  # cleaned while still opening: wait for it, then let go
+            connecting.join(30.0)
+            self._connecting = None
+            self.usb = self._connection.get("falcon")
         if getattr(self, "usb", None) is not None:
             self.usb.close()
             self.usb = None
@@ -243,11 +249,9 @@ class Falcon(Block):
     def _transfer(self, dt: float, hand_force: np.ndarray) -> bool:
         """Send `self.command`; True when `self.status` holds a new status frame."""
         if self.usb is not None:
-            from hapticop.devices.falcon.usb_driver import FalconUsbError
-
             try:
                 return self.usb.exchange(self.command, self.status)
-            except FalconUsbError as error:  # unplugged, powered off: frames stop, frames_ok tells
+            except self._usb_error as error:  # unplugged, powered off: frames stop, frames_ok tells
                 if not getattr(self, "_usb_failed", False):
                     self._usb_failed = True
                     self.log.error("%s", error)

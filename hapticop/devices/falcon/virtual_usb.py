@@ -188,6 +188,7 @@ class VirtualFalcon:
         self._reply = new_frame()
         self._sim_t = self._time()
         self.muted = False
+        self.physics_ns = 0  # CPU time spent simulating the handle (benchmarks subtract it)
         # faults
         self._lose = 0
         self._insert = bytearray()
@@ -420,14 +421,19 @@ class VirtualFalcon:
                 self._emit(bytes(echo), start + byte_s, self.baud)
 
     def _command(self, t: float) -> None:
-        """One valid command frame arrived at t: physics up to t, then one status frame."""
+        """One valid command frame arrived at t: physics up to t, then one status frame.
+
+        As in the `sim` driver, the command acts over the interval since the previous one.
+        """
         if self.muted:
             return
+        started = time.thread_time_ns()
         falcon = self.falcon
         hand = self.hand(t, falcon) if self.hand is not None else (0.0, 0.0, 0.0)
-        falcon.step(max(t - self._sim_t, 0.0), hand)
+        reply = falcon.exchange(self._frame, max(t - self._sim_t, 1e-6), hand, out=self._reply)
         self._sim_t = t
-        if falcon.exchange(self._frame, 0.0, hand, out=self._reply) is not None:
+        self.physics_ns += time.thread_time_ns() - started
+        if reply is not None:
             self._emit(self._reply.tobytes(), t + self.reply_delay_s, NORMAL_BAUD)
 
     # ------------------------------------------------------------ descriptors
