@@ -279,11 +279,12 @@ class VirtualFalcon:
             self._wait(now, timeout_ms / 1000.0)
             raise usb.core.USBTimeoutError("Operation timed out", -7, errno.ETIMEDOUT)
         self._wait(now, due - now)
-        now = self._time()
+        # The chip flushed at `due`; a host that wakes late gets the packet late, but the
+        # chip's timer restarted at `due` and bytes arriving since belong to the next packet.
         view = memoryview(buff).cast("B")
         view[0:ftdi.STATUS_BYTES] = self.status_bytes
-        n = self._take(now, limit, view, ftdi.STATUS_BYTES)
-        self._last_flush = now
+        n = self._take(due, limit, view, ftdi.STATUS_BYTES)
+        self._last_flush = due
         self.packets_sent += 1
         return ftdi.STATUS_BYTES + n
 
