@@ -24,11 +24,13 @@ app = typer.Typer(
 
 SYSTEMS_DIR = Path("systems")
 
+from hapticop.cli_devices import devices as _devices  # noqa: E402
 from hapticop.cli_devices import falcon as _falcon  # noqa: E402
 from hapticop.cli_devices import lidar as _lidar  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
+app.command("devices")(_devices)
 
 
 class OutputFormat(str, Enum):

@@ -1,4 +1,4 @@
-"""`hapticop lidar ...` and `hapticop falcon ...`: looking at captures and devices by hand."""
+"""`hapticop lidar ...`, `hapticop falcon ...` and `hapticop devices`: looking at captures and devices by hand."""
 
 from __future__ import annotations
 
@@ -116,3 +116,88 @@ def falcon_ik(
         return
     typer.echo(f"thigh angles  {' '.join(f'{a:+.6f}' for a in angles)} rad")
     typer.echo(f"counts        {' '.join(str(int(c)) for c in counts)}")
+
+
+def _host_port(text: str, default_port: int) -> tuple[str, int]:
+    """HOST, HOST:PORT, [V6]:PORT or a bare IPv6 address."""
+    if text.startswith("["):
+        host, _, rest = text[1:].partition("]")
+        return host, int(rest[1:]) if rest.startswith(":") else default_port
+    if text.count(":") == 1:
+        host, port = text.split(":")
+        return host, int(port)
+    return text, default_port
+
+
+def devices(
+    lidar: list[str] = typer.Option([], "--lidar", metavar="HOST[:PORT]",
+                                    help="probe a TiM5xx there over CoLa A (port 2112 by default); repeatable"),
+    usb: bool = typer.Option(True, "--usb/--no-usb", help="list the Falcons on USB"),
+    timeout: float = typer.Option(2.0, min=0.05, help="seconds to wait for a LIDAR"),
+    json_output: bool = typer.Option(False, "--json"),
+    usb_backend: str = typer.Option("libusb", hidden=True, help="'virtual': one virtual Falcon (demos, tests)"),
+) -> None:
+    """List the Falcons on USB and probe LIDAR addresses; exit 1 if something cannot be reached."""
+    from hapticop.devices.falcon.usb_driver import FalconUsbError, describe_falcons, system_backend
+    from hapticop.devices.sick.probe import ProbeError, probe_lidar
+
+    report: dict = {}
+    failed = False
+    if usb:
+        try:
+            if usb_backend == "virtual":
+                from hapticop.devices.falcon.virtual_usb import VirtualFalcon, VirtualUsbBackend, WallClock
+
+                backend = VirtualUsbBackend(VirtualFalcon(WallClock()))
+            else:
+                backend = system_backend()
+            falcons = describe_falcons(backend)
+            report["falcons"] = [dataclasses.asdict(f) for f in falcons]
+            failed |= any(f.problem for f in falcons)
+        except FalconUsbError as error:
+            report["falcons"], report["usb_error"] = [], str(error)
+            failed = True
+    lidars = []
+    for address in lidar:
+        try:
+            host, port = _host_port(address, 2112)
+        except ValueError:
+            lidars.append({"address": address, "error": f"{address!r} is not HOST or HOST:PORT"})
+            failed = True
+            continue
+        try:
+            lidars.append({"address": f"{host}:{port}", **dataclasses.asdict(probe_lidar(host, port, timeout))})
+        except ProbeError as error:
+            lidars.append({"address": f"{host}:{port}", "error": str(error)})
+            failed = True
+    if lidar:
+        report["lidars"] = lidars
+    if json_output:
+        typer.echo(json.dumps(report, indent=1))
+    else:
+        _print_devices(report, usb)
+    raise typer.Exit(1 if failed else 0)
+
+
+def _print_devices(report: dict, usb: bool) -> None:
+    if usb:
+        typer.echo("Falcons on USB (0403:CB48):")
+        if "usb_error" in report:
+            typer.echo(f"  error: {report['usb_error']}")
+        elif not report["falcons"]:
+            typer.echo("  none found: is the Falcon plugged in, and its own power supply connected?")
+        for f in report["falcons"]:
+            where = f"  [{f['index']}] bus {f['bus']} address {f['address']}"
+            if f["problem"]:
+                typer.echo(f"{where}: error: {f['problem']}")
+                continue
+            state = ("firmware running" if f["firmware_running"]
+                     else "no firmware loaded (the Falcon block loads it from the image you give)")
+            typer.echo(f"{where}, serial {f['serial']}, {f['product']}: {state}")
+    for entry in report.get("lidars", []):
+        if "error" in entry:
+            typer.echo(f"LIDAR {entry['address']}: error: {entry['error']}")
+        else:
+            state = f", state {entry['state']}" if entry["state"] else ""
+            typer.echo(f"LIDAR {entry['address']}: {entry['device_type']}, firmware {entry['firmware']}, "
+                       f"serial {entry['serial']}{state}")

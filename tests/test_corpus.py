@@ -53,6 +53,7 @@ CASES = [
     ("invalid-block-type.yaml", "unknown-block", 17, "unknown block type 'lidarr'", "did you mean 'lidar'?"),
     ("invalid-block-import.yaml", "unknown-block", 17, "cannot import module 'my_robot.sensors'", None),
     ("invalid-block-param-value.yaml", "bad-value", 15, "'serial' is not allowed", None),
+    ("invalid-falcon-usb-no-firmware.yaml", "bad-value", 14, "driver 'usb' needs 'firmware'", None),
     ("invalid-block-param-key.yaml", "unknown-key", 19, "unknown key 'pionts'", "did you mean 'points'?"),
     # schema: streams
     ("invalid-bad-name.yaml", "bad-name", 17, "'Pos' is not a valid name", None),

@@ -1,15 +1,21 @@
 """The Novint Falcon haptic device: handle position in, motor forces out, at 1 kHz.
 
 Geometry defaults to libnifalcon's values so its reference data applies
-(../shared/reference/falcon-kinematics.md).
+(../shared/reference/falcon-kinematics.md). `driver: sim` exchanges frames with a simulated
+handle held by the scene's operator; `driver: usb` runs the USB driver (`usb_driver`) on a
+real Falcon, or with `usb_backend: virtual` on the virtual Falcon of `virtual_usb`, whose
+simulated hand does the homing motion and then lets go.
 """
 
 from __future__ import annotations
 
+import threading
+import time
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params, Port, RateRange
@@ -34,8 +40,41 @@ class FalconParams(Params):
     scene: str = Field("hallway", description="the simulated world whose operator holds the handle (sim driver)")
     device_index: int = Field(0, ge=0, description="which Falcon, when several are on USB")
     firmware: str | None = Field(None, description="path to Novint's firmware image (usb driver); never shipped")
+    firmware_sha256: str | None = Field(
+        None, description="accept this image instead of Novint's known ones (usb driver): you vouch for it")
+    usb_backend: Literal["libusb", "virtual"] = Field(
+        "libusb", description="usb driver: 'libusb' for a real Falcon, 'virtual' for the simulated USB device")
     homing: bool = Field(True, description="home the encoders in capability configuration")
     geometry: FalconGeometry = Field(default_factory=FalconGeometry)
+
+    @field_validator("firmware_sha256")
+    @classmethod
+    def _is_sha256(cls, value: str | None) -> str | None:
+        if value is not None and (len(value) != 64 or any(c not in "0123456789abcdefABCDEF" for c in value)):
+            raise PydanticCustomError("sha256", "'firmware_sha256' must be a SHA-256 digest: 64 hex digits")
+        return value
+
+    @model_validator(mode="after")
+    def _usb_needs_firmware(self) -> "FalconParams":
+        if self.driver == "usb" and not self.firmware:
+            raise PydanticCustomError(
+                "usb_firmware", "driver 'usb' needs 'firmware': the path to Novint's Falcon firmware image "
+                "(nvent_firmware.bin, from Novint's installer or a libnifalcon checkout; hapticop never ships it)")
+        return self
+
+
+class _DeviceClock:
+    """The runtime's clock as the virtual USB device wants it (seconds; sleeps only in real time)."""
+
+    def __init__(self, clock) -> None:
+        self._clock = clock
+
+    def now(self) -> float:
+        return self._clock.now_ns() / 1e9
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0 and not getattr(self._clock, "virtual", False):
+            time.sleep(seconds)
 
 
 class Falcon(Block):
@@ -56,17 +95,20 @@ class Falcon(Block):
         )
         from hapticop.sim.scene import find_scene
 
-        if self.params.driver == "usb":
-            raise RuntimeError("the usb driver is not part of this hapticop yet; use driver: sim")
-        self.scene = find_scene(self.params.scene)
-        if self.scene is None:
-            return False  # the world activity has not opened the simulated world yet
         geometry = Geometry(**self.params.geometry.model_dump())
+        self.usb = None
+        if self.params.driver == "usb":
+            if not self._usb_connected(geometry):
+                return False  # opening, and maybe loading firmware, on a helper thread
+        else:
+            self.scene = find_scene(self.params.scene)
+            if self.scene is None:
+                return False  # the world activity has not opened the simulated world yet
         self.kinematics, self.codec, self.homing = FalconKinematics(geometry), FrameCodec(), Homing()
         self.status, self.command, self.reply = Status(), new_frame(), new_frame()
         self.centre = np.asarray(WORKSPACE_CENTRE_M, dtype=float)
-        operator = self.scene.operator
-        self.device = SimulatedFalcon(geometry, handle_mass_kg=0.1 + operator.mass_kg, rng=self.rng)
+        if self.usb is None:
+            self.device = SimulatedFalcon(geometry, handle_mass_kg=0.1 + self.scene.operator.mass_kg, rng=self.rng)
         self.position = np.zeros(3)  # device frame, workspace origin
         self.previous = np.zeros(3)
         self.motor = np.zeros(3, dtype=np.int64)
@@ -78,9 +120,58 @@ class Falcon(Block):
         self.outputs.position.value[:] = 0.0
         return True
 
+    def _usb_connected(self, geometry) -> bool:
+        """Open the Falcon (loading its firmware if needed) without blocking the thread's cycles.
+
+        The firmware file is checked first, here, so a wrong file fails at once and clearly.
+        """
+        from hapticop.devices.falcon import Homing
+        from hapticop.devices.falcon.firmware import read_firmware
+        from hapticop.devices.falcon.usb_driver import FalconUsbError, connect, system_backend
+
+        self._usb_error = FalconUsbError
+        if getattr(self, "_connecting", None) is None:
+            p = self.params
+            image = read_firmware(p.firmware, p.firmware_sha256)
+            backend = system_backend() if p.usb_backend == "libusb" else self._virtual_backend(geometry)
+            self._connection: dict = {"log": []}
+
+            def run() -> None:
+                try:
+                    self._connection["falcon"] = connect(image, p.device_index, backend,
+                                                         log=self._connection["log"].append)
+                except BaseException as error:  # noqa: BLE001 - handed to the life cycle below
+                    self._connection["error"] = error
+
+            self._connecting = threading.Thread(target=run, name=f"{self.name}-usb-open", daemon=True)
+            self._connecting.start()
+        if self._connecting.is_alive():
+            return False
+        self._connecting = None
+        for line in self._connection["log"]:
+            self.log.info("%s", line)
+        if "error" in self._connection:
+            raise self._connection["error"]
+        self.usb = self._connection["falcon"]
+        self.log.info("Falcon open on USB; %s", Homing.INSTRUCTIONS)
+        return True
+
+    def _virtual_backend(self, geometry):
+        from hapticop.devices.falcon import SimulatedFalcon
+        from hapticop.devices.falcon.virtual_usb import HomingHand, VirtualFalcon, VirtualUsbBackend
+
+        falcon = SimulatedFalcon(geometry, rng=self.rng)
+        self.virtual = VirtualFalcon(_DeviceClock(self.clock), falcon=falcon, hand=HomingHand())
+        return VirtualUsbBackend(self.virtual)
+
     def configure_capabilities(self) -> bool:
         """Homing: the hand pulls the grip out, then pushes it in (falcon-protocol.md §6)."""
         elapsed = (self.clock.now_ns() - self.started_ns) / 1e9
+        if self.usb is not None:  # a person (or the virtual device's hand) does the moving
+            self._exchange(self.hand, forces=False)
+            if self.homing.homed:
+                self.log.info("homed after %.2f s", elapsed)
+            return self.homing.homed
         self.homing_target[2] = 0.178 if elapsed % 2.5 < 0.8 else 0.075
         np.subtract(self.homing_target, self.device.position, out=self.hand)
         self.hand *= 300.0
@@ -93,6 +184,9 @@ class Falcon(Block):
         return False
 
     def compute(self) -> None:
+        if self.usb is not None:
+            self._exchange(self.hand, forces=True)
+            return
         scene = self.scene
         np.subtract(self.device.position, self.centre, out=scene.handle_position)
         np.copyto(scene.handle_velocity, self.device.velocity)
@@ -110,10 +204,18 @@ class Falcon(Block):
         self._exchange(self.hand, forces=False)
 
     def clean(self) -> None:
-        if hasattr(self, "device"):
+        if hasattr(self, "device") or getattr(self, "usb", None) is not None:
             self.hand[:] = 0.0
             self._exchange(self.hand, forces=False)  # a last frame with zero forces
             self.flags["frames_ok"] = False
+        connecting = getattr(self, "_connecting", None)
+        if connecting is not None:  # cleaned while still opening: wait for it, then let go
+            connecting.join(30.0)
+            self._connecting = None
+            self.usb = self._connection.get("falcon")
+        if getattr(self, "usb", None) is not None:
+            self.usb.close()
+            self.usb = None
 
     def _exchange(self, hand_force: np.ndarray, forces: bool) -> None:
         """One frame each way: forces out (when allowed), encoders in, then kinematics."""
@@ -124,11 +226,7 @@ class Falcon(Block):
         if forces and self.homing.forces_allowed and self.fk_ok:
             self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)
         self.codec.encode_command(self.motor, self.homing.command_flags(), self.command)
-        if self.device.exchange(self.command, dt, hand_force, out=self.reply) is None:
-            return
-        try:
-            self.codec.decode_status(self.reply, self.status)
-        except Exception:  # noqa: BLE001 - a corrupted frame is dropped; frames_ok tells
+        if not self._transfer(dt, hand_force):
             return
         self.last_frame_ns = now
         self.homing.update(self.status)
@@ -147,3 +245,21 @@ class Falcon(Block):
             out.velocity.publish()
             out.buttons.publish()
         self.flags["frames_ok"] = now - self.last_frame_ns < 100_000_000
+
+    def _transfer(self, dt: float, hand_force: np.ndarray) -> bool:
+        """Send `self.command`; True when `self.status` holds a new status frame."""
+        if self.usb is not None:
+            try:
+                return self.usb.exchange(self.command, self.status)
+            except self._usb_error as error:  # unplugged, powered off: frames stop, frames_ok tells
+                if not getattr(self, "_usb_failed", False):
+                    self._usb_failed = True
+                    self.log.error("%s", error)
+                return False
+        if self.device.exchange(self.command, dt, hand_force, out=self.reply) is None:
+            return False
+        try:
+            self.codec.decode_status(self.reply, self.status)
+        except Exception:  # noqa: BLE001 - a corrupted frame is dropped; frames_ok tells
+            return False
+        return True
