@@ -65,6 +65,7 @@ class Esc:
         self.outputs_sm: tuple[int, int] | None = None  # (start, length) of the programmed output buffer
         self.last_output_ns = 0
         self.watchdog_expired = False
+        self.error_held_until_ns = 0  # a persisting fault: acknowledgements fail until then
         self.power_on()
 
     # --- identity and power ------------------------------------------------------------
@@ -123,18 +124,20 @@ class Esc:
         if state < AL_SAFEOP:
             self.watchdog_expired = False
 
-    def raise_error(self, code: int, state: int | None = None) -> None:
+    def raise_error(self, code: int, state: int | None = None, until_ns: int = 0) -> None:
         """The application reports an error: ERR flag, the code, and a fall-back state
-        (SAFE-OP from OP, as a drive does; otherwise where it is)."""
+        (SAFE-OP from OP, as a drive does; otherwise where it is). Until `until_ns` the cause
+        persists, so acknowledging does not clear it."""
         fallback = state if state is not None else min(self.state, AL_SAFEOP)
         self._set_state(fallback, error=True, code=code)
+        self.error_held_until_ns = until_ns
 
-    def _al_control(self) -> None:
+    def _al_control(self, now_ns: int) -> None:
         value = struct.unpack_from("<H", self.mem, REG_AL_CONTROL)[0]
         requested, ack = value & 0x0F, bool(value & AL_ERROR)
         error = bool(self.al_status & AL_ERROR)
-        if error and not ack:
-            return  # an error must be acknowledged before the state machine moves again
+        if error and (not ack or now_ns < self.error_held_until_ns):
+            return  # an error must be acknowledged (and its cause gone) before the state machine moves again
         if ack:
             struct.pack_into("<H", self.mem, REG_AL_CODE, 0)
         current = self.state
@@ -151,7 +154,6 @@ class Esc:
 
     def _check_process_data(self) -> int:
         """PRE-OP -> SAFE-OP: the master's SM programming must match the SII's (else 0x001D/0x001E)."""
-        self.fmmus = self._read_fmmus()
         self.outputs_sm = None
         for n, spec in enumerate(self.identity.sync_managers):
             start, length, control, _, enable = struct.unpack_from("<HHBBB", self.mem, REG_SM + 8 * n)
@@ -207,6 +209,12 @@ class Esc:
         start, length = self.outputs_sm
         return memoryview(self.mem)[start:start + length]
 
+    def input_buffer(self) -> memoryview | None:
+        for spec in self.identity.sync_managers:
+            if spec.kind == SM_INPUTS:
+                return memoryview(self.mem)[spec.start:spec.start + spec.length]
+        return None
+
     def write_inputs(self, data: bytes | memoryview) -> None:
         """The application fills its input buffer (the SII's input SM area)."""
         for spec in self.identity.sync_managers:
@@ -240,11 +248,11 @@ class Esc:
         for a, b, old in saved:
             self.mem[a:b] = old
         if ado <= REG_AL_CONTROL < end:
-            self._al_control()
+            self._al_control(now_ns)
         if ado <= REG_EEP_CONTROL < end or ado <= REG_EEP_CONTROL + 1 < end:
             self._eeprom_command()
-        if ado <= REG_WD_STATUS < end:
-            pass
+        if ado < REG_FMMU + 16 * 8 and end > REG_FMMU:
+            self.fmmus = self._read_fmmus()  # SOEM may program FMMUs after SAFE-OP (reconfig does)
         self._note_output_write(ado, end, now_ns)
 
     def _note_output_write(self, start: int, end: int, now_ns: int) -> None:

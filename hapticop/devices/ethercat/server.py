@@ -8,8 +8,10 @@ pysoem, which holds the GIL inside several of its calls.
 
 Faults arrive over a Unix socket as JSON lines and run between two frames:
 `{"op": "lose", "slave": 5}` (power off / cable cut), `restore` (back, freshly powered),
-`al_error` with a `code`, `trip_watchdog`, `late` (`delay_us` for the next `frames`
-frames), `status`, `ping`, `stop`. Slaves are named by bus position, 0-based.
+`al_error` with a `code` (and `hold_ms`: the cause persists that long), `trip_watchdog`, `late` (`delay_us` for the next `frames`
+frames), `physics` (`run`: false freezes the robot, so its sensors stay put), `status`
+(states, codes, the wheels' process-data buffers in hex, the robot's pose), `ping`, `stop`.
+Slaves are named by bus position, 0-based.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class FrameServer:
         self.running = True
         self.late_us = 0
         self.late_frames = 0
+        self.physics = True
         self.started_ns = 0
 
     # --- the loop ----------------------------------------------------------------------
@@ -76,7 +79,8 @@ class FrameServer:
                         sock.send(view[:n])
                 if now >= next_step:
                     model.tick(now)
-                    model.step(now)
+                    if self.physics:
+                        model.step(now)
                     if truth is not None:
                         truth.write((now - self.started_ns) / 1e9, model.plant.pose, model.plant.twist)
                     next_step = max(next_step + STEP_NS, now)
@@ -108,8 +112,9 @@ class FrameServer:
                     {"name": s.name, "present": s.present, "state": s.state, "al_status": s.al_status,
                      "al_code": s.al_code, "station": s.station, "watchdog_ns": s.watchdog_ns()}
                     for s in self.model.slaves],
-                    "pose": self.model.plant.pose.tolist(), "twist": self.model.plant.twist.tolist(),
-                    "commands": self.model.rx.tolist()}
+                    "outputs": [bytes(w.output_buffer() or b"").hex() for w in self.model.wheels],
+                    "inputs": [bytes(w.input_buffer() or b"").hex() for w in self.model.wheels],
+                    "pose": self.model.plant.pose.tolist(), "twist": self.model.plant.twist.tolist()}
             if op == "lose":
                 self._slave(request).present = False
             elif op == "restore":
@@ -117,11 +122,15 @@ class FrameServer:
                 slave.power_on()
                 slave.present = True
             elif op == "al_error":
-                self._slave(request).raise_error(int(request["code"]))
+                hold_ns = int(float(request.get("hold_ms", 0)) * 1e6)
+                self._slave(request).raise_error(int(request["code"]), until_ns=time.monotonic_ns() + hold_ns)
             elif op == "trip_watchdog":
                 self._slave(request).trip_watchdog()
             elif op == "late":
                 self.late_us, self.late_frames = int(request["delay_us"]), int(request["frames"])
+            elif op == "physics":
+                self.physics = bool(request["run"])
+                self.model.last_step_ns = None  # no leap in time when it runs again
             elif op == "stop":
                 self.running = False
             else:
