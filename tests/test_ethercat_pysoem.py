@@ -31,6 +31,17 @@ def expected(products=PRODUCTS, names=NAMES):
     return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0))) for n, p in zip(names, products)]
 
 
+def _interface_here(name: str) -> bool:
+    """Whether this thread's network namespace has the interface (sysfs would show the mount's)."""
+    import socket
+
+    try:
+        socket.if_nametoindex(name)
+        return True
+    except OSError:
+        return False
+
+
 @pytest.fixture
 def box():
     with Sandbox() as sandbox:
@@ -127,8 +138,10 @@ def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box
         m.close()
         assert [s["state"] for s in inner.fault("status")["slaves"]] == [1] * 7
         process = inner.process
+        assert _interface_here("hapticop-ecat7")
     assert process.poll() is not None  # the emulator is gone
-    assert not os.path.exists("/sys/class/net/hapticop-ecat7")
+    assert not _interface_here("hapticop-ecat7") and not _interface_here("hapticop-esc7")
+    assert os.readlink("/proc/thread-self/ns/net") == home
 
 
 # --- the watchdog's recovery, with the runtime --------------------------------------------
@@ -251,3 +264,40 @@ def test_the_run_ends_cleanly_with_every_slave_in_init(recovery_run):
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert seen["final_states"] == [1] * 7
     assert "EtherCAT segment back in INIT" in (run / "ethercat.log").read_text()
+
+
+# --- the command line -----------------------------------------------------------------------
+
+def _hapticop(*args, timeout=120):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "hapticop.cli", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_the_sandbox_command_runs_a_command_beside_the_emulator_and_passes_its_status():
+    probe = ("import socket, subprocess, sys; "
+             "socket.if_nametoindex('hapticop-ecat0'); "
+             "out = subprocess.run([sys.executable, '-m', 'hapticop.cli', 'ethercat', 'fault', 'status'], "
+             "capture_output=True, text=True).stdout; "
+             "assert '\"name\": \"SWMC\"' in out, out; sys.exit(3)")
+    import sys
+
+    done = _hapticop("ethercat", "sandbox", "--", sys.executable, "-c", probe)
+    assert done.returncode == 3, done.stderr
+    assert not _interface_here("hapticop-ecat0")
+
+
+def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
+    done = _hapticop("ethercat", "sandbox", "--", "hapticop-compose-placeholder")
+    assert done.returncode == 127 and "no such command" in done.stderr
+    import sys
+
+    run = tmp_path / "run"
+    done = _hapticop("ethercat", "sandbox", "--", sys.executable, "-m", "hapticop.cli", "compose",
+                     "systems/hallway_ethercat.yaml", "--duration", "4s", "--run-dir", str(run))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "in OP: EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC" in (run / "ethercat.log").read_text()
+    assert "back in INIT" in (run / "ethercat.log").read_text()
+    assert "all 7 slaves operational" in (run / "ethercat_watchdog.log").read_text()

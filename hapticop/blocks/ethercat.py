@@ -56,6 +56,8 @@ class EthercatMasterParams(Params):
         default_factory=_ropod_segment, description="expected slaves in bus order"
     )
     receive_timeout_us: int = Field(2000, ge=100, le=100_000, description="how long a cycle waits for its frame")
+    frame_timeout_us: int = Field(2000, ge=100, le=100_000, description="how long a configuration datagram "
+                                  "may take at bring-up and recovery (SOEM's EC_TIMEOUTRET)")
     start_timeout_s: float = Field(5.0, gt=0, description="bring-up to OP and the wheels' encoders ready, at most")
 
     @property
@@ -115,7 +117,8 @@ class EthercatMaster(Block):
             self.rx = self.inputs.wheel_commands.value
             self.tx = self.outputs.wheel_sensors.value
             self.rx.fill(0)  # drives disabled, zero setpoints: what the wheels get until the controller runs
-            self.master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s)
+            self.master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s,
+                                     p.frame_timeout_us)
             self.started_ns = self.clock.now_ns()
             self.master.open()
             try:

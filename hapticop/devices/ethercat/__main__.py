@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from pathlib import Path
@@ -17,7 +18,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--control", type=Path, help="Unix socket for faults and status (JSON lines)")
     parser.add_argument("--truth", type=Path, help="file the robot's true pose is published to (in /dev/shm)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the simulated robot's noise")
+    parser.add_argument("--priority", type=int, default=0,
+                        help="SCHED_FIFO priority (1-98): hardware answers in microseconds whatever the CPU is doing")
     args = parser.parse_args(argv)
+    if args.priority:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
+        except OSError as error:
+            print(f"note: runs without real-time priority ({error.strerror})", file=sys.stderr)
     from hapticop.devices.ethercat.ropod import RopodSegment
     from hapticop.devices.ethercat.server import FrameServer
 

@@ -55,11 +55,13 @@ def find_master(interface: str) -> "SoemMaster | None":
 
 class SoemMaster:
     def __init__(self, interface: str, expected: Sequence[ExpectedSlave], receive_timeout_us: int = 2000,
-                 state_timeout_s: float = 2.0):
+                 state_timeout_s: float = 2.0, frame_timeout_us: int | None = None):
         import pysoem
 
         self.pysoem = pysoem
         pysoem.settings.always_release_gil = True
+        if frame_timeout_us is not None:  # SOEM's EC_TIMEOUTRET: how long a configuration datagram may take
+            pysoem.settings.timeouts.ret = frame_timeout_us
         self.interface = interface
         self.expected = list(expected)
         self.receive_timeout_us = receive_timeout_us

@@ -91,12 +91,16 @@ class RopodSegment:
             return
         dt = min(max(now_ns - self.last_step_ns, 0) / 1e9, self.max_step_s)
         self.last_step_ns = now_ns
+        live = False
         for i, wheel in enumerate(self.wheels):
             buffer = wheel.output_buffer() if wheel.outputs_live else None
             if buffer is None:
                 self.rx[i] = 0  # drive disabled: the firmware's safe state
             else:
                 self.rx[i] = np.frombuffer(buffer, np.uint8)
+                live = True
+        if not live and not self.plant.twist.any():
+            return  # at rest with every drive off, the robot stays at rest: nothing to integrate
         if dt > 0:
             self.plant.step(self.rx, dt, self.tx)
         self._publish_sensors()

@@ -74,8 +74,9 @@ class Sandbox:
     """
 
     def __init__(self, interface: str = MASTER_INTERFACE, peer: str = EMULATOR_INTERFACE, emulator: bool = True,
-                 seed: int = 0, truth: Path | None = None):
+                 seed: int = 0, truth: Path | None = None, priority: int = 45):
         self.interface, self.peer, self.start_emulator, self.seed = interface, peer, emulator, seed
+        self.priority = priority  # the emulator stands in for hardware: above the application's threads
         self.truth = truth if truth is not None else truth_path(interface)
         self._dir = tempfile.TemporaryDirectory(prefix="hapticop-ecat-")
         self.control = Path(self._dir.name) / "control.sock"
@@ -110,7 +111,7 @@ class Sandbox:
 
     def _emulator(self) -> None:
         command = [sys.executable, "-m", "hapticop.devices.ethercat", self.peer, "--control", str(self.control),
-                   "--truth", str(self.truth), "--seed", str(self.seed)]
+                   "--truth", str(self.truth), "--seed", str(self.seed), "--priority", str(self.priority)]
         with open(self.log, "wb") as log:
             self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
         from hapticop.devices.ethercat.server import control
