@@ -243,8 +243,13 @@ class EthercatWatchdog(Block):
         now = self.clock.now_ns()
         if self.check.needed() or now - self.last_poll_ns >= self.params.state_poll_ms * 1e6:
             self.last_poll_ns = now
-            self.check.check()
+            self.check.check(on_fault=self._fault_now)
         return not self.check.pending
+
+    def _fault_now(self) -> None:
+        """A slave is below OP: say so before the recovery steps block this thread."""
+        self.flags["slave_fault"] = True
+        self.flags["all_operational"] = False
 
     def compute(self) -> None:
         states, counter = self.inputs.slave_states, self.inputs.working_counter

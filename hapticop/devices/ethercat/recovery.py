@@ -31,28 +31,31 @@ class SlaveCheck:
     def needed(self) -> bool:
         return self.pending or self.master.last_wkc < self.master.expected_wkc
 
-    def check(self) -> bool:
-        """One pass; True when every slave is in OP."""
+    def check(self, on_fault=None) -> bool:
+        """One pass; True when every slave is in OP. `on_fault()` is called as soon as the
+        states show a slave below OP, before the recovery steps (which can take milliseconds)."""
         m = self.master
         with m.lock:
             if not m.opened:
                 return False
             m.master.read_state()
-            all_op = True
+            below = []
             for i, slave in enumerate(m.slaves):
                 state = slave.state
-                name = m.expected[i].name
                 if state != self.previous[i]:
                     code = slave.al_status
                     detail = f" (AL code 0x{code:04X} {m.pysoem.al_status_code_to_string(code)})" if code else ""
-                    self.log(f"{name}: {state_name(self.previous[i])} -> {state_name(state)}{detail}")
+                    self.log(f"{m.expected[i].name}: {state_name(self.previous[i])} -> {state_name(state)}{detail}")
                     self.previous[i] = state
-                if state == AL_OP and not self.lost[i]:
-                    continue
-                all_op = False
-                self._recover(i, slave, name, state)
-            self.pending = not all_op
-            return all_op
+                if state != AL_OP or self.lost[i]:
+                    below.append(i)
+            self.pending = bool(below)
+            if below and on_fault is not None:
+                on_fault()
+            for i in below:
+                slave = m.slaves[i]
+                self._recover(i, slave, m.expected[i].name, slave.state)
+            return not below
 
     def _recover(self, i: int, slave, name: str, state: int) -> None:
         if self.lost[i]:
