@@ -90,7 +90,7 @@ def run(seconds: float, losses: int) -> dict:
     expected = [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
                 for n, p in zip(NAMES, PRODUCTS)]
     with Sandbox() as box:
-        master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=10_000)
+        master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=2000)
         master.open()
         rx, tx = new_rx_image(4), new_tx_image(4)
 

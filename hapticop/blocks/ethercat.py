@@ -201,6 +201,8 @@ class EthercatWatchdogParams(Params):
         "check and recovery on that master, which must be open in this process (deploy both threads as 'thread')")
     state_poll_ms: float = Field(10.0, gt=0, description="read the AL states this often even while the working "
                                  "counter is healthy (an AL error in SAFE-OP keeps it full)")
+    retry_lost_ms: float = Field(100.0, gt=0, description="how often to try to recover a lost slave (each try "
+                                 "holds pysoem's GIL through its timeouts)")
 
 
 class EthercatWatchdog(Block):
@@ -239,7 +241,7 @@ class EthercatWatchdog(Block):
         if self.check is None or self.check.master is not master:
             from hapticop.devices.ethercat.recovery import SlaveCheck
 
-            self.check = SlaveCheck(master, self.log.warning)
+            self.check = SlaveCheck(master, self.log.warning, self.params.retry_lost_ms)
         now = self.clock.now_ns()
         if self.check.needed() or now - self.last_poll_ns >= self.params.state_poll_ms * 1e6:
             self.last_poll_ns = now

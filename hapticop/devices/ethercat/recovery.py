@@ -8,9 +8,16 @@ reconfigured, which leaves it in SAFE-OP for the next check to take to OP. Check
 while any slave is below OP: a reconfigured slave in SAFE-OP returns a full working
 counter, so the counter alone would not show it. Every change of a slave's state is
 reported to `log(message)`.
+
+pysoem holds the GIL through `recover`, `reconfig`, `state_check` and `read_state`, and a
+recovery attempt on a slave that is still gone waits out its timeouts: so a lost slave is
+retried every `retry_lost_ms`, not every cycle, or the exchange thread of the same process
+would starve while the wheel is away.
 """
 
 from __future__ import annotations
+
+import time
 
 from hapticop.devices.ethercat.master import AL_ERROR, AL_NONE, AL_OP, AL_SAFEOP, SoemMaster, state_name
 
@@ -20,9 +27,11 @@ AL_ACK = 0x10
 
 
 class SlaveCheck:
-    def __init__(self, master: SoemMaster, log):
+    def __init__(self, master: SoemMaster, log, retry_lost_ms: float = 100.0):
         self.master = master
         self.log = log
+        self.retry_lost_ns = int(retry_lost_ms * 1e6)
+        self.last_try = [0] * len(master.slaves)
         self.n = len(master.slaves)
         self.previous = [AL_OP] * self.n
         self.lost = [False] * self.n
@@ -60,6 +69,10 @@ class SlaveCheck:
     def _recover(self, i: int, slave, name: str, state: int) -> None:
         if self.lost[i]:
             if state == AL_NONE:
+                now = time.monotonic_ns()
+                if now - self.last_try[i] < self.retry_lost_ns:
+                    return
+                self.last_try[i] = now
                 if slave.recover():
                     self.lost[i] = False
                     self.log(f"{name}: recovered")
