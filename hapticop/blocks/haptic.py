@@ -46,6 +46,7 @@ class HapticController(Block):
     flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running",
                   "robot_held": "the robot is held still (a wheel is not in OP): command no motion"}
     awaits = frozenset({"resources_ready"})
+    optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
     capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
                                    "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor", "braking_field",
                                    "force_model"})
