@@ -27,10 +27,12 @@ SYSTEMS_DIR = Path("systems")
 from hapticop.cli_devices import devices as _devices  # noqa: E402
 from hapticop.cli_devices import falcon as _falcon  # noqa: E402
 from hapticop.cli_devices import lidar as _lidar  # noqa: E402
+from hapticop.cli_ethercat import ethercat as _ethercat  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
+app.add_typer(_ethercat, name="ethercat")
 
 
 class OutputFormat(str, Enum):

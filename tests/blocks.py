@@ -72,3 +72,28 @@ class Recorder(Block):
 
     def clean(self):
         np.savez(self.run_dir / f"{self.name}.npz", samples=self.samples[: self.n], stamps=self.stamps[: self.n])
+
+
+class ConstantTwistParams(Params):
+    twist: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class ConstantTwist(Block):
+    """Commands a constant platform twist, or none while `held` (as the haptic controller does)."""
+
+    Params = ConstantTwistParams
+    outputs = {"velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s")}
+    flags_read = {"held": "command no motion"}
+    changes: list[bool] = []  # every change of `held` seen, for a test in this process to read
+
+    def create(self):
+        self.held = False
+
+    def compute(self):
+        held = bool(self.flags["held"])
+        if held != self.held:
+            self.held = held
+            ConstantTwist.changes.append(held)
+        out = self.outputs.velocity_setpoint
+        out.value[:] = 0.0 if held else self.params.twist
+        out.publish()

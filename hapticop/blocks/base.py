@@ -40,6 +40,8 @@ class Block:
     flags_written: ClassVar[dict[str, str]] = {}
     flags_read: ClassVar[dict[str, str]] = {}
     awaits: ClassVar[frozenset[str]] = frozenset()  # read flags the block waits for: someone must write them
+    # Read flags a composition may leave unbound (they stay false), so validation does not warn.
+    optional_flags: ClassVar[frozenset[str]] = frozenset()
     rate: ClassVar[RateRange | None] = None
     # Parameters a live patch may change with only capability configuration (gains, limits);
     # a change to any other parameter takes the activity through resource configuration.

@@ -3,7 +3,11 @@
 The master exchanges the raw process-data images (168 bytes in, 36 bytes out per wheel,
 packed little endian) every cycle; what the bytes mean is the business of the block that
 reads them. Driver `sim` exchanges them with a simulated ropod and publishes where that
-robot truly is, for the simulated world. The watchdog watches slave states and working counters and raises flags.
+robot truly is, for the simulated world. Driver `pysoem` is the real master (SOEM): it
+brings the segment up to OP against the expected slaves and exchanges real frames, with
+the ropod or with the emulated segment (hapticop.devices.ethercat). The watchdog watches
+slave states and working counters, raises flags, and with pysoem runs SOEM's recovery of
+slaves that left OP on the master of its own process.
 """
 
 from __future__ import annotations
@@ -45,11 +49,16 @@ def _ropod_segment() -> dict[str, SlaveSpec]:
 
 
 class EthercatMasterParams(Params):
-    driver: Literal["sim", "pysoem"] = Field("sim", description="'sim': a simulated ropod in the shared world")
+    driver: Literal["sim", "pysoem"] = Field("sim", description="'sim': a simulated ropod in the shared world; "
+                                              "'pysoem': the SOEM master on `interface`")
     interface: str = Field("hapticop-ecat0", description="network interface of the segment (pysoem driver)")
     slaves: dict[str, SlaveSpec] = Field(
         default_factory=_ropod_segment, description="expected slaves in bus order"
     )
+    receive_timeout_us: int = Field(2000, ge=100, le=100_000, description="how long a cycle waits for its frame")
+    frame_timeout_us: int = Field(2000, ge=100, le=100_000, description="how long a configuration datagram "
+                                  "may take at bring-up and recovery (SOEM's EC_TIMEOUTRET)")
+    start_timeout_s: float = Field(5.0, gt=0, description="bring-up to OP and the wheels' encoders ready, at most")
 
     @property
     def wheels(self) -> int:
@@ -78,9 +87,9 @@ class EthercatMaster(Block):
             rate=RateRange(100.0, 4000.0, "smart-wheel drives expect a steady cycle near 1 kHz"),
         )
 
-    def configure_resources(self) -> None:
+    def configure_resources(self) -> bool:
         if self.params.driver == "pysoem":
-            raise RuntimeError("the pysoem driver is not part of this hapticop yet; use driver: sim")
+            return self._start_pysoem()
         from hapticop.devices.ropod.plant import PlantParams, RopodPlant
 
         self.plant = RopodPlant(PlantParams(), rng=self.rng)  # its pose counts from where it starts
@@ -93,7 +102,68 @@ class EthercatMaster(Block):
         self.outputs.working_counter.value[...] = 3 * self.params.wheels
         return True
 
+    # -- pysoem ---------------------------------------------------------------------------
+    def _start_pysoem(self) -> bool:
+        """First call: open and bring up to OP (blocking, about 0.1 s). Then, exchanging every
+        cycle so no drive's watchdog fires, wait until every wheel reports its encoders ready."""
+        if getattr(self, "master", None) is None:
+            from hapticop.devices.ethercat.master import ExpectedSlave, SoemMaster
+
+            p = self.params
+            expected = [ExpectedSlave(name, spec.product, *((SMARTWHEEL_OUTPUT_BYTES, SMARTWHEEL_INPUT_BYTES)
+                                                             if spec.wheel is not None else (0, 0)))
+                        for name, spec in p.slaves.items()]
+            self.positions = [(spec.wheel, i) for i, spec in enumerate(p.slaves.values()) if spec.wheel is not None]
+            self.rx = self.inputs.wheel_commands.value
+            self.tx = self.outputs.wheel_sensors.value
+            self.rx.fill(0)  # drives disabled, zero setpoints: what the wheels get until the controller runs
+            self.master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s,
+                                     p.frame_timeout_us)
+            self.started_ns = self.clock.now_ns()
+            self.master.open()
+            try:
+                self.master.bring_up(on_safeop=self._write_outputs)
+            except Exception:
+                self.master.close()
+                raise
+            self.log.info("EtherCAT segment on %s in OP: %s; IOmap working counter %d", p.interface,
+                          ", ".join(s.name for s in self.master.slaves), self.master.expected_wkc)
+        self._exchange_pysoem()
+        if self._wheels_ready():
+            self.log.info("all %d wheels report their encoders ready", len(self.positions))
+            return True
+        if self.clock.now_ns() - self.started_ns > self.params.start_timeout_s * 1e9:
+            raise RuntimeError("the smart wheels did not report their encoders ready (ENC_1_OK, ENC_2_OK, "
+                               f"ENC_PIVOT_OK) within {self.params.start_timeout_s} s")
+        return False
+
+    def _wheels_ready(self) -> bool:
+        from hapticop.devices.ropod.pdo import Stat1, txpdo_view
+
+        status = txpdo_view(self.tx)["status1"]
+        return bool(np.all((status & int(Stat1.ENCODERS_OK)) == int(Stat1.ENCODERS_OK)))
+
+    def _write_outputs(self) -> None:
+        for wheel, position in self.positions:
+            self.master.write_outputs(position, self.rx[wheel])
+
+    def _exchange_pysoem(self) -> None:
+        m, out = self.master, self.outputs
+        self._write_outputs()
+        wkc = m.exchange()
+        for wheel, position in self.positions:
+            m.read_inputs(position, self.tx[wheel])
+        m.states(out.slave_states.value)
+        out.working_counter.value[...] = wkc
+        out.wheel_sensors.publish()
+        out.slave_states.publish()
+        out.working_counter.publish()
+        self.flags["operational"] = bool(wkc == m.expected_wkc and np.all(out.slave_states.value == AL_OP))
+
     def compute(self) -> None:
+        if self.params.driver == "pysoem":
+            self._exchange_pysoem()
+            return
         now = self.clock.now_ns()
         dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9  # a late cycle is not a leap in time
         self.last_ns = now
@@ -111,12 +181,28 @@ class EthercatMaster(Block):
 
     def clean(self) -> None:
         self.flags["operational"] = False
+        master = getattr(self, "master", None)
+        if master is not None:
+            self.rx.fill(0)
+            self._write_outputs()  # drives disabled before the slaves leave OP
+            master.exchange()
+            master.close()
+            self.master = None
+            self.log.info("EtherCAT segment back in INIT, %s closed", self.params.interface)
 
 
 class EthercatWatchdogParams(Params):
     slaves: int = Field(7, ge=1, description="slaves on the segment, as the master sees them")
     expected_working_counter: int = Field(12, ge=1, description="working counter of a healthy exchange")
-    lost_after_cycles: int = Field(10, ge=1, description="cycles without new process data before it counts as lost")
+    lost_after_cycles: int = Field(10, ge=1, description="cycles without new process data, or with a short working "
+                                   "counter, before it counts as a fault (one late frame is not a lost wheel)")
+    interface: str | None = Field(
+        None, description="with the pysoem driver: the master's interface; the watchdog then runs SOEM's slave "
+        "check and recovery on that master, which must be open in this process (deploy both threads as 'thread')")
+    state_poll_ms: float = Field(10.0, gt=0, description="read the AL states this often even while the working "
+                                 "counter is healthy (an AL error in SAFE-OP keeps it full)")
+    retry_lost_ms: float = Field(100.0, gt=0, description="how often to try to recover a lost slave (each try "
+                                 "holds pysoem's GIL through its timeouts)")
 
 
 class EthercatWatchdog(Block):
@@ -139,20 +225,49 @@ class EthercatWatchdog(Block):
 
     def create(self) -> None:
         self.stale_cycles = 0
+        self.short_cycles = 0
         self.healthy = False
+        self.check = None
+        self.last_poll_ns = 0
+
+    def _recover(self) -> bool:
+        """SOEM's check on the master of this process: True while every slave is in OP."""
+        from hapticop.devices.ethercat.master import find_master
+
+        master = find_master(self.params.interface)
+        if master is None or not master.up:
+            self.check = None
+            return False
+        if self.check is None or self.check.master is not master:
+            from hapticop.devices.ethercat.recovery import SlaveCheck
+
+            self.check = SlaveCheck(master, self.log.warning, self.params.retry_lost_ms)
+        now = self.clock.now_ns()
+        if self.check.needed() or now - self.last_poll_ns >= self.params.state_poll_ms * 1e6:
+            self.last_poll_ns = now
+            self.check.check(on_fault=self._fault_now)
+        return not self.check.pending
+
+    def _fault_now(self) -> None:
+        """A slave is below OP: say so before the recovery steps block this thread."""
+        self.flags["slave_fault"] = True
+        self.flags["all_operational"] = False
 
     def compute(self) -> None:
         states, counter = self.inputs.slave_states, self.inputs.working_counter
         self.stale_cycles = 0 if states.fresh else self.stale_cycles + 1
-        healthy = (states.seq > 0 and self.stale_cycles < self.params.lost_after_cycles
-                   and bool(np.all(states.value == AL_OP))
-                   and int(counter.value) == self.params.expected_working_counter)
+        in_op = self._recover() if self.params.interface else True
+        short = int(counter.value) != self.params.expected_working_counter
+        self.short_cycles = self.short_cycles + 1 if short else 0
+        healthy = (in_op and states.seq > 0 and self.stale_cycles < self.params.lost_after_cycles
+                   and bool(np.all(states.value == AL_OP)) and self.short_cycles < self.params.lost_after_cycles)
         if healthy != self.healthy:
             if healthy:
                 self.log.info("all %d slaves operational", self.params.slaves)
             else:
-                self.log.warning("slave fault: states %s, working counter %d, %d cycles without process data",
-                                 states.value.tolist(), int(counter.value), self.stale_cycles)
+                self.log.warning("slave fault: states %s, working counter %d (%d cycles short), "
+                                 "%d cycles without process data", states.value.tolist(), int(counter.value),
+                                 self.short_cycles, self.stale_cycles)
             self.healthy = healthy
         self.flags["all_operational"] = healthy
         self.flags["slave_fault"] = not healthy and states.seq > 0

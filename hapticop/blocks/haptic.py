@@ -43,8 +43,10 @@ class HapticControllerParams(Params):
 
 class HapticController(Block):
     Params = HapticControllerParams
-    flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running"}
+    flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running",
+                  "robot_held": "the robot is held still (a wheel is not in OP): command no motion"}
     awaits = frozenset({"resources_ready"})
+    optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
     capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
                                    "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor", "braking_field",
                                    "force_model"})
@@ -96,6 +98,8 @@ class HapticController(Block):
         self.pd.compute(p_in.handle_position.value, out.force.value, p_in.handle_velocity.value,
                         out.environment_force.value)
         handle_to_twist(p_in.handle_position.value, out.velocity_setpoint.value, self.driving)
+        if self.flags["robot_held"]:
+            out.velocity_setpoint.value[:] = 0.0
         if self.params.governor and p_in.ranges.valid:
             govern_twist(out.velocity_setpoint.value, self.filter.out, self.beams, out.velocity_setpoint.value,
                          self.governor)

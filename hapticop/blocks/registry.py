@@ -20,6 +20,7 @@ BUILTIN: dict[str, str] = {
     "ethercat_master": "hapticop.blocks.ethercat:EthercatMaster",
     "ethercat_watchdog": "hapticop.blocks.ethercat:EthercatWatchdog",
     "ropod_controller": "hapticop.blocks.ropod:RopodController",
+    "ropod_truth": "hapticop.blocks.ropod_truth:RopodTruth",
     "haptic_controller": "hapticop.blocks.haptic:HapticController",
     "hallway_world": "hapticop.blocks.world:HallwayWorld",
     "counter": "hapticop.blocks.basic:Counter",

@@ -117,7 +117,9 @@ def flags(cg: G.CompositionGraph) -> Check:
                 and not name.split(".")[1] == "lcsm" and not coordination_broken:
             activity_name, flag_name = name.split(".", 1)
             resolved = cg.loaded.activities.get(activity_name)
-            if resolved is not None and flag_name in resolved.block.awaits:
+            if resolved is not None and flag_name in resolved.block.optional_flags:
+                pass  # the block reads it only where there is something to say (see its declaration)
+            elif resolved is not None and flag_name in resolved.block.awaits:
                 yield Diagnostic("flag-no-writer", f"activity '{activity_name}' waits for flag '{name}' but no flag "
                                  "map writes it, so it would wait for ever", ("activities", activity_name),
                                  hint=f"add a sink for '{name}' to a flag map")

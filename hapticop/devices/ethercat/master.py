@@ -1,0 +1,182 @@
+"""An EtherCAT master over pysoem (SOEM): bring-up, cyclic exchange, shutdown.
+
+Bring-up is SOEM's: open the interface, `config_init` (find and name the slaves from
+their SII), check them against the expected list by product code and order, `config_map`
+(build the IOmap, program SMs and FMMUs), SAFE-OP, then OP while exchanging process data
+so the outputs are valid before any drive is enabled. The exchange moves raw images:
+outputs are length-checked before they are written (pysoem's setter copies without
+checking, and would run into the next slave's outputs). `always_release_gil` is set so
+the other threads of the process run while SOEM waits on the wire; `config_map`,
+`read_state`, `state_check`, `reconfig` and `recover` still hold the GIL.
+Masters opened here are found by interface, so the watchdog of the same process can act on
+the same SOEM context, as SOEM's own check thread does.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["ExpectedSlave", "SoemMaster", "BringUpError", "find_master", "AL_OP", "AL_SAFEOP", "AL_INIT", "state_name"]
+
+AL_NONE, AL_INIT, AL_PREOP, AL_BOOT, AL_SAFEOP, AL_OP, AL_ERROR = 0x00, 0x01, 0x02, 0x03, 0x04, 0x08, 0x10
+_NAMES = {AL_NONE: "NONE", AL_INIT: "INIT", AL_PREOP: "PRE-OP", AL_BOOT: "BOOT", AL_SAFEOP: "SAFE-OP", AL_OP: "OP"}
+
+
+def state_name(state: int) -> str:
+    base = _NAMES.get(state & 0x0F, f"0x{state & 0x0F:02X}")
+    return base + ("+ERR" if state & AL_ERROR else "")
+
+
+class BringUpError(RuntimeError):
+    """The segment could not be brought up; the message says which step and which slave."""
+
+
+@dataclass(frozen=True)
+class ExpectedSlave:
+    name: str  # hapticop's name for it (for messages)
+    product: int
+    output_bytes: int = 0
+    input_bytes: int = 0
+
+
+_masters: dict[str, "SoemMaster"] = {}
+_lock = threading.Lock()
+
+
+def find_master(interface: str) -> "SoemMaster | None":
+    """The master open on `interface` in this process, if any."""
+    return _masters.get(interface)
+
+
+class SoemMaster:
+    def __init__(self, interface: str, expected: Sequence[ExpectedSlave], receive_timeout_us: int = 2000,
+                 state_timeout_s: float = 2.0, frame_timeout_us: int | None = None):
+        import pysoem
+
+        self.pysoem = pysoem
+        pysoem.settings.always_release_gil = True
+        if frame_timeout_us is not None:  # SOEM's EC_TIMEOUTRET: how long a configuration datagram may take
+            pysoem.settings.timeouts.ret = frame_timeout_us
+        self.interface = interface
+        self.expected = list(expected)
+        self.receive_timeout_us = receive_timeout_us
+        self.state_timeout_s = state_timeout_s
+        self.master = pysoem.Master()
+        self.slaves: list = []
+        self.expected_wkc = 0
+        # SOEM lets a check thread work beside the exchange (its port has its own locks), so the
+        # exchange takes no lock; this one keeps the watchdog's recovery and close apart.
+        self.lock = threading.Lock()
+        self.opened = False
+        self.last_wkc = 0
+        self.up = False  # in OP once: the watchdog may act on it
+
+    # --- bring-up ------------------------------------------------------------------------
+    def open(self) -> None:
+        with _lock:
+            if self.interface in _masters:
+                raise BringUpError(f"a master is already open on '{self.interface}' in this process")
+            try:
+                self.master.open(self.interface)
+            except ConnectionError as error:
+                raise BringUpError(f"cannot open EtherCAT interface '{self.interface}': {error} "
+                                   "(does it exist, and is this process root?)") from None
+            _masters[self.interface] = self
+            self.opened = True
+
+    def bring_up(self, on_safeop=None) -> None:
+        """Up to OP, or BringUpError naming the step. `on_safeop()` writes safe outputs."""
+        found = self.master.config_init()
+        if found <= 0:  # SOEM returns -1, not 0, when nothing answers
+            raise BringUpError(f"no EtherCAT slave answers on '{self.interface}'")
+        self.slaves = list(self.master.slaves)
+        self._check_slaves()
+        self.master.config_map()
+        self.expected_wkc = self.master.expected_wkc
+        for slave, spec in zip(self.slaves, self.expected):
+            if len(slave.output) != spec.output_bytes or len(slave.input) != spec.input_bytes:
+                raise BringUpError(f"slave {spec.name} ({slave.name}) maps {len(slave.output)} output and "
+                                   f"{len(slave.input)} input bytes; expected {spec.output_bytes} and {spec.input_bytes}")
+        if self.master.state_check(AL_SAFEOP, 50_000) != AL_SAFEOP:
+            self.master.read_state()
+            raise BringUpError("not every slave reached SAFE-OP: " + self.describe_states())
+        if on_safeop is not None:
+            on_safeop()
+        self.master.state = AL_OP
+        self.exchange()  # valid outputs before the request, as SOEM's examples do
+        self.master.write_state()
+
+        deadline = time.monotonic() + self.state_timeout_s
+        while time.monotonic() < deadline:
+            self.exchange()
+            if self.master.state_check(AL_OP, 1000) == AL_OP:
+                self.up = True
+                return
+        self.master.read_state()
+        raise BringUpError("not every slave reached OP: " + self.describe_states())
+
+    def _check_slaves(self) -> None:
+        found = [(s.name, s.id) for s in self.slaves]
+        if len(found) != len(self.expected):
+            listing = ", ".join(f"{n} 0x{p:08X}" for n, p in found)
+            raise BringUpError(f"found {len(found)} slaves on '{self.interface}', expected {len(self.expected)} "
+                               f"({', '.join(e.name for e in self.expected)}): {listing}")
+        for position, ((name, product), spec) in enumerate(zip(found, self.expected)):
+            if product != spec.product:
+                raise BringUpError(f"slave {position} is {name} with product code 0x{product:08X}; "
+                                   f"expected {spec.name} with product code 0x{spec.product:08X}")
+
+    # --- the cycle -----------------------------------------------------------------------
+    def exchange(self) -> int:
+        """One send/receive of the process data; the working counter, or -1 if no frame came back."""
+        self.master.send_processdata()
+        self.last_wkc = self.master.receive_processdata(self.receive_timeout_us)
+        return self.last_wkc
+
+    def write_outputs(self, position: int, image: np.ndarray) -> None:
+        """A slave's outputs from a uint8 row, refused if its length is not the slave's."""
+        slave = self.slaves[position]
+        spec = self.expected[position]
+        if image.nbytes != spec.output_bytes:
+            raise ValueError(f"outputs of {spec.name} are {spec.output_bytes} bytes, got {image.nbytes}")
+        slave.output = image.tobytes()
+
+    def read_inputs(self, position: int, out: np.ndarray) -> None:
+        data = self.slaves[position].input
+        if len(data) != out.nbytes:
+            raise ValueError(f"inputs of {self.expected[position].name} are {len(data)} bytes, buffer {out.nbytes}")
+        out[:] = np.frombuffer(data, np.uint8)
+
+    def states(self, out: np.ndarray) -> None:
+        """Each slave's AL state as SOEM last read it (the watchdog reads them)."""
+        for i, slave in enumerate(self.slaves):
+            out[i] = slave.state
+
+    def describe_states(self) -> str:
+        return ", ".join(f"{spec.name} {state_name(s.state)}" + (f" (AL code 0x{s.al_status:04X} "
+                         f"{self.pysoem.al_status_code_to_string(s.al_status)})" if s.al_status else "")
+                         for s, spec in zip(self.slaves, self.expected))
+
+    # --- shutdown ------------------------------------------------------------------------
+    def close(self) -> None:
+        """Every slave back to INIT, then the interface closed."""
+        if not self.opened:
+            return
+        self.up = False
+        with _lock:
+            if _masters.get(self.interface) is self:
+                del _masters[self.interface]  # the watchdog lets go of it
+        with self.lock:
+            try:
+                if self.slaves:
+                    self.master.state = AL_INIT
+                    self.master.write_state()
+                    self.master.state_check(AL_INIT, 500_000)
+            finally:
+                self.master.close()
+                self.opened = False

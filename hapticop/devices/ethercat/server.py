@@ -1,0 +1,190 @@
+"""The emulated segment on a network interface: raw EtherCAT frames in, processed frames out.
+
+One process, one loop: receive a frame of EtherType 0x88A4 on the interface (an AF_PACKET
+socket does not see its own transmissions, so a veth peer is a wire), let the segment
+process it, send it back; between frames, expire watchdogs and step the robot's physics
+about every millisecond, and publish where the robot is. It must not share a process with
+pysoem, which holds the GIL inside several of its calls.
+
+Faults arrive over a Unix socket as JSON lines and run between two frames:
+`{"op": "lose", "slave": 5}` (power off / cable cut), `restore` (back, freshly powered),
+`al_error` with a `code` (and `hold_ms`: the cause persists that long), `trip_watchdog`, `late` (`delay_us` for the next `frames`
+frames), `physics` (`run`: false freezes the robot, so its sensors stay put), `status`
+(states, codes, the wheels' process-data buffers in hex, the robot's pose), `ping`, `stop`.
+Slaves are named by bus position, 0-based.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import select
+import socket
+import threading
+import time
+from pathlib import Path
+
+from hapticop.devices.ethercat.ropod import RopodSegment
+from hapticop.devices.ethercat.segment import ETHERTYPE
+from hapticop.devices.ethercat.truth import TruthWriter
+
+__all__ = ["FrameServer", "control"]
+
+STEP_NS = 1_000_000
+
+
+class FrameServer:
+    def __init__(self, interface: str, model: RopodSegment, control_path: Path | None = None,
+                 truth_path: Path | None = None, log=print):
+        self.interface, self.model = interface, model
+        self.control_path = Path(control_path) if control_path else None
+        self.truth_path = Path(truth_path) if truth_path else None
+        self.log = log
+        self.requests: queue.SimpleQueue = queue.SimpleQueue()
+        self.running = True
+        self.late_us = 0
+        self.late_frames = 0
+        self.physics = True
+        self.started_ns = 0
+
+    # --- the loop ----------------------------------------------------------------------
+    def run(self) -> None:
+        sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETHERTYPE))
+        try:
+            sock.bind((self.interface, ETHERTYPE))
+        except OSError as error:
+            sock.close()
+            raise OSError(f"cannot open EtherCAT interface '{self.interface}': {error}") from None
+        truth = TruthWriter(self.truth_path) if self.truth_path else None
+        listener = self._listen() if self.control_path else None
+        buffer = bytearray(1518)
+        view = memoryview(buffer)
+        model, segment = self.model, self.model.segment
+        self.started_ns = now = time.monotonic_ns()
+        next_step = now
+        self.log(f"emulated segment on {self.interface}: {', '.join(s.name for s in model.slaves)}")
+        try:
+            while self.running:
+                wait = max(next_step - time.monotonic_ns(), 0) / 1e9
+                ready, _, _ = select.select([sock], [], [], wait)
+                now = time.monotonic_ns()
+                if ready:
+                    n = sock.recv_into(buffer)
+                    if n > 16 and buffer[12] == 0x88 and buffer[13] == 0xA4 and segment.process(view[14:n], now):
+                        buffer[6] |= 0x02  # an ESC marks the source address of a frame it returns
+                        if self.late_frames:
+                            self.late_frames -= 1
+                            time.sleep(self.late_us / 1e6)
+                        sock.send(view[:n])
+                if now >= next_step:
+                    model.tick(now)
+                    if self.physics:
+                        model.step(now)
+                    if truth is not None:
+                        truth.write((now - self.started_ns) / 1e9, model.plant.pose, model.plant.twist)
+                    next_step = max(next_step + STEP_NS, now)
+                while not self.requests.empty():
+                    request, reply = self.requests.get_nowait()
+                    reply.put(self._handle(request))
+        finally:
+            sock.close()
+            if truth is not None:
+                truth.close()
+            if listener is not None:
+                listener.close()
+                self.control_path.unlink(missing_ok=True)
+
+    # --- faults and status -------------------------------------------------------------
+    def _slave(self, request: dict):
+        position = int(request["slave"])
+        if not 0 <= position < len(self.model.slaves):
+            raise ValueError(f"no slave at position {position} (0-{len(self.model.slaves) - 1})")
+        return self.model.slaves[position]
+
+    def _handle(self, request: dict) -> dict:
+        try:
+            op = request.get("op")
+            if op == "ping":
+                return {"ok": True, "frames": self.model.segment.frames}
+            if op == "status":
+                return {"ok": True, "frames": self.model.segment.frames, "slaves": [
+                    {"name": s.name, "present": s.present, "state": s.state, "al_status": s.al_status,
+                     "al_code": s.al_code, "station": s.station, "watchdog_ns": s.watchdog_ns()}
+                    for s in self.model.slaves],
+                    "outputs": [bytes(w.output_buffer() or b"").hex() for w in self.model.wheels],
+                    "inputs": [bytes(w.input_buffer() or b"").hex() for w in self.model.wheels],
+                    "pose": self.model.plant.pose.tolist(), "twist": self.model.plant.twist.tolist()}
+            if op == "lose":
+                self._slave(request).present = False
+            elif op == "restore":
+                slave = self._slave(request)
+                slave.power_on()
+                slave.present = True
+            elif op == "al_error":
+                hold_ns = int(float(request.get("hold_ms", 0)) * 1e6)
+                self._slave(request).raise_error(int(request["code"]), until_ns=time.monotonic_ns() + hold_ns)
+            elif op == "trip_watchdog":
+                self._slave(request).trip_watchdog()
+            elif op == "late":
+                self.late_us, self.late_frames = int(request["delay_us"]), int(request["frames"])
+            elif op == "physics":
+                self.physics = bool(request["run"])
+                self.model.last_step_ns = None  # no leap in time when it runs again
+            elif op == "stop":
+                self.running = False
+            else:
+                raise ValueError(f"unknown operation {op!r}")
+            self.log(f"fault: {json.dumps(request)}")
+            return {"ok": True}
+        except (KeyError, ValueError, TypeError) as error:
+            return {"ok": False, "error": str(error)}
+
+    def _listen(self) -> socket.socket:
+        self.control_path.unlink(missing_ok=True)
+        listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        listener.bind(str(self.control_path))
+        os.chmod(self.control_path, 0o600)
+        listener.listen(4)
+        threading.Thread(target=self._serve, args=(listener,), daemon=True, name="ecat-control").start()
+        return listener
+
+    def _serve(self, listener: socket.socket) -> None:
+        while self.running:
+            try:
+                connection, _ = listener.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._client, args=(connection,), daemon=True).start()
+
+    def _client(self, connection: socket.socket) -> None:
+        with connection, connection.makefile("rw") as stream:
+            for line in stream:
+                try:
+                    request = json.loads(line)
+                except json.JSONDecodeError as error:
+                    answer = {"ok": False, "error": f"not JSON: {error}"}
+                else:
+                    reply: queue.SimpleQueue = queue.SimpleQueue()
+                    self.requests.put((request, reply))
+                    try:
+                        answer = reply.get(timeout=5.0)
+                    except queue.Empty:
+                        answer = {"ok": False, "error": "the emulator loop did not answer"}
+                stream.write(json.dumps(answer) + "\n")
+                stream.flush()
+
+
+def control(path: Path, request: dict, timeout: float = 5.0) -> dict:
+    """Send one request to a running emulator's control socket and return its answer."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+        sock.settimeout(timeout)
+        sock.connect(str(path))
+        sock.sendall((json.dumps(request) + "\n").encode())
+        answer = b""
+        while not answer.endswith(b"\n"):
+            chunk = sock.recv(65536)
+            if not chunk:
+                raise ConnectionError(f"the emulator at {path} closed the connection")
+            answer += chunk
+    return json.loads(answer)

@@ -1,0 +1,222 @@
+"""The emulated ESC and segment, frame by frame, without a network (no root needed).
+
+A tiny master here builds datagrams byte by byte from the EtherCAT layout, so the emulator
+is checked against the protocol, not against itself.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from hapticop.devices.ethercat.esc import AL_CODE_INVALID_OUTPUT_CONFIG, AL_CODE_INVALID_STATE_CHANGE
+from hapticop.devices.ethercat.ropod import EK1100, EK1122, SWMC, RopodSegment
+from hapticop.devices.ethercat.truth import TruthReader, TruthWriter
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, rxpdo_view
+
+from .conftest import SHARED_TESTDATA
+
+APRD, APWR, FPRD, FPWR, BRD, BWR, LRW = 1, 2, 4, 5, 7, 8, 12
+NS = 1_000_000
+
+
+def frame(*datagrams) -> bytearray:
+    """An EtherCAT payload (after the EtherType) of (cmd, adp, ado, data) datagrams."""
+    body = bytearray()
+    for i, (cmd, adp, ado, data) in enumerate(datagrams):
+        more = 0x8000 if i + 1 < len(datagrams) else 0
+        body += struct.pack("<BBHHHH", cmd, i, adp, ado, len(data) | more, 0) + bytes(data) + b"\0\0"
+    return bytearray(struct.pack("<H", len(body) | 0x1000)) + body
+
+
+def answers(payload: bytearray) -> list[tuple[bytes, int]]:
+    """(data, working counter) of each datagram."""
+    out, at = [], 2
+    while at < len(payload):
+        length = struct.unpack_from("<H", payload, at + 6)[0]
+        size = length & 0x07FF
+        out.append((bytes(payload[at + 10:at + 10 + size]), struct.unpack_from("<H", payload, at + 10 + size)[0]))
+        if not length & 0x8000:
+            break
+        at += 12 + size
+    return out
+
+
+def send(seg: RopodSegment, *datagrams, now=0):
+    payload = frame(*datagrams)
+    assert seg.segment.process(memoryview(payload), now)
+    return answers(payload)
+
+
+def u16(v):
+    return struct.pack("<H", v)
+
+
+@pytest.fixture
+def seg():
+    return RopodSegment(rng=np.random.default_rng(0))
+
+
+def address(seg):
+    """Station addresses 0x1001.. by position, as SOEM gives them."""
+    for position in range(7):
+        send(seg, (APWR, (-position) & 0xFFFF, 0x0010, u16(0x1001 + position)))
+
+
+def eeprom_read(seg, station, word) -> bytes:
+    send(seg, (FPWR, station, 0x0502, struct.pack("<HI", 0x0100, word)))
+    return send(seg, (FPRD, station, 0x0508, bytes(8)))[0][0]
+
+
+def request(seg, station, state, now=0):
+    send(seg, (FPWR, station, 0x0120, u16(state)), now=now)
+    data, _ = send(seg, (FPRD, station, 0x0130, bytes(6)), now=now)[0]
+    return data[0], struct.unpack_from("<H", data, 4)[0]
+
+
+def test_a_broadcast_read_counts_the_slaves_and_positions_address_them(seg):
+    (data, wkc), = send(seg, (BRD, 0, 0x0000, bytes(2)))
+    assert wkc == 7 and data[0] == 0x11
+    address(seg)
+    stations = [struct.unpack("<H", send(seg, (APRD, (-p) & 0xFFFF, 0x0010, bytes(2)))[0][0])[0] for p in range(7)]
+    assert stations == [0x1001 + p for p in range(7)]
+    assert send(seg, (FPRD, 0x1004, 0x0010, bytes(2)))[0] == (u16(0x1004), 1)
+    assert send(seg, (FPRD, 0x2000, 0x0010, bytes(2)))[0][1] == 0  # nobody there
+
+
+def test_the_sii_identifies_each_slave_through_the_eeprom_registers(seg):
+    address(seg)
+    products = [struct.unpack_from("<I", eeprom_read(seg, 0x1001 + p, 0x0A))[0] for p in range(7)]
+    assert products == [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
+    vendor = struct.unpack_from("<I", eeprom_read(seg, 0x1001, 0x08))[0]
+    assert vendor == 2  # Beckhoff
+    assert eeprom_read(seg, 0x1003, 0x18)[:4] == bytes(4)  # no mailbox on the wheels here
+
+
+def _categories(eeprom: bytes) -> dict[int, bytes]:
+    out, at = {}, 0x80
+    while True:
+        kind, words = struct.unpack_from("<HH", eeprom, at)
+        if kind == 0xFFFF:
+            return out
+        out[kind] = eeprom[at + 4:at + 4 + 2 * words]
+        at += 4 + 2 * words
+
+
+def test_the_wheel_sii_categories_describe_the_ropod_pdo_layout(seg):
+    cats = _categories(bytes(seg.wheels[0].eeprom))
+    strings = cats[10]
+    assert strings[0] >= 1 and strings[2:2 + strings[1]] == b"SWMC"  # string 1 is the name
+    assert cats[30][3] == 1  # general: name index
+    assert list(cats[40][:2]) == [1, 2]  # FMMU 0 outputs, FMMU 1 inputs
+    sms = [struct.unpack_from("<HHBBBB", cats[41], 8 * i) for i in range(2)]
+    assert sms == [(0x1000, RXPDO_BYTES, 0x64, 0, 1, 3), (0x1100, TXPDO_BYTES, 0x20, 0, 1, 4)]
+    for kind, sm, nbytes, entries in ((51, 0, RXPDO_BYTES, 9), (50, 1, TXPDO_BYTES, 40)):
+        index, count, sync = struct.unpack_from("<HBB", cats[kind])
+        bits = sum(cats[kind][8 + 8 * i + 5] for i in range(count))
+        assert (count, sync, bits) == (entries, sm, 8 * nbytes)
+
+
+def test_the_pdo_layout_matches_the_shared_data(seg):
+    path = SHARED_TESTDATA / "ethercat" / "ropod_smartwheel_pdo.json"
+    if not path.exists():
+        pytest.skip("../shared/testdata is not here; the sizes are checked above")
+    spec = json.loads(path.read_text())
+    cats = _categories(bytes(seg.wheels[0].eeprom))
+    fields = spec["txpdo_inputs_slave_to_master"]["fields"]
+    assert [cats[50][8 + 8 * i + 5] for i in range(len(fields))] == [8 * f["size"] for f in fields]
+
+
+def test_the_al_state_machine_refuses_illegal_requests_until_acknowledged(seg):
+    address(seg)
+    assert request(seg, 0x1003, 0x08) == (0x01 | 0x10, AL_CODE_INVALID_STATE_CHANGE)  # INIT -> OP
+    assert request(seg, 0x1003, 0x02) == (0x11, AL_CODE_INVALID_STATE_CHANGE)  # ignored: not acknowledged
+    assert request(seg, 0x1003, 0x12) == (0x02, 0)  # PRE-OP with ACK
+    assert request(seg, 0x1003, 0x04) == (0x02 | 0x10, AL_CODE_INVALID_OUTPUT_CONFIG)  # no SM programmed
+
+
+def program_wheel(seg, station, logical_out, logical_in):
+    """What SOEM's config_map writes: SM0/SM1 from the SII, FMMU0 outputs, FMMU1 inputs."""
+    send(seg, (FPWR, station, 0x0800, struct.pack("<HHBBBB", 0x1000, RXPDO_BYTES, 0x64, 0, 1, 0)),
+         (FPWR, station, 0x0808, struct.pack("<HHBBBB", 0x1100, TXPDO_BYTES, 0x20, 0, 1, 0)),
+         (FPWR, station, 0x0600, struct.pack("<IHBBHBBB3x", logical_out, RXPDO_BYTES, 0, 7, 0x1000, 0, 2, 1)),
+         (FPWR, station, 0x0610, struct.pack("<IHBBHBBB3x", logical_in, TXPDO_BYTES, 0, 7, 0x1100, 0, 1, 1)))
+
+
+def bring_up(seg):
+    address(seg)
+    send(seg, (BWR, 0, 0x0120, u16(0x12)))  # PRE-OP with ACK, every slave
+    for n, position in enumerate((2, 3, 5, 6)):
+        station = 0x1001 + position
+        program_wheel(seg, station, n * (RXPDO_BYTES + TXPDO_BYTES), n * (RXPDO_BYTES + TXPDO_BYTES) + RXPDO_BYTES)
+    send(seg, (BWR, 0, 0x0120, u16(0x04)))
+    send(seg, (BWR, 0, 0x0120, u16(0x08)))
+
+
+def test_lrw_moves_the_images_through_the_fmmus_with_working_counter_three_per_wheel(seg):
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    (_, wkc), = send(seg, (LRW, 0, 0, bytes(size)))
+    assert wkc == 0  # nothing mapped in INIT
+    bring_up(seg)
+    assert [s.state for s in seg.slaves] == [8] * 7
+    commands = bytearray(size)
+    commands[0:4] = struct.pack("<HH", int(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_VELOCITY), 0)
+    (data, wkc), = send(seg, (LRW, 0, 0, commands), now=NS)
+    assert wkc == 12
+    assert bytes(seg.wheels[0].output_buffer()) == bytes(commands[:RXPDO_BYTES])
+    assert data[RXPDO_BYTES:RXPDO_BYTES + TXPDO_BYTES] == bytes(seg.wheels[0].input_buffer())
+    seg.step(NS)
+    seg.step(2 * NS)
+    assert rxpdo_view(seg.rx)["command1"][0] == 0x000B  # the live wheel drives with its outputs
+
+
+def test_the_process_data_watchdog_drops_a_wheel_to_safe_op_with_code_0x001b(seg):
+    bring_up(seg)
+    wheel = seg.wheels[1]
+    send(seg, (FPWR, 0x1004, 0x0420, u16(100)))  # 100 x 100 us = 10 ms
+    assert wheel.watchdog_ns() == 10 * NS
+    send(seg, (LRW, 0, 0, bytes(4 * (RXPDO_BYTES + TXPDO_BYTES))), now=NS)
+    seg.tick(NS + 10 * NS)
+    assert wheel.state == 8 and wheel.outputs_live
+    seg.tick(NS + 11 * NS)
+    assert (wheel.al_status, wheel.al_code) == (0x14, 0x001B) and not wheel.outputs_live
+    seg.step(20 * NS)
+    seg.step(21 * NS)
+    assert not seg.rx[1].any()  # its drive gets nothing: the firmware's safe state
+    assert request(seg, 0x1004, 0x14) == (0x04, 0)  # acknowledged back to SAFE-OP
+
+
+def test_a_lost_slave_is_passed_by_and_comes_back_in_init(seg):
+    bring_up(seg)
+    seg.slaves[5].present = False
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 6
+    (_, wkc), = send(seg, (LRW, 0, 0, bytes(4 * (RXPDO_BYTES + TXPDO_BYTES))))
+    assert wkc == 9
+    seg.slaves[5].power_on()
+    seg.slaves[5].present = True
+    assert seg.slaves[5].state == 1 and seg.slaves[5].station == 0  # freshly powered: INIT, no address
+    assert send(seg, (APRD, (-5) & 0xFFFF, 0x0010, bytes(2)))[0] == (u16(0), 1)
+
+
+def test_a_persisting_al_error_cannot_be_acknowledged_until_its_cause_is_gone(seg):
+    bring_up(seg)
+    wheel = seg.wheels[2]
+    wheel.raise_error(0x0032, until_ns=5 * NS)
+    assert request(seg, 0x1006, 0x14, now=4 * NS) == (0x14, 0x0032)
+    assert request(seg, 0x1006, 0x14, now=6 * NS) == (0x04, 0)
+
+
+def test_the_true_pose_is_shared_through_a_file(tmp_path):
+    writer = TruthWriter(tmp_path / "truth")
+    reader = TruthReader(tmp_path / "truth")
+    pose, twist = np.zeros(3), np.zeros(3)
+    assert reader.read(pose, twist) == 0
+    writer.write(1.5, np.array([1.0, 2.0, 0.5]), np.array([0.3, 0.0, 0.1]))
+    assert reader.read(pose, twist) == 2
+    assert pose.tolist() == [1.0, 2.0, 0.5] and twist.tolist() == [0.3, 0.0, 0.1]
+    reader.close()
+    writer.close()
+    assert not (tmp_path / "truth").exists()

@@ -1,0 +1,303 @@
+"""The pysoem master against the emulated ropod segment, over a veth pair in a private namespace.
+
+Unmodified pysoem sends real EtherCAT frames; the emulator (its own process) answers them.
+Needs root for the namespace and raw sockets: without the rights these tests skip, saying so.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from hapticop.devices.ethercat.sandbox import Sandbox, namespace_problem
+
+PROBLEM = namespace_problem()
+pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"EtherCAT over veth: {PROBLEM}")
+
+from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
+from hapticop.devices.ethercat.ropod import EK1100, EK1122, SWMC  # noqa: E402
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES  # noqa: E402
+
+NAMES = ["ek1100", "ek1122_front", "wheel_1", "wheel_2", "ek1122_rear", "wheel_3", "wheel_4"]
+PRODUCTS = [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
+WHEELS = [2, 3, 5, 6]
+
+
+def expected(products=PRODUCTS, names=NAMES):
+    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0))) for n, p in zip(names, products)]
+
+
+def _interface_here(name: str) -> bool:
+    """Whether this thread's network namespace has the interface (sysfs would show the mount's)."""
+    import socket
+
+    try:
+        socket.if_nametoindex(name)
+        return True
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def box():
+    with Sandbox() as sandbox:
+        yield sandbox
+
+
+@pytest.fixture
+def master(box):
+    m = SoemMaster(box.interface, expected(), receive_timeout_us=20_000)
+    m.open()
+    try:
+        yield m
+    finally:
+        m.close()
+
+
+def test_bring_up_reaches_op_with_the_expected_slaves(box, master):
+    master.bring_up()
+    assert [s.name for s in master.slaves] == ["EK1100", "EK1122", "SWMC", "SWMC", "EK1122", "SWMC", "SWMC"]
+    assert [s.id for s in master.slaves] == PRODUCTS
+    assert master.expected_wkc == 12  # 4 wheels x (2 for the outputs + 1 for the inputs)
+    assert master.exchange() == 12
+    status = box.fault("status")["slaves"]
+    assert [s["state"] for s in status] == [8] * 7
+    assert [s["station"] for s in status] == [0x1001 + i for i in range(7)]  # SOEM's station addresses
+
+
+def test_a_wrong_slave_count_is_refused_by_name(box):
+    m = SoemMaster(box.interface, expected(PRODUCTS[:6], NAMES[:6]), receive_timeout_us=20_000)
+    m.open()
+    try:
+        with pytest.raises(BringUpError, match=r"found 7 slaves on 'hapticop-ecat0', expected 6"):
+            m.bring_up()
+    finally:
+        m.close()
+
+
+def test_a_wrong_product_code_is_refused_by_position_and_code(box):
+    products = list(PRODUCTS)
+    products[5] = 0x01701001  # the older SmartWheel2 prototype
+    m = SoemMaster(box.interface, expected(products), receive_timeout_us=20_000)
+    m.open()
+    try:
+        with pytest.raises(BringUpError, match=r"slave 5 is SWMC with product code 0x01705011; "
+                                               r"expected wheel_3 with product code 0x01701001"):
+            m.bring_up()
+    finally:
+        m.close()
+
+
+def test_an_empty_wire_and_a_missing_interface_are_clear_errors():
+    with Sandbox(emulator=False) as empty:
+        m = SoemMaster(empty.interface, expected(), receive_timeout_us=20_000)
+        m.open()
+        try:
+            with pytest.raises(BringUpError, match="no EtherCAT slave answers on 'hapticop-ecat0'"):
+                m.bring_up()
+        finally:
+            m.close()
+        with pytest.raises(BringUpError, match="cannot open EtherCAT interface 'nosuch0'"):
+            SoemMaster("nosuch0", expected()).open()
+
+
+def test_process_data_round_trip_is_bit_exact(box, master):
+    master.bring_up()
+    box.fault("physics", run=False)  # the robot holds still: its sensor images stay put
+    rng = np.random.default_rng(7)
+    outputs = rng.integers(0, 256, (4, RXPDO_BYTES), dtype=np.uint8)
+    for wheel, position in enumerate(WHEELS):
+        master.write_outputs(position, outputs[wheel])
+    assert master.exchange() == 12
+    status = box.fault("status")
+    assert [bytes.fromhex(h) for h in status["outputs"]] == [row.tobytes() for row in outputs]
+    inputs = np.zeros((4, TXPDO_BYTES), np.uint8)
+    for wheel, position in enumerate(WHEELS):
+        master.read_inputs(position, inputs[wheel])
+    assert [bytes.fromhex(h) for h in status["inputs"]] == [row.tobytes() for row in inputs]
+    assert len(set(status["inputs"])) == 4 and inputs.any()  # four real, different sensor images
+
+
+def test_outputs_of_the_wrong_length_are_refused_before_pysoem_copies_them(master):
+    master.bring_up()
+    with pytest.raises(ValueError, match="outputs of wheel_1 are 36 bytes, got 37"):
+        master.write_outputs(2, np.zeros(37, np.uint8))
+
+
+def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box):
+    home = os.readlink("/proc/thread-self/ns/net")
+    with Sandbox(interface="hapticop-ecat7", peer="hapticop-esc7") as inner:
+        assert os.readlink("/proc/thread-self/ns/net") != home
+        m = SoemMaster(inner.interface, expected(), receive_timeout_us=20_000)
+        m.open()
+        m.bring_up()
+        m.close()
+        assert [s["state"] for s in inner.fault("status")["slaves"]] == [1] * 7
+        process = inner.process
+        assert _interface_here("hapticop-ecat7")
+    assert process.poll() is not None  # the emulator is gone
+    assert not _interface_here("hapticop-ecat7") and not _interface_here("hapticop-esc7")
+    assert os.readlink("/proc/thread-self/ns/net") == home
+
+
+# --- the watchdog's recovery, with the runtime --------------------------------------------
+
+RECOVERY = """
+version: 1
+name: ecat_recovery
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, drive]}}
+  fieldbus: {period: 1ms, deploy: thread, schedules: {0: [ethercat, ropod]}}
+  watchdog: {period: 1ms, deploy: thread, schedules: {0: [ethercat_watchdog]}}
+activities:
+  mediator: {block: mediator}
+  drive: {block: "tests.blocks:ConstantTwist", params: {twist: [0.3, 0.0, 0.0]}}
+  ethercat: {block: ethercat_master, params: {driver: pysoem, interface: hapticop-ecat0, receive_timeout_us: 5000}}
+  ropod: {block: ropod_controller}
+  ethercat_watchdog: {block: ethercat_watchdog, params: {interface: hapticop-ecat0}}
+streams:
+  velocity_setpoint: {from: drive.velocity_setpoint, to: ropod.velocity_setpoint}
+  wheel_sensors: {from: ethercat.wheel_sensors, to: ropod.wheel_sensors}
+  wheel_commands: {from: ropod.wheel_commands, to: ethercat.wheel_commands}
+  slave_states: {from: ethercat.slave_states, to: ethercat_watchdog.slave_states}
+  working_counter: {from: ethercat.working_counter, to: ethercat_watchdog.working_counter}
+coordination:
+  nets:
+    fault:
+      places: {WATCHING: , FAULT: }
+      transitions: {}
+      marking: {WATCHING: 1}
+      terminal: [WATCHING]
+  flag_maps:
+    fault:
+      net: fault
+      tracking_sources: {ethercat_watchdog.slave_fault: FAULT}
+      tracking_sinks: {ropod.stop: FAULT, drive.held: FAULT}
+"""
+
+
+def _until(condition, what: str, timeout_s: float = 15.0):
+    """Wait for a condition (a bound against hanging, not a timing claim)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"never happened: {what}")
+        time.sleep(0.005)
+
+
+@pytest.fixture(scope="module")
+def recovery_run(tmp_path_factory):
+    from .blocks import ConstantTwist
+    from .runtime_helpers import compose
+
+    tmp = tmp_path_factory.mktemp("ecat")
+    seen: dict = {"errors": []}
+    ConstantTwist.changes.clear()
+    # (fault, its arguments, how long the cause persists: the robot must come to a stop meanwhile)
+    faults = (("lose", {"slave": 5}, True), ("al_error", {"slave": 3, "code": 0x0032, "hold_ms": 600}, True),
+              ("trip_watchdog", {"slave": 6}, False))
+    with Sandbox() as box:
+        def speed():
+            return abs(box.fault("status")["twist"][0])
+
+        def all_op():
+            return [s["state"] for s in box.fault("status")["slaves"]] == [8] * 7
+
+        def scenario(system):
+            try:
+                _until(lambda: speed() > 0.1, "the robot drives")
+                for fault, args, lasting in faults:
+                    before = len(ConstantTwist.changes)
+                    box.fault(fault, **args)
+                    _until(lambda: True in ConstantTwist.changes[before:], f"{fault}: the drive is told to hold")
+                    _until(lambda: system.flag("ropod.stop") or all_op(), f"{fault}: ropod.stop raised")
+                    seen[fault] = {"held": True}
+                    if lasting:
+                        _until(lambda: speed() < 0.02, f"{fault}: the robot stops")
+                        seen[fault]["stopped"] = True
+                    if fault == "lose":
+                        box.fault("restore", slave=5)
+                    _until(lambda: all_op() and not system.flag("ropod.stop"), f"{fault}: every slave back in OP")
+                    _until(lambda: speed() > 0.1, f"{fault}: the robot drives again")
+            except Exception as error:  # reported by the tests, not lost in a thread
+                seen["errors"].append(str(error))
+            finally:
+                system.request_shutdown()
+
+        def on_start(system):
+            threading.Thread(target=scenario, args=(system,), daemon=True).start()
+
+        result = compose(tmp, RECOVERY, clock="realtime", duration="60s", name="recovery", on_start=on_start,
+                         shutdown_timeout="5s")
+        seen["final_states"] = [s["state"] for s in box.fault("status")["slaves"]]
+    return result, tmp / "run-recovery", seen
+
+
+def test_a_lost_wheel_stops_the_robot_and_is_recovered(recovery_run):
+    result, run, seen = recovery_run
+    assert not seen["errors"], seen["errors"]
+    assert seen["lose"] == {"held": True, "stopped": True}
+    log = (run / "ethercat_watchdog.log").read_text()
+    for line in ("wheel_3: OP -> NONE", "wheel_3: lost", "wheel_3: recovered", "wheel_3: reconfigured"):
+        assert line in log
+
+
+def test_an_al_error_and_a_watchdog_trip_are_acknowledged_back_to_op(recovery_run):
+    result, run, seen = recovery_run
+    assert not seen["errors"], seen["errors"]
+    log = (run / "ethercat_watchdog.log").read_text()
+    assert seen["al_error"] == {"held": True, "stopped": True}
+    assert "wheel_2: OP -> SAFE-OP+ERR (AL code 0x0032" in log and "wheel_2: acknowledging the error" in log
+    assert "wheel_2: SAFE-OP -> OP" in log
+    assert seen["trip_watchdog"] == {"held": True}
+    assert "wheel_4: OP -> SAFE-OP+ERR (AL code 0x001B" in log and "wheel_4: SAFE-OP -> OP" in log
+
+
+def test_the_run_ends_cleanly_with_every_slave_in_init(recovery_run):
+    result, run, seen = recovery_run
+    from hapticop.runtime.system import ExitStatus
+
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert seen["final_states"] == [1] * 7
+    assert "EtherCAT segment back in INIT" in (run / "ethercat.log").read_text()
+
+
+# --- the command line -----------------------------------------------------------------------
+
+def _hapticop(*args, timeout=120):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "hapticop.cli", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_the_sandbox_command_runs_a_command_beside_the_emulator_and_passes_its_status():
+    probe = ("import socket, subprocess, sys; "
+             "socket.if_nametoindex('hapticop-ecat0'); "
+             "out = subprocess.run([sys.executable, '-m', 'hapticop.cli', 'ethercat', 'fault', 'status'], "
+             "capture_output=True, text=True).stdout; "
+             "assert '\"name\": \"SWMC\"' in out, out; sys.exit(3)")
+    import sys
+
+    done = _hapticop("ethercat", "sandbox", "--", sys.executable, "-c", probe)
+    assert done.returncode == 3, done.stderr
+    assert not _interface_here("hapticop-ecat0")
+
+
+def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
+    done = _hapticop("ethercat", "sandbox", "--", "hapticop-compose-placeholder")
+    assert done.returncode == 127 and "no such command" in done.stderr
+    import sys
+
+    run = tmp_path / "run"
+    done = _hapticop("ethercat", "sandbox", "--", sys.executable, "-m", "hapticop.cli", "compose",
+                     "systems/hallway_ethercat.yaml", "--duration", "4s", "--run-dir", str(run))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "in OP: EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC" in (run / "ethercat.log").read_text()
+    assert "back in INIT" in (run / "ethercat.log").read_text()
+    assert "all 7 slaves operational" in (run / "ethercat_watchdog.log").read_text()
