@@ -46,6 +46,9 @@ class FalconParams(Params):
         "libusb", description="usb driver: 'libusb' for a real Falcon, 'virtual' for the simulated USB device")
     homing: bool = Field(True, description="home the encoders in capability configuration")
     geometry: FalconGeometry = Field(default_factory=FalconGeometry)
+    sim_fault: Literal["none", "silent", "corrupt"] = Field(
+        "none", description="sim driver: a fault of the simulated link, for fault scenarios (set it by a patch): "
+        "'silent' the device stops answering, 'corrupt' every status frame arrives with a byte flipped")
 
     @field_validator("firmware_sha256")
     @classmethod
@@ -85,6 +88,7 @@ class Falcon(Block):
         "velocity": Port("float64", (3,), "m/s", "handle velocity, differentiated from position"),
         "buttons": Port("uint8", (), "1", "button bit mask"),
     }
+    running_params = frozenset({"sim_fault"})
     flags_written = {"frames_ok": "frames arrive and decode (false after 100 ms without one)"}
     rate = RateRange(900.0, 1100.0, "the Falcon firmware exchanges frames at about 1 kHz and holds a force only 100 ms")
 
@@ -227,6 +231,7 @@ class Falcon(Block):
             self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)
         self.codec.encode_command(self.motor, self.homing.command_flags(), self.command)
         if not self._transfer(dt, hand_force):
+            self._frames(now)
             return
         self.last_frame_ns = now
         self.homing.update(self.status)
@@ -244,7 +249,19 @@ class Falcon(Block):
             out.position.publish()
             out.velocity.publish()
             out.buttons.publish()
-        self.flags["frames_ok"] = now - self.last_frame_ns < 100_000_000
+        self._frames(now)
+
+    def _frames(self, now: int) -> None:
+        """`frames_ok` falls 100 ms after the last good frame (the firmware's own force hold) and
+        rises with the next one; each change is logged once. Without frames the position is not
+        published, so its readers see it age past their streams' `max_age`."""
+        ok = now - self.last_frame_ns < 100_000_000
+        if ok != self.flags["frames_ok"]:
+            if ok:
+                self.log.info("frames are back")
+            else:
+                self.log.warning("no good frame for 100 ms: the Falcon holds no force, the robot is stopped")
+            self.flags["frames_ok"] = ok
 
     def _transfer(self, dt: float, hand_force: np.ndarray) -> bool:
         """Send `self.command`; True when `self.status` holds a new status frame."""
@@ -258,6 +275,11 @@ class Falcon(Block):
                 return False
         if self.device.exchange(self.command, dt, hand_force, out=self.reply) is None:
             return False
+        fault = self.params.sim_fault
+        if fault == "silent":
+            return False  # the device moved on, but its reply never arrived
+        if fault == "corrupt":
+            self.reply[7] ^= 0x5A  # a flipped byte on the wire: the codec must refuse the frame
         try:
             self.codec.decode_status(self.reply, self.status)
         except Exception:  # noqa: BLE001 - a corrupted frame is dropped; frames_ok tells

@@ -7,6 +7,7 @@ the environmental force of the chosen model, everything limited to 10 N per axis
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 import numpy as np
@@ -39,14 +40,22 @@ class HapticControllerParams(Params):
     d_max_m: float = Field(2.0, gt=0, description="range beyond which obstacles exert no force")
     moving_average: int = Field(3, ge=1, description="window of the range filter (811 points give 809)")
     scan_points: int = Field(811, ge=2, le=10_000)
+    blind: Literal["stop", "slow"] = Field(
+        "stop", description="while the scan is stale (older than its stream's max_age): 'stop' commands no motion, "
+        "'slow' limits the robot to blind_speed_mps and blind_turn_rad_s")
+    blind_speed_mps: float = Field(0.1, ge=0, description="speed limit while blind (policy 'slow')")
+    blind_turn_rad_s: float = Field(0.2, ge=0, description="turn-rate limit while blind (policy 'slow')")
 
 
 class HapticController(Block):
     Params = HapticControllerParams
     flags_read = {"resources_ready": "the Falcon, LIDAR and ropod controller are running",
                   "robot_held": "the robot is held still (a wheel is not in OP): command no motion"}
+    flags_written = {"blind": "the scan is stale: the blind policy limits the robot",
+                     "handle_lost": "the handle position is stale (Falcon frames stopped): no force, no motion"}
     awaits = frozenset({"resources_ready"})
     optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
+    running_params = frozenset({"blind", "blind_speed_mps", "blind_turn_rad_s"})
     capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
                                    "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor", "braking_field",
                                    "force_model"})
@@ -68,6 +77,7 @@ class HapticController(Block):
                 "environment_force": Port("float64", (3,), "N", "the obstacle part of the force"),
             },
             flags_read=dict(cls.flags_read),
+            flags_written=dict(cls.flags_written),
             rate=RateRange(500.0, 2000.0, "the haptic loop renders stiff forces only near 1 kHz"),
         )
 
@@ -88,6 +98,18 @@ class HapticController(Block):
     def compute(self) -> None:
         p_in = self.inputs
         out = self.outputs
+        handle_ok = p_in.handle_position.valid
+        if handle_ok == self.flags["handle_lost"]:
+            self.flags["handle_lost"] = not handle_ok
+            if handle_ok:
+                self.log.info("handle position back: driving resumes")
+            else:
+                self.log.warning("handle position stale: no force, no motion")
+        if not handle_ok:  # nothing to render against, and nobody to say where to go
+            for port in (out.force, out.environment_force, out.velocity_setpoint):
+                port.value[:] = 0.0
+                port.publish()
+            return
         if p_in.ranges.fresh:
             self.model.update_scan(self.filter.apply(p_in.ranges.value))  # NaN beams are free space
         if p_in.ranges.valid:
@@ -103,6 +125,7 @@ class HapticController(Block):
         if self.params.governor and p_in.ranges.valid:
             govern_twist(out.velocity_setpoint.value, self.filter.out, self.beams, out.velocity_setpoint.value,
                          self.governor)
+        self._blind_policy(not p_in.ranges.valid, out.velocity_setpoint.value)
         out.force.publish()
         out.environment_force.publish()
         out.velocity_setpoint.publish()
@@ -116,6 +139,27 @@ class HapticController(Block):
             getattr(self.outputs, port).publish()
 
     # -- helpers ------------------------------------------------------------------------------
+    def _blind_policy(self, blind: bool, twist) -> None:
+        """Without a fresh scan nothing can be felt nor governed: stop, or creep (the policy says)."""
+        if blind != self.flags["blind"]:
+            self.flags["blind"] = blind
+            if blind:
+                self.log.warning("scan stale: blind, policy '%s'", self.params.blind)
+            else:
+                self.log.info("scan fresh again")
+        if not blind:
+            return
+        p = self.params
+        if p.blind == "stop":
+            twist[:] = 0.0
+            return
+        speed = math.hypot(twist[0], twist[1])
+        if speed > p.blind_speed_mps:
+            scale = p.blind_speed_mps / speed
+            twist[0] *= scale
+            twist[1] *= scale
+        twist[2] = min(max(twist[2], -p.blind_turn_rad_s), p.blind_turn_rad_s)
+
     def twist_measured(self):
         platform = self.inputs.platform_velocity
         return platform.value if platform.valid else self.outputs.velocity_setpoint.value

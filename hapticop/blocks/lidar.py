@@ -36,10 +36,15 @@ class LidarParams(Params):
     max_range_m: float = Field(10.0, gt=0)
     reconnect_backoff_s: tuple[float, float] = Field((0.1, 2.0), description="first and longest retry delay")
     mount: MountPose = Field(default_factory=MountPose)
+    sim_fault: Literal["none", "unplugged", "stall", "garbage"] = Field(
+        "none", description="sim driver: a fault of the simulated scanner, for fault scenarios (set it by a patch): "
+        "'unplugged' drops the connection and refuses new ones, 'stall' keeps it open but sends no scans, "
+        "'garbage' sends noise between telegrams")
 
 
 class Lidar(Block):
     Params = LidarParams
+    running_params = frozenset({"sim_fault"})
     flags_written = {"new_scan": "a complete scan was written to the ranges and angles ports"}
 
     @classmethod
@@ -79,6 +84,7 @@ class Lidar(Block):
         self.angles = np.zeros(p.points, dtype=np.float32)
         self.yaw = np.radians(p.mount.yaw_deg)
         self.connected = False
+        self.fault = "none"
         return True
 
     def _simulator(self):
@@ -106,8 +112,13 @@ class Lidar(Block):
 
     def compute(self) -> None:
         now = self.clock.now_ns()
-        if self.simulator is not None and self.clock.virtual:
-            self.simulator.step(now)
+        if self.simulator is not None:
+            if self.params.sim_fault != self.fault:
+                self._inject(self.params.sim_fault)
+            if self.fault == "garbage":
+                self.simulator.inject_garbage()
+            if self.clock.virtual:
+                self.simulator.step(now)
         if self.client.poll(now) and self.client.latest_scan(self.ranges, self.angles):
             out = self.outputs
             np.copyto(out.ranges.value, self.ranges)
@@ -122,6 +133,20 @@ class Lidar(Block):
                 "LIDAR %s%s", "streaming" if connected else "not streaming",
                 "" if connected else f" ({self.client.last_error or 'starting'})")
             self.connected = connected
+
+    def _inject(self, fault: str) -> None:
+        """Switch the simulated scanner's fault (a patch changed `sim_fault`)."""
+        simulator = self.simulator
+        simulator.unplug(fault == "unplugged")
+        if fault == "stall":
+            simulator.stall()
+        else:
+            simulator.resume()
+        if fault == "none":
+            self.log.info("simulated scanner fault cleared")
+        else:
+            self.log.warning("simulated scanner fault: %s", fault)
+        self.fault = fault
 
     def clean(self) -> None:
         if getattr(self, "client", None) is not None:

@@ -80,6 +80,7 @@ class HallwayWorld(Block):
             if not self.flags["operator_go"]:
                 return
             scene.operator_since_ns = now
+            self.recorder.meta["operator_start_ns"] = now  # the recording's time 0, on the system's clock
             self.log.info("the operator starts driving")
         t = scene.operator_time(now)
         force = self.inputs.environment_force

@@ -113,15 +113,20 @@ def apply(system: "System", pending: PendingPatch) -> None:
 def _new_params(system: "System", name: str, resolved: ResolvedActivity) -> None:
     old = system.loaded.activities[name]
     changed = {k for k in type(resolved.params).model_fields if getattr(resolved.params, k) != getattr(old.params, k)}
-    request = ("request_capability_configuration" if changed <= old.block.capability_params
-               else "request_resource_configuration")
+    if changed <= old.block.running_params:
+        request = None  # read every cycle: the next cycle uses them
+    elif changed <= old.block.capability_params | old.block.running_params:
+        request = "request_capability_configuration"
+    else:
+        request = "request_resource_configuration"
     runner = system.built.runners.get(name)
     if runner is not None:
         runner.block.params = runner.block.context.params = resolved.params
     else:
         system.send(system.owner_thread[name], ("params", name, resolved.spec.params))
     system.loaded.activities[name] = resolved
-    system.set_flag(f"{name}.lcsm.{request}")
+    if request is not None:
+        system.set_flag(f"{name}.lcsm.{request}")
 
 
 def _add_activity(system: "System", name: str, resolved: ResolvedActivity, new: Composition) -> None:

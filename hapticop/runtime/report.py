@@ -45,7 +45,8 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
         summary = Summary.of(region.e2e[slot], int(region.e2e_max[slot]))
         latencies[name] = {"from": spec.source, "to": spec.sink, "samples": summary.count,
                            "latency_us": _numbers(summary), "histogram_us": sparse(region.e2e[slot])}
-    return {"elapsed_s": round(elapsed_ns / 1e9, 3) if elapsed_ns else None, "threads": threads,
+    return {"started_ns": int(region.system[Region.STARTED_NS]),
+            "elapsed_s": round(elapsed_ns / 1e9, 3) if elapsed_ns else None, "threads": threads,
             "activities": activities, "latencies": latencies}
 
 

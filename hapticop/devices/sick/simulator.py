@@ -17,7 +17,7 @@ Two ways to run it, one code path (`step`):
 
 Scan k is sent at epoch + k/15 s (epoch = the first step), and its ranges come from
 `ranges_m(t_ns)`, t_ns being when the scan was taken (5 ms earlier), in the sensor frame at
-`ANGLES_RAD`. Faults for tests: `drop_connection`, `stall`, `inject_garbage`, `mute`.
+`ANGLES_RAD`. Faults for tests: `drop_connection`, `unplug`, `stall`, `inject_garbage`, `mute`.
 """
 
 from __future__ import annotations
@@ -120,6 +120,7 @@ class TiMSimulator:
         self._stall_until: float | None = None
         self._garbage = bytearray()
         self.muted = False
+        self.unplugged = False
         # counters
         self.scans_sent = 0
         self.scans_dropped = 0
@@ -187,7 +188,7 @@ class TiMSimulator:
                 conn, _ = self._listener.accept()
             except (BlockingIOError, InterruptedError):
                 return accepted
-            if self._conn is not None:
+            if self._conn is not None or self.unplugged:
                 self.refused_connections += 1
                 conn.close()
                 continue
@@ -446,6 +447,13 @@ class TiMSimulator:
         """Send these bytes before the next telegram (the default also holds a broken frame)."""
         with self._lock:
             self._garbage += data
+
+    def unplug(self, on: bool = True) -> None:
+        """Cable pulled: the connection drops and new ones are refused until plugged back."""
+        with self._lock:
+            self.unplugged = on
+            if on:
+                self._disconnect()
 
     def mute(self, on: bool = True) -> None:
         """Ignore commands (no reply at all), so the client's reply timeout fires."""
