@@ -90,3 +90,14 @@ def test_governor_allocates_nothing():
     ranges = robot_scan(ANGLES, hallway(2.0, 4.0), (0.5, 0.3, math.radians(8))).astype(np.float32)
     cmd, out = np.array([0.8, 0.05, 0.4]), np.zeros(3)
     assert_no_allocation(lambda: govern_twist(cmd, ranges, BEAMS, out))
+
+
+def test_blind_limit_keeps_direction_and_clips_turning():
+    from hapticop.haptics.governor import limit_blind
+
+    twist = np.array([0.3, 0.4, -1.0])  # 0.5 m/s
+    limit_blind(twist, 0.1, 0.2)
+    assert np.allclose(twist, [0.06, 0.08, -0.2])
+    slow = np.array([0.05, 0.0, 0.1])
+    assert np.array_equal(limit_blind(slow.copy(), 0.1, 0.2), slow)  # within the limits: untouched
+    assert np.array_equal(limit_blind(np.array([0.5, -0.2, 0.7]), 0.0, 0.0), [0.0, -0.0, 0.0])

@@ -7,7 +7,6 @@ the environmental force of the chosen model, everything limited to 10 N per axis
 
 from __future__ import annotations
 
-import math
 from typing import Literal
 
 import numpy as np
@@ -16,7 +15,7 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.force_models import BrakingFieldParams
-from hapticop.haptics.governor import govern_twist
+from hapticop.haptics.governor import govern_twist, limit_blind
 from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage
 
@@ -147,18 +146,12 @@ class HapticController(Block):
                 self.log.warning("scan stale: blind, policy '%s'", self.params.blind)
             else:
                 self.log.info("scan fresh again")
-        if not blind:
-            return
-        p = self.params
-        if p.blind == "stop":
-            twist[:] = 0.0
-            return
-        speed = math.hypot(twist[0], twist[1])
-        if speed > p.blind_speed_mps:
-            scale = p.blind_speed_mps / speed
-            twist[0] *= scale
-            twist[1] *= scale
-        twist[2] = min(max(twist[2], -p.blind_turn_rad_s), p.blind_turn_rad_s)
+        if blind:
+            p = self.params
+            if p.blind == "stop":
+                limit_blind(twist, 0.0, 0.0)
+            else:
+                limit_blind(twist, p.blind_speed_mps, p.blind_turn_rad_s)
 
     def twist_measured(self):
         platform = self.inputs.platform_velocity

@@ -95,3 +95,18 @@ def govern_twist(
     out[TWIST_VY] = vy
     out[TWIST_WZ] = wz
     return out
+
+
+def limit_blind(twist: NDArray[np.float64], speed_mps: float, turn_rad_s: float) -> NDArray[np.float64]:
+    """Without a fresh scan: scale the translation down to `speed_mps` and clip the turn rate, in place.
+
+    Direction is kept (the operator still steers); `speed_mps = turn_rad_s = 0` is a full stop.
+    """
+    vx, vy = float(twist[TWIST_VX]), float(twist[TWIST_VY])
+    speed = math.hypot(vx, vy)
+    if speed > speed_mps:
+        scale = speed_mps / speed
+        twist[TWIST_VX] = vx * scale
+        twist[TWIST_VY] = vy * scale
+    twist[TWIST_WZ] = min(max(float(twist[TWIST_WZ]), -turn_rad_s), turn_rad_s)
+    return twist
