@@ -31,6 +31,9 @@ CASES = [
     ("invalid-version.yaml", "bad-version", 2, "composition version 2 is not supported", None),
     ("invalid-flag-map-unknown-net-follow-on.yaml", "unknown-net", 25, "unknown net 'exti'", "did you mean 'exit'?"),
     ("invalid-priority-99-only-thread.yaml", "priority-99", 6, "priority 99 is refused", None),
+    ("invalid-latency-unreachable.yaml", "latency-unreachable", 16, "no stream path carries data", None),
+    ("invalid-latency-unknown-port.yaml", "unknown-port", 17, "has no output port 'cont'", "did you mean 'count'?"),
+    ("invalid-phase-too-long.yaml", "bad-value", 6, "phase must be shorter than the period", None),
     # YAML level
     ("invalid-yaml-syntax.yaml", "yaml-syntax", 7, "malformed YAML", None),
     ("invalid-duplicate-key.yaml", "duplicate-key", 7, 'duplicate key "period"', None),
@@ -146,3 +149,21 @@ def test_valid_file_has_no_diagnostics(path):
 
 def test_corpus_is_not_empty():
     assert len(CASES) >= 36 and len(VALID_FILES) >= 3
+
+
+def test_busy_wait_beside_other_threads_is_a_warning():
+    text = """
+version: 1
+threads:
+  main: {period: 1ms, deploy: main, busy_wait: 50us, schedules: {0: [mediator]}}
+  other: {period: 1ms, schedules: {0: []}}
+  alone: {period: 1ms, deploy: process, busy_wait: 50us, schedules: {0: []}}
+activities:
+  mediator: {block: mediator}
+"""
+    from hapticop.validation import validate_text
+
+    report = validate_text(text, "b.yaml").report
+    assert report.ok
+    [warning] = report.warnings
+    assert (warning.rule, warning.path, warning.line) == ("busy-wait-shared", ("threads", "main", "busy_wait"), 4)
