@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
-from hapticop.units import Duration
+from hapticop.units import Duration, Offset
 
 VERSION = 1
 
@@ -57,12 +57,12 @@ class Thread(Strict):
     schedules: dict[Annotated[int, Field(ge=0, le=255)], list[Name]] = Field(
         description="activity-scheduler sets by ID; ID 0 is selected at start"
     )
-    phase: Duration | Literal["auto"] = Field(
+    phase: Offset | Literal["auto"] = Field(
         "auto",
         description="offset of the first deadline within the period; 'auto' staggers the real-time "
         "threads of equal period evenly, highest priority first, so their wake-ups do not collide",
     )
-    busy_wait: Duration = Field(
+    busy_wait: Offset = Field(
         0, description="spin this long before each deadline instead of sleeping through it: "
         "lower wake-up latency for a core's worth of CPU, e.g. '50us'; 0 sleeps all the way",
     )

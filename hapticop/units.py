@@ -21,8 +21,9 @@ _QUANTITY = re.compile(r"^\s*(?P<number>[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]
 _NUMBER = re.compile(r"^\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?")
 
 
-def parse_duration_ns(text: str) -> int:
-    """Parse `1ms`, `66.667ms` or `15Hz` into whole nanoseconds (rounded to the nearest)."""
+def parse_duration_ns(text: str, allow_zero: bool = False) -> int:
+    """Parse `1ms`, `66.667ms` or `15Hz` into whole nanoseconds (rounded to the nearest);
+    `allow_zero` accepts a zero time (`0ms`) for offsets, never a zero rate."""
     match = _QUANTITY.match(text)
     if not match:
         raise ValueError(f"'{text}' is not a number followed by a unit ({UNITS_TEXT})")
@@ -36,7 +37,7 @@ def parse_duration_ns(text: str) -> int:
         ns = 1e9 / (number * HZ_PER_UNIT[unit])
     else:
         raise ValueError(f"'{unit}' is not a unit of time or rate ({UNITS_TEXT})")
-    if ns < 1:
+    if ns < 1 and not (allow_zero and ns == 0 and unit in NS_PER_UNIT):
         raise ValueError(f"'{text}' is shorter than one nanosecond")
     return round(ns)
 
@@ -47,6 +48,17 @@ def format_duration(ns: int) -> str:
         if ns >= scale:
             return f"{ns / scale:.6g}{unit}"
     return f"{ns}ns"
+
+
+def _coerce_offset(value: Any) -> int:
+    if value == 0 and not isinstance(value, bool):
+        return 0
+    if isinstance(value, str):
+        try:
+            return parse_duration_ns(value, allow_zero=True)
+        except ValueError as error:
+            raise PydanticCustomError("duration", "{reason}", {"reason": str(error)}) from None
+    return _coerce_duration(value)
 
 
 def _coerce_duration(value: Any) -> int:
@@ -74,6 +86,23 @@ Duration = Annotated[
             "pattern": r"^\s*([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?\s*(ns|us|µs|ms|s|Hz|kHz)\s*$",
             "description": "a period or a rate with its unit: '1ms', '66.667ms', '15Hz', '1kHz'",
             "examples": ["1ms", "15Hz", "66.667ms"],
+        }
+    ),
+]
+
+# A time offset that may be zero ('0ms' or 0): a phase, a busy-wait allowance.
+Offset = Annotated[
+    int,
+    BeforeValidator(_coerce_offset),
+    PlainSerializer(format_duration, return_type=str),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "string", "pattern": r"^\s*([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?\s*(ns|us|µs|ms|s)\s*$"},
+                {"const": 0},
+            ],
+            "description": "a time with its unit, or 0: '0ms', '250us', 0",
+            "examples": ["0ms", "250us"],
         }
     ),
 ]

@@ -53,3 +53,17 @@ def test_serialises_back_to_text():
     assert Holder(period="1ms").model_dump() == {"period": "1ms"}
     assert format_duration(66_666_667) == "66.6667ms"
     assert format_duration(250) == "250ns"
+
+
+def test_offsets_may_be_zero_but_periods_may_not():
+    from pydantic import TypeAdapter, ValidationError
+
+    from hapticop.units import Duration, Offset
+
+    offset = TypeAdapter(Offset)
+    assert offset.validate_python("0ms") == 0 and offset.validate_python(0) == 0
+    assert offset.validate_python("250us") == 250_000
+    with pytest.raises(ValidationError):
+        offset.validate_python("0Hz")
+    with pytest.raises(ValidationError):
+        TypeAdapter(Duration).validate_python("0ms")
