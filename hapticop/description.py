@@ -58,9 +58,10 @@ class Thread(Strict):
         description="activity-scheduler sets by ID; ID 0 is selected at start"
     )
     phase: Offset | Literal["auto"] = Field(
-        "auto",
-        description="offset of the first deadline within the period; 'auto' staggers the real-time "
-        "threads of equal period evenly, highest priority first, so their wake-ups do not collide",
+        0,
+        description="offset of the deadlines within the period; 'auto' staggers the threads of equal period "
+        "evenly, highest priority first. Default 0: loops of equal period wake together and run side by side "
+        "on separate cores, which measured better for the hallway on 2 cores (README, real-time bench)",
     )
     busy_wait: Offset = Field(
         0, description="spin this long before each deadline instead of sleeping through it: "

@@ -73,18 +73,19 @@ def test_auto_phases_stagger_equal_periods_highest_priority_first():
     text = """
 version: 1
 threads:
-  main: {period: 1ms, priority: 38, deploy: main, schedules: {0: [mediator]}}
-  fieldbus: {period: 1ms, priority: 45, schedules: {0: []}}
-  plain: {period: 1ms, schedules: {0: []}}
-  lidar: {period: 15Hz, schedules: {0: []}}
+  main: {period: 1ms, priority: 38, deploy: main, phase: auto, schedules: {0: [mediator]}}
+  fieldbus: {period: 1ms, priority: 45, phase: auto, schedules: {0: []}}
+  plain: {period: 1ms, phase: auto, schedules: {0: []}}
+  lidar: {period: 15Hz, phase: auto, schedules: {0: []}}
   fixed: {period: 1ms, phase: 100us, schedules: {0: []}}
+  together: {period: 1ms, schedules: {0: []}}
 activities:
   mediator: {block: mediator}
 """
     composition = validate_text(text, "p.yaml").graph.loaded.composition
     got = phases(composition)
     assert got["fieldbus"] == 0 and got["main"] == 333_333 and got["plain"] == 666_666
-    assert got["lidar"] == 0 and got["fixed"] == 100_000
+    assert got["lidar"] == 0 and got["fixed"] == 100_000 and got["together"] == 0  # the default: no offset
 
 
 @pytest.mark.parametrize("now", [0, 1, 999_999, 1_000_000, 123_456_789])
