@@ -116,7 +116,8 @@ class System:
         self.main.supervisor = self.supervise
         self.tree = parse_text(source_text, file).tree
         self.pending: deque[live.PendingPatch] = deque()
-        self.scripted = sorted(((p.at, name, p) for name, p in self.composition.patches.items()),
+        # (at, name, patch, prepared PendingPatch or None, the tree it was prepared on)
+        self.scripted = sorted(((p.at, name, p, None, None) for name, p in self.composition.patches.items()),
                                key=lambda item: (item[0], item[1]))
         self.control: ControlServer | None = None
         self.finished = False
@@ -132,6 +133,8 @@ class System:
                 if spec.deploy == "process":
                     self._spawn(name)
             realtime.prepare_process([self.composition.threads[t] for t in local], self.log)
+        if not self.virtual and self.scripted:
+            self._prepare_scripted()
         self.region.system[Region.STARTED_NS] = self.region.system[Region.EPOCH_NS] = self.clock.now_ns()
         self._warn_declaration_only_blocks()
 
@@ -297,10 +300,30 @@ class System:
                 self.log.error("patch not applied: %s", pending.error)
             pending.applied.set()
 
+    def _prepare_scripted(self) -> None:
+        """Validate the scripted patches before any loop runs, each on the tree the one before
+        leaves: validating takes about a second, which a 1 kHz main loop cannot spare. A patch
+        whose base changed meanwhile (a live patch came between) is prepared again when due."""
+        tree, composition, prepared = self.tree, self.composition, []
+        for at, name, scripted, _, _ in self.scripted:
+            pending = None
+            try:
+                new_tree, new, plan, diff = prepare(tree, scripted.patch, old=composition,
+                                                    patch_file=f"patches.{name}", name=Path(self.file).name)
+                pending = live.PendingPatch(plan, new, new_tree, live.check(self, plan, new), threading.Event())
+                pending.diff = diff
+            except PatchError:
+                pass  # refused when due, with its reason
+            prepared.append((at, name, scripted, pending, tree))
+            if pending is not None:
+                tree, composition = pending.tree, pending.composition
+        self.scripted = prepared
+
     def _apply_scripted(self, item) -> None:
-        at, name, scripted = item
+        at, name, scripted, pending, base = item
         try:
-            pending = self.prepare_patch(scripted.patch, patch_file=f"patches.{name}")
+            if pending is None or base is not self.tree:
+                pending = self.prepare_patch(scripted.patch, patch_file=f"patches.{name}")
             live.apply(self, pending)
             self.log.always("scripted patch '%s' applied at %s", name, format_duration(at))
         except PatchError as error:
