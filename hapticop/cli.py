@@ -91,6 +91,17 @@ def _duration(text: Optional[str], option: str) -> Optional[int]:
         raise typer.BadParameter(str(error), param_hint=option) from None
 
 
+def _valid_or_exit(file: Path, refusal: str):
+    """Validate, print every finding, and stop with status 1 on errors."""
+    validated = validate_path(file)
+    for diagnostic in validated.report.sorted():
+        typer.echo(diagnostic.to_text(), err=True)
+    if not validated.report.ok:
+        typer.echo(f"{file}: {refusal}: {len(validated.report.errors)} errors", err=True)
+        raise typer.Exit(1)
+    return validated
+
+
 @app.command()
 def compose(
     file: Path = typer.Argument(..., help="composition file"),
@@ -107,12 +118,7 @@ def compose(
     from hapticop.runtime.report import print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
-    validated = validate_path(file)
-    for diagnostic in validated.report.sorted():
-        typer.echo(diagnostic.to_text(), err=True)
-    if not validated.report.ok:
-        typer.echo(f"{file}: not started: {len(validated.report.errors)} errors", err=True)
-        raise typer.Exit(1)
+    validated = _valid_or_exit(file, "not started")
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
                          control=control)
@@ -250,12 +256,7 @@ def bench(
     from hapticop.benchmark import report, runner
 
     seconds = _duration(duration, "--duration") / 1e9
-    validated = validate_path(file)
-    for diagnostic in validated.report.sorted():
-        typer.echo(diagnostic.to_text(), err=True)
-    if not validated.report.ok:
-        typer.echo(f"{file}: not measured: {len(validated.report.errors)} errors", err=True)
-        raise typer.Exit(1)
+    _valid_or_exit(file, "not measured")
     out = out or Path(f"hapticop-bench-{time.strftime('%Y%m%d-%H%M%S')}")
     out.mkdir(parents=True, exist_ok=True)
     conditions = ("idle", "loaded") if load else ("idle",)
