@@ -90,10 +90,11 @@ def summarise(path: Path) -> str:
             f"{sum(1 for r in group if r['collisions'])} | {sum(1 for r in group if r['stop_ok'])} | "
             f"{_median([r['e_stop_m'] for r in group], 100)} | {_median([r['completion_time_s'] for r in group])} | "
             f"{_median([r['force_peak_n'] for r in group], digits=2)} |")
-    haptic = [r["haptic_compute_us"]["p50"] for r in runs]
-    ropod = [r["ropod_compute_us"]["p50"] for r in runs]
-    lines += ["", f"1 kHz step compute time (median over runs of each run's median, virtual clock, one process): "
-                  f"haptic controller {_median(haptic, digits=0)} us, ropod controller {_median(ropod, digits=0)} us."]
+    lines += ["", "1 kHz step compute time (median over runs of each run's median, virtual clock, one process):"]
+    for model in sorted({r["model"] for r in runs}):
+        mine = [r for r in runs if r["model"] == model]
+        lines.append(f"- {model}: haptic controller {_median([r['haptic_compute_us']['p50'] for r in mine], digits=0)} us, "
+                     f"ropod controller {_median([r['ropod_compute_us']['p50'] for r in mine], digits=0)} us")
     return "\n".join(lines) + "\n"
 
 
