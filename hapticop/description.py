@@ -54,6 +54,10 @@ class Thread(Strict):
         description="'main': the process's main thread (runs the mediator); "
         "'thread': a thread of the main process; 'process': its own process",
     )
+    process: Name | None = Field(
+        None, description="with 'deploy: process', threads naming the same process share it (a fieldbus and "
+        "the watchdog that acts on its master); default: a process of the thread's own",
+    )
     schedules: dict[Annotated[int, Field(ge=0, le=255)], list[Name]] = Field(
         description="activity-scheduler sets by ID; ID 0 is selected at start"
     )
@@ -70,6 +74,18 @@ class Thread(Strict):
     start: StartPolicy = Field("auto", description=START_DOC)
     log: LogLevel = Field("info", description="the most detailed level written to this thread's log")
     doc: str = ""
+
+    @field_validator("process")
+    @classmethod
+    def _process_needs_deploy(cls, value: str | None, info: ValidationInfo) -> str | None:
+        if value is not None and info.data.get("deploy") != "process":
+            raise PydanticCustomError("process_without_deploy", "'process' names a shared process: it needs "
+                                      "'deploy: process'")
+        return value
+
+    def process_name(self, thread: str) -> str | None:
+        """The process this thread runs in, for 'deploy: process' threads (None: the main process)."""
+        return (self.process or thread) if self.deploy == "process" else None
 
     @field_validator("phase", "busy_wait")
     @classmethod

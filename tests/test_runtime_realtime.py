@@ -95,3 +95,51 @@ def test_a_second_ctrl_c_leaves_at_once(tmp_path):
     _, err = process.communicate(timeout=30)
     assert process.returncode == 130, err
     assert "left at once" in err and "Traceback" not in err
+
+
+SHARED = """
+version: 1
+name: shared
+threads:
+  main:
+    period: 1ms
+    deploy: main
+    schedules: {0: [mediator, source]}
+  fieldbus:
+    period: 1ms
+    deploy: process
+    process: bus
+    schedules: {0: [relay]}
+  watchdog:
+    period: 2ms
+    deploy: process
+    process: bus
+    schedules: {0: [sink]}
+activities:
+  mediator: {block: mediator}
+  source: {block: counter}
+  relay: {block: echo}
+  sink: {block: echo}
+streams:
+  count: {from: source.count, to: relay.input}
+  relayed: {from: relay.output, to: sink.input}
+"""
+
+
+def test_threads_naming_one_process_share_it(tmp_path):
+    result = compose(tmp_path, SHARED, clock="realtime", duration="1s", name="shared")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    log = (tmp_path / "run-shared" / "system.log").read_text()
+    pids = {line.rsplit(" ", 1)[1] for line in log.splitlines() if "runs in process" in line}
+    assert len(pids) == 1  # one process for both
+    assert result.timing["activities"]["relay"]["steps"] > 0 and result.timing["activities"]["sink"]["steps"] > 0
+    assert all(result.states[f"threads.{t}"] is State.DONE for t in ("fieldbus", "watchdog"))
+
+
+def test_a_named_process_needs_deploy_process():
+    from hapticop.validation import validate_text
+
+    report = validate_text(SHARED.replace("    deploy: process\n    process: bus\n    schedules: {0: [relay]}",
+                                          "    process: bus\n    schedules: {0: [relay]}"), "s.yaml").report
+    [error] = report.errors
+    assert error.path == ("threads", "fieldbus", "process") and "needs 'deploy: process'" in error.message

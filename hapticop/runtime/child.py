@@ -1,14 +1,16 @@
-"""The entry point of a thread deployed in its own process.
+"""The entry point of a process running threads deployed out of the main process.
 
-The child rebuilds the composition from the plain tree it is handed, attaches to the parent's shared region
-by name, builds only its own thread, and runs its loop. Ctrl+C is the parent's to handle:
-the child ignores SIGINT and leaves when its thread is done or the region says terminate.
+The child rebuilds the composition from the plain tree it is handed, attaches to the parent's
+shared region by name, builds only its own threads (one, or those sharing a named process),
+and runs their loops. Ctrl+C is the parent's to handle: the child ignores SIGINT and leaves
+when its threads are done or the region says terminate.
 """
 
 from __future__ import annotations
 
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -21,27 +23,40 @@ from hapticop.runtime.deadlines import first_deadline, phases
 from hapticop.runtime.region import Region
 
 
-def process_main(tree: dict, flags: list[str], region_name: str, thread: str, run_dir: str, seed: int,
+def process_main(tree: dict, flags: list[str], region_name: str, threads: list[str], run_dir: str, seed: int,
                  messages) -> None:
     """The parent hands over the validated tree as plain data and the flag list, so this process
-    neither parses YAML nor builds the graph again: it starts in a fraction of the time."""
+    neither parses YAML nor builds the graph again: it starts in a fraction of the time. The
+    first thread runs on this process's main thread; others it shares the process with get
+    threads of their own."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     loaded = load_tree(tree)
     region = Region.attach(layout_of(loaded, flags), region_name)
     clock = RealtimeClock()
     writer = LogWriter(Path(run_dir), echo=sys.stderr).start()
-    built = build(loaded, region, [thread], clock, writer, seed, apply_realtime=True)
-    realtime.prepare_process([loaded.composition.threads[thread]], writer.logger("system", Level.INFO, clock.now_ns))
-    index = region.layout.thread_index[thread]
-    loop = built.threads[thread]
-    loop.supervisor = _LiveChanges(loop, built, loaded, region, index, messages)
-    try:
+    built = build(loaded, region, threads, clock, writer, seed, apply_realtime=True)
+    composition = loaded.composition
+    realtime.prepare_process([composition.threads[t] for t in threads],
+                             writer.logger("system", Level.INFO, clock.now_ns))
+    first = built.threads[threads[0]]
+    first.supervisor = _LiveChanges(built, region, threads, messages)
+
+    def run(thread: str) -> None:
+        index = region.layout.thread_index[thread]
         while not region.go[index] and not region.system[Region.TERMINATE]:
             time.sleep(0.001)  # created early; runs once the mediator starts the thread
-        spec = loaded.composition.threads[thread]
-        start = first_deadline(int(region.system[Region.EPOCH_NS]), spec.period, phases(loaded.composition)[thread],
+        spec = composition.threads[thread]
+        start = first_deadline(int(region.system[Region.EPOCH_NS]), spec.period, phases(composition)[thread],
                                clock.now_ns())
         built.threads[thread].run_realtime(start, lambda: False)
+
+    others = [threading.Thread(target=run, args=(t,), name=f"hapticop-{t}", daemon=True) for t in threads[1:]]
+    try:
+        for other in others:
+            other.start()
+        run(threads[0])
+        for other in others:
+            other.join()
     finally:
         writer.stop()
         del built
@@ -49,25 +64,29 @@ def process_main(tree: dict, flags: list[str], region_name: str, thread: str, ru
 
 
 class _LiveChanges:
-    """Applies the parent's live changes between two cycles of this process's thread."""
+    """Applies the parent's live changes between two cycles of this process's first thread."""
 
-    def __init__(self, loop, built, loaded, region: Region, index: int, messages):
-        self.loop, self.built, self.loaded, self.region, self.index, self.messages = \
-            loop, built, loaded, region, index, messages
+    def __init__(self, built, region: Region, threads: list[str], messages):
+        self.built, self.region, self.messages = built, region, messages
+        self.indices = [region.layout.thread_index[t] for t in threads]
         self.seen = 0
 
     def __call__(self) -> None:
-        if self.region.control[self.index] == self.seen:
-            return  # the common case: one memory read
-        self.seen = int(self.region.control[self.index])
+        control = self.region.control
+        total = 0
+        for index in self.indices:
+            total += int(control[index])
+        if total == self.seen:
+            return  # the common case: a few memory reads
+        self.seen = total
         while self.messages.poll():
-            kind, *args = self.messages.recv()
+            thread, (kind, *args) = self.messages.recv()
             if kind == "params":
                 name, params = args
                 runner = self.built.runners[name]
                 runner.block.params = runner.block.context.params = type(runner.block.params).model_validate(params)
             elif kind == "schedules":
-                self.loop.replace_schedules({int(k): v for k, v in args[0].items()})
+                self.built.threads[thread].replace_schedules({int(k): v for k, v in args[0].items()})
             elif kind == "max_age":
                 reader, max_age = args
                 activity, port = reader.split(".")

@@ -69,9 +69,10 @@ class RunOptions:
 
 @dataclass
 class _ProcessThread:
-    name: str
+    name: str  # the process's name: its thread's, or the shared 'process' name
     process: multiprocessing.Process
-    messages: object  # the sending end of a pipe: live changes for this thread
+    messages: object  # the sending end of a pipe: live changes for its threads
+    threads: list[str] = field(default_factory=list)
     reported: bool = False
 
 
@@ -129,9 +130,12 @@ class System:
         if not self.virtual:
             # Processes are created now, before memory is locked and before any loop runs
             # (forking a large locked process stalls the parent); they wait for the mediator.
+            groups: dict[str, list[str]] = {}
             for name, spec in self.composition.threads.items():
                 if spec.deploy == "process":
-                    self._spawn(name)
+                    groups.setdefault(spec.process_name(name), []).append(name)
+            for process_name, threads in groups.items():
+                self._spawn(process_name, threads)
             realtime.prepare_process([self.composition.threads[t] for t in local], self.log)
         if not self.virtual and self.scripted:
             self._prepare_scripted()
@@ -193,29 +197,31 @@ class System:
         return first_deadline(int(self.region.system[Region.EPOCH_NS]), self.composition.threads[thread].period,
                               phases(self.composition)[thread], self.clock.now_ns())
 
-    def _spawn(self, name: str) -> None:
+    def _spawn(self, name: str, threads: list[str]) -> None:
         from hapticop.runtime.child import process_main
 
         context = multiprocessing.get_context("spawn")
         receiving, sending = context.Pipe(duplex=False)
         process = context.Process(
             target=process_main,
-            args=(plain(self.tree), self.layout.flags[: self.layout.declared_flags], self.region.name, name,
+            args=(plain(self.tree), self.layout.flags[: self.layout.declared_flags], self.region.name, threads,
                   str(self.run_dir), self.options.seed, receiving),
             name=f"hapticop-{name}", daemon=True,
         )
         process.start()
         receiving.close()
-        self.processes[name] = _ProcessThread(name, process, sending)
-        self.log.info("thread '%s' runs in process %d", name, process.pid)
+        handle = _ProcessThread(name, process, sending, threads)
+        for thread in threads:
+            self.processes[thread] = handle
+            self.log.info("thread '%s' runs in process %d", thread, process.pid)
 
     def coordinate(self) -> None:
         """One coordination step (the mediator's compute)."""
         self.coordinator.step()
 
     def send(self, thread: str, message: tuple) -> None:
-        """A live change for a thread in its own process; its loop notices the counter."""
-        self.processes[thread].messages.send(message)
+        """A live change for a thread in another process; that process notices the counter."""
+        self.processes[thread].messages.send((thread, message))
         self.region.control[self.layout.thread_index[thread]] += 1
 
     @staticmethod
@@ -358,17 +364,21 @@ class System:
         return handle is not None and handle.reported
 
     def _watch_processes(self) -> None:
-        for handle in self.processes.values():
+        for handle in {id(h): h for h in self.processes.values()}.values():
             if handle.reported or handle.process.is_alive():
                 continue
-            if self.state(f"threads.{handle.name}") is State.DONE and handle.process.exitcode == 0:
+            done = all(self.state(f"threads.{t}") is State.DONE for t in handle.threads)
+            if done and handle.process.exitcode == 0:
                 continue
             handle.reported = True
-            message = (f"thread '{handle.name}' was lost: its process {handle.process.pid} ended with exit code "
-                       f"{handle.process.exitcode}")
+            names = ", ".join(f"'{t}'" for t in handle.threads)
+            message = (f"thread{'s' if len(handle.threads) > 1 else ''} {names} "
+                       f"{'were' if len(handle.threads) > 1 else 'was'} lost: process {handle.process.pid} "
+                       f"ended with exit code {handle.process.exitcode}")
             self.reasons.append(message)
             self.log.error(message)
-            self.set_flag(f"threads.{handle.name}.lost")
+            for thread in handle.threads:
+                self.set_flag(f"threads.{thread}.lost")
 
     # -- running ------------------------------------------------------------------------
     # -- the control channel ------------------------------------------------------------

@@ -261,13 +261,16 @@ def latencies(cg: G.CompositionGraph) -> Check:
 def busy_waits(cg: G.CompositionGraph) -> Check:
     """Spinning holds the GIL: only a loop alone in its process may busy-wait."""
     threads = cg.loaded.composition.threads
-    shared = [name for name, spec in threads.items() if spec.deploy != "process"]
+    processes: dict[str | None, list[str]] = defaultdict(list)
     for name, spec in threads.items():
-        if spec.busy_wait and spec.deploy != "process" and len(shared) > 1:
-            others = ", ".join(n for n in shared if n != name)
-            yield Diagnostic("busy-wait-shared", f"thread '{name}' busy-waits in a process it shares with {others}: "
-                             "the spinning holds the GIL and delays them", ("threads", name, "busy_wait"),
-                             severity=Severity.WARNING, hint="deploy: process, or busy_wait: 0")
+        processes[spec.process_name(name)].append(name)
+    for name, spec in threads.items():
+        mates = [n for n in processes[spec.process_name(name)] if n != name]
+        if spec.busy_wait and mates:
+            yield Diagnostic("busy-wait-shared", f"thread '{name}' busy-waits in a process it shares with "
+                             f"{', '.join(mates)}: the spinning holds the GIL and delays them",
+                             ("threads", name, "busy_wait"), severity=Severity.WARNING,
+                             hint="a process of its own, or busy_wait: 0")
 
 
 CHECKS = (unknown_activities, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus, latencies,
