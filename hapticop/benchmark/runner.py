@@ -12,6 +12,7 @@ import platform
 import subprocess
 import sys
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,15 +71,9 @@ def run(file: str, seconds: float, out: Path, conditions: tuple[str, ...] = ("id
                            "figures are for normal scheduling")
     for name in conditions:
         say(f"{name}: {file} for {seconds:g} s" + (" beside cyclictest" if cyclictest.available() else ""))
-        load = Load(seconds + STARTUP_S + 5) if name == "loaded" else None
-        if load:
-            load.__enter__()
-        try:
+        with Load(seconds + STARTUP_S + 5) if name == "loaded" else nullcontext():
             beside = cyclictest.Cyclictest(seconds + STARTUP_S / 2) if cyclictest.available() else None
             timing, code = compose(file, seconds, out / f"run-{name}")
             baseline = beside.result() if beside else None
-        finally:
-            if load:
-                load.__exit__(None, None, None)
         bench.conditions.append(Condition(name, timing, baseline, code, out / f"run-{name}"))
     return bench
