@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
+from hapticop.sim.scene import place
 from hapticop.blocks.interface import Params, Port
 
 
@@ -64,12 +65,7 @@ class HallwayWorld(Block):
         pose, scene = self.inputs.robot_pose, self.scene
         if pose.seq == 0:
             return
-        sx, sy, st = self.geometry.start
-        rx, ry, rt = pose.value
-        c, s = np.cos(st), np.sin(st)
-        scene.pose[0] = sx + c * rx - s * ry
-        scene.pose[1] = sy + s * rx + c * ry
-        scene.pose[2] = st + rt
+        place(self.geometry.start, pose.value, scene.pose)
         np.copyto(scene.twist, self.inputs.robot_twist.value)
 
     def compute(self) -> None:

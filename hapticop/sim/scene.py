@@ -59,3 +59,15 @@ def find_scene(name: str) -> Scene | None:
 def close_scene(name: str) -> None:
     with _lock:
         _scenes.pop(name, None)
+
+
+def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The robot's pose in the hallway: its start pose composed with how far it has moved
+    (`moved` = [x, y, theta] from where it started, in the start frame), into `out`."""
+    sx, sy, st = start
+    rx, ry, rt = moved
+    c, s = np.cos(st), np.sin(st)
+    out[0] = sx + c * rx - s * ry
+    out[1] = sy + s * rx + c * ry
+    out[2] = st + rt
+    return out
