@@ -120,6 +120,7 @@ class Falcon(Block):
         self.absolute = np.zeros(3)
         self.fk_ok = False
         self.last_frame_ns = self.started_ns = self.last_ns = self.clock.now_ns()
+        self.frames_ok = False
         self.homing_target = np.zeros(3)
         self.outputs.position.value[:] = 0.0
         return True
@@ -211,7 +212,7 @@ class Falcon(Block):
         if hasattr(self, "device") or getattr(self, "usb", None) is not None:
             self.hand[:] = 0.0
             self._exchange(self.hand, forces=False)  # a last frame with zero forces
-            self.flags["frames_ok"] = False
+            self.frames_ok = self.flags["frames_ok"] = False
         connecting = getattr(self, "_connecting", None)
         if connecting is not None:  # cleaned while still opening: wait for it, then let go
             connecting.join(30.0)
@@ -256,12 +257,12 @@ class Falcon(Block):
         rises with the next one; each change is logged once. Without frames the position is not
         published, so its readers see it age past their streams' `max_age`."""
         ok = now - self.last_frame_ns < 100_000_000
-        if ok != self.flags["frames_ok"]:
+        if ok != self.frames_ok:
             if ok:
                 self.log.info("frames are back")
             else:
                 self.log.warning("no good frame for 100 ms: the Falcon holds no force, the robot is stopped")
-            self.flags["frames_ok"] = ok
+            self.frames_ok = self.flags["frames_ok"] = ok
 
     def _transfer(self, dt: float, hand_force: np.ndarray) -> bool:
         """Send `self.command`; True when `self.status` holds a new status frame."""
