@@ -81,14 +81,19 @@ def summarise(path: Path) -> str:
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for run in runs:
         groups[(run["model"], run["profile"])].append(run)
-    lines = ["| force model | operator | runs | crashes | runs with collisions | stop error on target (-5/+10 cm; cautious -5/+25) | "
-             "median stop error (cm) | median time (s) | median peak force (N) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| force model | operator | runs | crashes | runs with collisions | stop error within -5/+10 cm | "
+             "stop error min / median / max (cm) | least side clearance, min / median (m) | median time (s) | "
+             "median peak force (N) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for (model, profile), group in sorted(groups.items()):
+        stops = [r["e_stop_m"] for r in group if r["e_stop_m"] is not None]
+        spread = (f"{100 * min(stops):.1f} / {_median(stops, 100)} / {100 * max(stops):.1f}" if stops else "-")
+        sides = [r["side_clearance_min_m"] for r in group if r["side_clearance_min_m"] is not None]
+        side = f"{min(sides):.2f} / {_median(sides, digits=2)}" if sides else "-"
         lines.append(
             f"| {model} | {profile} | {len(group)} | {sum(r['crash'] for r in group)} | "
-            f"{sum(1 for r in group if r['collisions'])} | {sum(1 for r in group if r['stop_ok'])} | "
-            f"{_median([r['e_stop_m'] for r in group], 100)} | {_median([r['completion_time_s'] for r in group])} | "
+            f"{sum(1 for r in group if r['collisions'])} | {sum(1 for s in stops if -0.05 <= s <= 0.10)} | "
+            f"{spread} | {side} | {_median([r['completion_time_s'] for r in group])} | "
             f"{_median([r['force_peak_n'] for r in group], digits=2)} |")
     lines += ["", "1 kHz step compute time (median over runs of each run's median, virtual clock, one process):"]
     for model in sorted({r["model"] for r in runs}):
