@@ -97,3 +97,16 @@ class ConstantTwist(Block):
         out = self.outputs.velocity_setpoint
         out.value[:] = 0.0 if held else self.params.twist
         out.publish()
+
+
+class Simulator(Block):
+    """Stands for a simulated device: it does some arithmetic each cycle, all of it simulation."""
+
+    simulator = True
+
+    def create(self):
+        self.state = np.zeros(256)
+
+    def compute(self):
+        np.sin(self.state, out=self.state)
+        self.state += 0.001

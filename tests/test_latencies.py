@@ -94,3 +94,42 @@ def test_first_deadline_is_on_the_grid_and_far_enough_ahead(now):
     deadline = first_deadline(epoch, period, phase, now)
     assert (deadline - epoch - phase) % period == 0
     assert now + START_MARGIN_NS <= deadline < now + START_MARGIN_NS + period or deadline == epoch + phase
+
+
+def test_the_simulation_timer_accumulates_without_allocating():
+    import numpy as np
+
+    from hapticop.runtime.context import SimulationTimer
+
+    totals = np.zeros(2, dtype=np.int64)
+    timer = SimulationTimer(totals, 1)
+    for _ in range(3):
+        with timer:
+            sum(range(1000))
+    assert totals[0] == 0 and totals[1] > 0
+    with SimulationTimer():  # a context without a region: counts nothing, fails nothing
+        pass
+
+
+SIMULATING = """
+version: 1
+name: simulating
+threads:
+  main:
+    period: 1ms
+    deploy: main
+    schedules: {0: [mediator, source, world]}
+activities:
+  mediator: {block: mediator}
+  source: {block: counter}
+  world: {block: "tests.blocks:Simulator"}
+"""
+
+
+def test_the_report_tells_the_system_from_its_simulators(tmp_path):
+    result = compose(tmp_path, SIMULATING, clock="realtime", duration="0.5s", name="simulating")
+    cpu = result.timing["cpu"]
+    assert cpu["simulators_percent"] > 0
+    assert cpu["without_simulators_percent"] == pytest.approx(cpu["loops_percent"] - cpu["simulators_percent"], abs=0.11)
+    assert result.timing["activities"]["world"]["simulation_us_per_step"] > 0
+    assert "simulation_us_per_step" not in result.timing["activities"]["source"]

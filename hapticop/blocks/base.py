@@ -46,6 +46,8 @@ class Block:
     # Parameters a live patch may change with only capability configuration (gains, limits);
     # a change to any other parameter takes the activity through resource configuration.
     capability_params: ClassVar[frozenset[str]] = frozenset()
+    # A block that only simulates (the hallway world): all its compute counts as simulation.
+    simulator: ClassVar[bool] = False
     # Parameters the block reads every cycle (modes, limits): a live patch changes them between
     # two cycles without taking the activity out of running.
     running_params: ClassVar[frozenset[str]] = frozenset()

@@ -168,7 +168,8 @@ class EthercatMaster(Block):
         dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9  # a late cycle is not a leap in time
         self.last_ns = now
         if dt > 0:
-            self.plant.step(self.rx, dt, self.tx)
+            with self.context.simulation:
+                self.plant.step(self.rx, dt, self.tx)
         out = self.outputs
         np.copyto(out.robot_pose.value, self.plant.pose)
         np.copyto(out.robot_twist.value, self.plant.twist)

@@ -199,8 +199,9 @@ class Falcon(Block):
         if scene.operator_since_ns is None:
             self.hand[:] = 0.0  # hands resting on the grip until told to drive
         else:
-            scene.operator.step(scene.operator_time(self.clock.now_ns()), scene.environment_force,
-                                scene.handle_position, self.hand, scene.handle_velocity)
+            with self.context.simulation:
+                scene.operator.step(scene.operator_time(self.clock.now_ns()), scene.environment_force,
+                                    scene.handle_position, self.hand, scene.handle_velocity)
         np.copyto(scene.hand_force, self.hand)
         self._exchange(self.hand, forces=True)
 
@@ -274,7 +275,9 @@ class Falcon(Block):
                     self._usb_failed = True
                     self.log.error("%s", error)
                 return False
-        if self.device.exchange(self.command, dt, hand_force, out=self.reply) is None:
+        with self.context.simulation:
+            replied = self.device.exchange(self.command, dt, hand_force, out=self.reply) is not None
+        if not replied:
             return False
         fault = self.params.sim_fault
         if fault == "silent":

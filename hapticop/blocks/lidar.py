@@ -118,7 +118,8 @@ class Lidar(Block):
             if self.fault == "garbage":
                 self.simulator.inject_garbage()
             if self.clock.virtual:
-                self.simulator.step(now)
+                with self.context.simulation:
+                    self.simulator.step(now)
         if self.client.poll(now) and self.client.latest_scan(self.ranges, self.angles):
             out = self.outputs
             np.copyto(out.ranges.value, self.ranges)

@@ -32,6 +32,7 @@ class HallwayWorldParams(Params):
 
 class HallwayWorld(Block):
     Params = HallwayWorldParams
+    simulator = True  # everything it does is the simulation
     inputs = {
         "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
         "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),

@@ -16,7 +16,7 @@ import numpy as np
 from hapticop.description import Composition
 from hapticop.loader import Loaded, ResolvedActivity
 from hapticop.runtime.latencies import OriginRelay
-from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
+from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.streams import LatestSlot, SpscQueue, latest_nbytes, queue_nbytes
@@ -136,7 +136,8 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
             target.max_age_ns = spec.max_age or 0
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
+    timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name), writer.run_dir)
+                              clock, log, activity_rng(seed, name), writer.run_dir, timer)
     block = resolved.block(context)
     return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)

@@ -8,7 +8,8 @@ the stream's transports. Nothing here allocates on the cycle path.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Callable
@@ -118,6 +119,24 @@ class FlagView:
         self._flags[self._index[name]] = 1 if value else 0
 
 
+class SimulationTimer:
+    """`with context.simulation:` around the simulated device inside a block, so reports can
+    tell the system's own CPU from its simulators'. One object per activity: entering and
+    leaving allocate nothing."""
+
+    __slots__ = ("_totals", "_index", "_started")
+
+    def __init__(self, totals: np.ndarray | None = None, index: int = 0):
+        self._totals, self._index, self._started = totals, index, 0
+
+    def __enter__(self) -> None:
+        self._started = time.perf_counter_ns()
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if self._totals is not None:
+            self._totals[self._index] += time.perf_counter_ns() - self._started
+
+
 @dataclass
 class ActivityContext:
     name: str
@@ -129,3 +148,4 @@ class ActivityContext:
     log: Logger
     rng: np.random.Generator
     run_dir: Path  # where the activity may leave results (logs live there too)
+    simulation: SimulationTimer = field(default_factory=SimulationTimer)

@@ -111,6 +111,7 @@ class Layout:
         section("latency", (threads, BINS), "int64")
         section("compute_max", (acts,), "int64")
         section("compute", (acts, BINS), "int64")
+        section("sim_ns", (acts,), "int64")  # time each activity spent in simulated devices
         section("cpu_ns", (threads,), "int64")  # CPU time each thread's loop has used
         section("cpu_base", (threads,), "int64")  # ... and had used when timing started
         section("cycles_base", (threads,), "int64")  # cycles before timing started

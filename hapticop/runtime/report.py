@@ -40,13 +40,22 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
     for name, index in layout.activity_index.items():
         summary = Summary.of(region.compute[index], int(region.compute_max[index]))
         activities[name] = {"steps": summary.count, "compute_us": _numbers(summary)}
+        if region.sim_ns[index]:
+            activities[name]["simulation_us_per_step"] = round(int(region.sim_ns[index]) / 1000 / max(1, summary.count), 1)
+    if elapsed_ns:  # the system's own CPU: the loops' CPU less what their blocks spent simulating devices
+        simulated = 100.0 * int(region.sim_ns.sum()) / elapsed_ns
+        loops = sum(t["cpu_percent"] or 0.0 for t in threads.values())
+        cpu = {"loops_percent": round(loops, 1), "simulators_percent": round(simulated, 1),
+               "without_simulators_percent": round(loops - simulated, 1)}
+    else:
+        cpu = None
     latencies = {}
     for slot, (name, spec) in enumerate(composition.latencies.items()):
         summary = Summary.of(region.e2e[slot], int(region.e2e_max[slot]))
         latencies[name] = {"from": spec.source, "to": spec.sink, "samples": summary.count,
                            "latency_us": _numbers(summary), "histogram_us": sparse(region.e2e[slot])}
     return {"started_ns": int(region.system[Region.STARTED_NS]),
-            "elapsed_s": round(elapsed_ns / 1e9, 3) if elapsed_ns else None, "threads": threads,
+            "elapsed_s": round(elapsed_ns / 1e9, 3) if elapsed_ns else None, "cpu": cpu, "threads": threads,
             "activities": activities, "latencies": latencies}
 
 
@@ -86,12 +95,17 @@ def print_timing(data: dict, console: Console, virtual: bool) -> None:
                           _cell(lat["p99.9"]), _cell(lat["max"]))
         console.print(table)
     table = Table(title="activities", title_justify="left")
-    for column in ("activity", "steps", "compute p50 us", "p99", "max"):
+    for column in ("activity", "steps", "compute p50 us", "p99", "max", "of which simulation us"):
         table.add_column(column, justify="right" if column != "activity" else "left")
     for name, a in data["activities"].items():
         c = a["compute_us"]
-        table.add_row(name, str(a["steps"]), _cell(c["p50"]), _cell(c["p99"]), _cell(c["max"]))
+        table.add_row(name, str(a["steps"]), _cell(c["p50"]), _cell(c["p99"]), _cell(c["max"]),
+                      _cell(a.get("simulation_us_per_step")))
     console.print(table)
+    if data.get("cpu"):
+        cpu = data["cpu"]
+        console.print(f"CPU of the loops: {cpu['loops_percent']:g} % of one core, of which simulated devices "
+                      f"{cpu['simulators_percent']:g} %: the system itself {cpu['without_simulators_percent']:g} %")
 
 
 def write_timing(data: dict, run_dir: Path) -> Path:

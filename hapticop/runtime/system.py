@@ -272,7 +272,7 @@ class System:
         if not (region.cycles > 0).all() and now - started < 60 * SECOND:
             return
         self.operating_ns = now
-        for name in ("latency", "latency_max", "compute", "compute_max", "missed", "e2e", "e2e_max"):
+        for name in ("latency", "latency_max", "compute", "compute_max", "missed", "e2e", "e2e_max", "sim_ns"):
             getattr(region, name)[...] = 0
         region.cycles_base[:] = region.cycles
         region.cpu_base[:] = region.cpu_ns

@@ -31,6 +31,7 @@ class ActivityRunner:
                  relay: OriginRelay | None = None):
         self.name, self.block, self.region, self.log = name, block, region, log
         self.relay = relay
+        self.simulator = block.simulator
         layout = region.layout
         self.index = layout.activity_index[name]
         self.inputs = [port for port in vars(block.inputs).values()]
@@ -53,7 +54,10 @@ class ActivityRunner:
             relay.before_step()
         started = time.perf_counter_ns()
         self.lifecycle.step()
-        record(self.region.compute, self.region.compute_max, self.index, time.perf_counter_ns() - started)
+        took = time.perf_counter_ns() - started
+        record(self.region.compute, self.region.compute_max, self.index, took)
+        if self.simulator:
+            self.region.sim_ns[self.index] += took
         if relay is not None:
             relay.after_step()
 
