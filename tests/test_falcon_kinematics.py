@@ -17,7 +17,6 @@ from .conftest import FIXTURES, SHARED_TESTDATA
 
 # The full reference data when ../shared is present, else the small copies the project ships.
 DATA = SHARED_TESTDATA / "falcon" if (SHARED_TESTDATA / "falcon").is_dir() else FIXTURES / "falcon"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="no Falcon reference data")
 REF = json.loads((DATA / "kinematics_reference.json").read_text()) if DATA.is_dir() else {
     "inverse_kinematics_and_jacobian": [], "forward_kinematics": [], "encoder_to_angle": []}
 IK_CASES = REF["inverse_kinematics_and_jacobian"]
@@ -37,7 +36,6 @@ def kin() -> FalconKinematics:
 
 
 # ---------------------------------------------------------------- constants and encoders
-@needs_data
 def test_defaults_are_libnifalcons_constants():
     c, g, dr = REF["constants"], Geometry(), Drive()
     assert [getattr(g, k) for k in "abcdefrs"] == [c[k] for k in "abcdefrs"]
@@ -47,7 +45,6 @@ def test_defaults_are_libnifalcons_constants():
     assert dr.motor_per_nm == c["getForces"]["sign"] * c["getForces"]["torque_to_motor_scale"]
 
 
-@needs_data
 @pytest.mark.parametrize("case", REF["encoder_to_angle"], ids=lambda c: str(c["encoder"]))
 def test_counts_to_thigh_angle(kin, case):
     theta = kin.angles_from_counts(np.full(3, case["encoder"]), np.zeros(3))
@@ -59,7 +56,6 @@ def test_counts_to_thigh_angle(kin, case):
 
 
 # ---------------------------------------------------------------- inverse kinematics, Jacobian
-@needs_data
 @pytest.mark.parametrize("case", IK_CASES, ids=lambda c: str(c["position_m"]))
 def test_inverse_kinematics(kin, case):
     t1, t2, t3 = np.zeros(3), np.zeros(3), np.zeros(3)
@@ -69,7 +65,6 @@ def test_inverse_kinematics(kin, case):
         assert got == pytest.approx(case[f"independent_{leg}_rad"], abs=1e-12)
 
 
-@needs_data
 @pytest.mark.parametrize("case", IK_CASES, ids=lambda c: str(c["position_m"]))
 def test_jacobian(kin, case):
     J, M = np.zeros((3, 3)), np.zeros((3, 3))
@@ -89,7 +84,6 @@ def test_jacobian(kin, case):
     assert np.allclose(M_lib[:, :2], M[:, :2], rtol=1e-5, atol=1e-5)
 
 
-@needs_data
 def test_libnifalcon_z_column_error_is_real_and_large():
     worst = max(np.abs(np.array(c["libnifalcon_jacobian"]) - c["independent_jacobian"]).max()
                 / np.abs(c["independent_jacobian"]).max() for c in IK_CASES)
@@ -97,7 +91,6 @@ def test_libnifalcon_z_column_error_is_real_and_large():
 
 
 # ---------------------------------------------------------------- forces
-@needs_data
 @pytest.mark.parametrize("case", IK_CASES, ids=lambda c: str(c["position_m"]))
 def test_forces_use_the_true_jacobian_transpose(kin, case):
     J_lib = np.array(case["libnifalcon_jacobian"])
@@ -125,7 +118,6 @@ def test_documented_example_at_125mm(kin):
     assert motor.tolist() == [-178, 605, -427]  # libnifalcon sends (-178, 596, -324)
 
 
-@needs_data
 @pytest.mark.parametrize("case", IK_CASES[::3], ids=lambda c: str(c["position_m"]))
 def test_virtual_work_holds_for_ours_and_fails_for_libnifalcons(kin, case):
     """tau . dtheta == F . dx for a small real motion (FK of perturbed angles, not J)."""
@@ -181,7 +173,6 @@ def test_force_at_last_forward_pose_equals_force_at_that_position(kin):
 
 
 # ---------------------------------------------------------------- forward kinematics
-@needs_data
 @pytest.mark.parametrize("case", FK_CASES, ids=lambda c: str(c["encoders"]))
 def test_forward_kinematics_cold(kin, case):
     p = np.zeros(3)
@@ -194,7 +185,6 @@ def test_forward_kinematics_cold(kin, case):
     assert kin.inverse(p, back) and back == pytest.approx(theta, abs=1e-12)
 
 
-@needs_data
 @pytest.mark.parametrize("case", FK_UNREACHABLE, ids=lambda c: str(c["encoders"]))
 def test_forward_kinematics_unreachable_says_so(kin, case):
     p = np.array([1.0, 2.0, 3.0])
@@ -204,7 +194,6 @@ def test_forward_kinematics_unreachable_says_so(kin, case):
     assert kin.forward([10, 10, 10], p) and kin.iterations <= 4  # warm start survived
 
 
-@needs_data
 def test_warm_started_sequence_does_not_lag(kin):
     """libnifalcon's one half-step per cycle lags the encoders; ours is exact every cycle."""
     p, cold = np.zeros(3), np.zeros(3)
@@ -221,7 +210,6 @@ def test_warm_started_sequence_does_not_lag(kin):
     assert lib_err[-1] < 1e-6
 
 
-@needs_data
 @pytest.mark.parametrize("case", IK_CASES, ids=lambda c: str(c["position_m"]))
 def test_round_trip_ik_fk(kin, case):
     theta, p = np.zeros(3), np.zeros(3)
@@ -248,7 +236,6 @@ def test_fk_inverts_ik_in_the_workspace(a, b, c, d, e, f):
     assert np.abs(p - target).max() < 1e-9
 
 
-@needs_data
 def test_geometry_is_a_parameter():
     """The thesis's r = 36.6 mm moves the counts-0 point by 2.4 mm in z (kinematics notes §1)."""
     p, q = np.zeros(3), np.zeros(3)

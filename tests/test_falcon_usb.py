@@ -8,6 +8,8 @@ Time is a `VirtualClock`: no test sleeps, none asserts a wall-clock duration.
 from __future__ import annotations
 
 import hashlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -17,7 +19,6 @@ from hapticop.devices.falcon.codec import MOTOR_LIMIT, Button, Flag, FrameCodec,
 from hapticop.devices.falcon.homing import Homing
 from hapticop.devices.falcon.usb_driver import (
     FalconDisconnected, FalconLoaderError, FalconUsb, FalconUsbError, connect, describe_falcons, find_falcons,
-    system_backend,
 )
 from hapticop.devices.falcon.virtual_usb import HomingHand, Phase, VirtualClock, VirtualFalcon, VirtualUsbBackend
 
@@ -95,13 +96,13 @@ def test_index_chooses_among_several_falcons_and_bad_indexes_are_explained():
 
 
 def test_without_libusb_the_error_says_what_to_install():
-    import usb.backend.libusb0
-    import usb.backend.libusb1
-
-    if usb.backend.libusb1._lib_object is not None or usb.backend.libusb0._lib is not None:
-        pytest.skip("libusb is already loaded in this process: pyusb caches it")
-    with pytest.raises(FalconUsbError, match="libusb is not installed"):
-        system_backend(find_library=lambda name: None)
+    # pyusb caches a loaded libusb for the whole process, so ask in a fresh interpreter
+    check = ("from hapticop.devices.falcon.usb_driver import FalconUsbError, system_backend\n"
+             "try:\n    system_backend(find_library=lambda name: None)\n"
+             "except FalconUsbError as error:\n    print(error)\n")
+    done = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "libusb is not installed" in done.stdout
 
 
 # ---------------------------------------------------------------- the loader

@@ -29,7 +29,6 @@ def test_a_clear_error_without_matplotlib(tmp_path, monkeypatch):
 
 
 def test_the_plot_writes_a_png(tmp_path):
-    pytest.importorskip("matplotlib", reason="matplotlib is the optional 'report' extra")
     g = HallwayGeometry.named("H4")
     y = lambda t: 0.2 * np.sin(t / 3)  # noqa: E731
     run, _ = straight_run(g=g, y=y)
