@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+from hapticop.benchmark.cyclictest import parse as parse_cyclictest
 
 COMPOSITION = """\
 version: 1
@@ -52,28 +52,8 @@ streams:
 def cyclictest(seconds: int) -> dict:
     out = subprocess.run(["cyclictest", "-m", "-p", "80", "-i", "1000", "-l", str(seconds * 1000), "-q", "-h", "20000"],
                          capture_output=True, text=True, check=True).stdout
-    histogram = np.zeros(20001, dtype=np.int64)
-    maximum = 0
-    overflows = 0
-    for line in out.splitlines():
-        if line.startswith("#"):
-            if "Max Latencies" in line:
-                maximum = int(line.split(":")[1].split()[0])
-            if "Histogram Overflows" in line:
-                overflows = int(line.split(":")[1].split()[0])
-            continue
-        parts = line.split()
-        if len(parts) >= 2 and parts[0].isdigit():
-            histogram[int(parts[0])] = int(parts[1])
-    histogram[-1] += overflows
-    cumulative = np.cumsum(histogram)
-    total = cumulative[-1]
-
-    def pct(q):
-        return float(np.searchsorted(cumulative, max(1, int(np.ceil(q / 100 * total)))))
-
-    return {"p50": pct(50), "p99": pct(99), "p99.9": pct(99.9), "max": float(maximum), "cycles": int(total),
-            "missed": None}
+    distribution = parse_cyclictest(out)
+    return {**distribution.summary(), "cycles": distribution.count, "missed": None}
 
 
 def hapticop(deploy: str, seconds: int, work: Path) -> dict:

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hapticop.runtime.timing import percentile_us
+
 
 @dataclass(frozen=True)
 class Distribution:
@@ -34,12 +36,8 @@ class Distribution:
         return int(self.counts.sum())
 
     def percentile(self, q: float) -> float:
-        """The smallest bin holding the ceil(q % of n)-th sample; NaN when empty."""
-        total = self.count
-        if total == 0:
-            return math.nan
-        rank = max(1, math.ceil(q / 100.0 * total))
-        return float(np.searchsorted(np.cumsum(self.counts), rank))
+        """The smallest bin holding the ceil(q % of n)-th sample; NaN when empty (as the runtime reads its own)."""
+        return percentile_us(self.counts, q)
 
     @property
     def maximum(self) -> float:

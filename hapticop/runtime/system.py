@@ -287,9 +287,11 @@ class System:
             self.set_flag("system.shutdown_requested")
 
     # -- live changes -------------------------------------------------------------------
-    def prepare_patch(self, patch, patch_file: str = "<patch>") -> "live.PendingPatch":
-        """Apply and validate a patch against the running description (any thread)."""
-        new_tree, new, plan, diff = prepare(self.tree, patch, old=self.composition, patch_file=patch_file,
+    def prepare_patch(self, patch, patch_file: str = "<patch>", base=None) -> "live.PendingPatch":
+        """Apply and validate a patch against the running description (any thread), or against
+        `base`, a (tree, composition) some earlier pending patch will leave."""
+        tree, composition = base or (self.tree, self.composition)
+        new_tree, new, plan, diff = prepare(tree, patch, old=composition, patch_file=patch_file,
                                             name=Path(self.file).name)
         resolved = live.check(self, plan, new)
         pending = live.PendingPatch(plan, new, new_tree, resolved, threading.Event())
@@ -314,10 +316,7 @@ class System:
         for at, name, scripted, _, _ in self.scripted:
             pending = None
             try:
-                new_tree, new, plan, diff = prepare(tree, scripted.patch, old=composition,
-                                                    patch_file=f"patches.{name}", name=Path(self.file).name)
-                pending = live.PendingPatch(plan, new, new_tree, live.check(self, plan, new), threading.Event())
-                pending.diff = diff
+                pending = self.prepare_patch(scripted.patch, f"patches.{name}", base=(tree, composition))
             except PatchError:
                 pass  # refused when due, with its reason
             prepared.append((at, name, scripted, pending, tree))
