@@ -13,9 +13,9 @@ from collections.abc import Callable
 import numpy as np
 
 
-def allocation_stats(fn: Callable[[], object], calls: int = 1000) -> tuple[int, int]:
+def allocation_stats(fn: Callable[[], object], calls: int = 1000, warmup: int = 10) -> tuple[int, int]:
     """(bytes still allocated after `calls` calls, peak bytes during them), by tracemalloc."""
-    for _ in range(10):
+    for _ in range(warmup):
         fn()
     tracemalloc.start()
     try:
@@ -40,3 +40,16 @@ def time_per_call(fn: Callable[[], object], calls: int = 5000) -> tuple[float, f
         fn()
         samples[i] = clock() - started
     return float(np.median(samples)) / 1e3, float(np.percentile(samples, 99)) / 1e3
+
+
+def grown_bytes(run: Callable[[], object]) -> int:
+    """Bytes one call of `run` left allocated, summed over the files where allocation grew
+    (tracemalloc snapshots before and after; warm up before calling this)."""
+    tracemalloc.start()
+    try:
+        before = tracemalloc.take_snapshot()
+        run()
+        after = tracemalloc.take_snapshot()
+    finally:
+        tracemalloc.stop()
+    return sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)

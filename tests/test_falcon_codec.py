@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import tracemalloc
 
 import numpy as np
 import pytest
@@ -11,9 +10,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hapticop.devices.falcon.codec import (
-    FRAME_SIZE, Button, Command, Flag, FrameCodec, FrameError, FrameReader, Status,
-    is_valid_frame, new_frame,
+    FRAME_SIZE,
+    Button,
+    Command,
+    Flag,
+    FrameCodec,
+    FrameError,
+    FrameReader,
+    Status,
+    is_valid_frame,
+    new_frame,
 )
+from hapticop.measure import grown_bytes
 
 from .conftest import FIXTURES, SHARED_TESTDATA
 
@@ -276,12 +284,7 @@ def test_cycle_path_allocates_nothing_that_stays():
             codec.encode_command(motor, 3, cmd)
 
     cycles(500)
-    tracemalloc.start()
-    before = tracemalloc.take_snapshot()
-    cycles(5000)
-    after = tracemalloc.take_snapshot()
-    tracemalloc.stop()
-    grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
+    grown = grown_bytes(lambda: cycles(5000))
     assert grown < 2048
     assert reader.frames == 5500 and reader.discarded == 0
     assert FRAME_SIZE == 16

@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import json
 import math
-import tracemalloc
 
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from hapticop.devices.falcon.kinematics import WORKSPACE_BOX_M, Drive, FalconKinematics, Geometry
+from hapticop.devices.falcon.kinematics import (
+    WORKSPACE_BOX_M,
+    Drive,
+    FalconKinematics,
+    Geometry,
+)
+from hapticop.measure import grown_bytes
 
 from .conftest import FIXTURES, SHARED_TESTDATA
 
@@ -257,10 +262,5 @@ def test_cycle_path_allocates_nothing_that_stays(kin):
             kin.forces_to_motor(None, force, motor)
 
     cycles(300)
-    tracemalloc.start()
-    before = tracemalloc.take_snapshot()
-    cycles(3000)
-    after = tracemalloc.take_snapshot()
-    tracemalloc.stop()
-    grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
+    grown = grown_bytes(lambda: cycles(3000))
     assert grown < 2048

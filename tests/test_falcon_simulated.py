@@ -6,8 +6,16 @@ import numpy as np
 import pytest
 
 from hapticop.devices.falcon import (
-    Button, Flag, FalconKinematics, FrameCodec, Homing, SimulatedFalcon, Status, new_frame,
+    Button,
+    FalconKinematics,
+    Flag,
+    FrameCodec,
+    Homing,
+    SimulatedFalcon,
+    Status,
+    new_frame,
 )
+from hapticop.measure import grown_bytes
 
 DT = 0.001
 CENTRE = np.array([0.0, 0.0, 0.125])
@@ -212,7 +220,6 @@ def test_an_unreachable_start_is_refused():
 
 
 def test_exchange_into_out_allocates_nothing_that_stays():
-    import tracemalloc
 
     sim, cmd, reply = SimulatedFalcon(rng=1, homed=True), new_frame(), new_frame()
     force = np.array([0.0, 0.0, 1.0])
@@ -224,10 +231,5 @@ def test_exchange_into_out_allocates_nothing_that_stays():
             sim.exchange(cmd, DT, force, out=reply)
 
     cycles(300)
-    tracemalloc.start()
-    before = tracemalloc.take_snapshot()
-    cycles(3000)
-    after = tracemalloc.take_snapshot()
-    tracemalloc.stop()
-    grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
+    grown = grown_bytes(lambda: cycles(3000))
     assert grown < 2048

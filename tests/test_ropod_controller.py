@@ -2,15 +2,26 @@
 
 from __future__ import annotations
 
-import tracemalloc
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.controller import THESIS_PIVOT_OFFSETS_RAD, PlatformControllerParams, PlatformVelocityController
+from hapticop.devices.ropod.controller import (
+    THESIS_PIVOT_OFFSETS_RAD,
+    PlatformControllerParams,
+    PlatformVelocityController,
+)
 from hapticop.devices.ropod.controllers import LinearControllerParams
-from hapticop.devices.ropod.pdo import Com1, Stat1, new_rx_image, new_tx_image, rxpdo_view, txpdo_view
+from hapticop.devices.ropod.pdo import (
+    Com1,
+    Stat1,
+    new_rx_image,
+    new_tx_image,
+    rxpdo_view,
+    txpdo_view,
+)
+from hapticop.measure import allocation_stats
 
 from .test_ropod_data import load
 
@@ -193,18 +204,8 @@ def test_step_allocates_nothing():
     ctrl, rx, v = PlatformVelocityController(), new_rx_image(4), np.zeros(3)
     tx = _sensors([0.3, -1.0, 2.0, 0.5], np.linspace(-5, 5, 8))
     sp = np.array([0.3, 0.1, 0.2])
-    for _ in range(10):
-        ctrl.step(sp, tx, rx, v)
-    tracemalloc.start()
-    try:
-        base = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
-        for _ in range(1000):
-            ctrl.step(sp, tx, rx, v)
-        current, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    assert current - base < 256 and peak - base < 2048
+    retained, peak = allocation_stats(lambda: ctrl.step(sp, tx, rx, v), 1000)
+    assert retained < 256 and peak < 2048
 
 
 def test_params_must_fit_the_geometry():

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
-import tracemalloc
-
 import numpy as np
 import pytest
 
 from hapticop.devices.ropod.controllers import (
-    ROPOD2019_PLATFORM_THETA, ROPOD2019_PLATFORM_XY, THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL,
-    ControllerBank, LinearControllerParams,
+    ROPOD2019_PLATFORM_THETA,
+    ROPOD2019_PLATFORM_XY,
+    THESIS_PLATFORM_THETA,
+    THESIS_PLATFORM_XY,
+    THESIS_WHEEL,
+    ControllerBank,
+    LinearControllerParams,
 )
+from hapticop.measure import allocation_stats
 
 from .test_ropod_data import load
 
@@ -144,15 +148,5 @@ def test_step_allocates_nothing():
     """Nothing retained and no temporaries beyond numpy's own call overhead (a bare np.clip peaks at ~5 KiB)."""
     bank = ControllerBank(LinearControllerParams.stack([THESIS_PLATFORM_XY] * 3 + [THESIS_WHEEL] * 8), TS)
     e, out, reset = np.linspace(-3, 3, 11), np.zeros(11), np.zeros(11, bool)
-    for _ in range(10):
-        bank.step(e, out, reset)
-    tracemalloc.start()
-    try:
-        base = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
-        for _ in range(2000):
-            bank.step(e, out, reset)
-        current, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    assert current - base < 256 and peak - base < 1024
+    retained, peak = allocation_stats(lambda: bank.step(e, out, reset), 2000)
+    assert retained < 256 and peak < 1024

@@ -3,14 +3,21 @@
 from __future__ import annotations
 
 import math
-import tracemalloc
 
 import numpy as np
 import pytest
 
 from hapticop.devices.ropod.controller import PlatformVelocityController
+from hapticop.devices.ropod.pdo import (
+    Com1,
+    Stat1,
+    new_rx_image,
+    new_tx_image,
+    rxpdo_view,
+    txpdo_view,
+)
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
-from hapticop.devices.ropod.pdo import Com1, Stat1, new_rx_image, new_tx_image, rxpdo_view, txpdo_view
+from hapticop.measure import allocation_stats
 
 from .test_ropod_data import load
 
@@ -199,15 +206,5 @@ def test_casters_starting_sideways_realign_and_the_step_settles():
 
 def test_step_allocates_nothing():
     plant, tx, rx = RopodPlant(PlantParams(initial_twist=(0.3, 0.1, 0.2))), new_tx_image(4), _commands(TORQUE, 1, -1)
-    for _ in range(10):
-        plant.step(rx, DT, tx)
-    tracemalloc.start()
-    try:
-        base = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
-        for _ in range(300):
-            plant.step(rx, DT, tx)
-        current, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    assert current - base < 256 and peak - base < 2048
+    retained, peak = allocation_stats(lambda: plant.step(rx, DT, tx), 300)
+    assert retained < 256 and peak < 2048

@@ -2,12 +2,18 @@
 
 import math
 import time
-import tracemalloc
 
 import numpy as np
 import pytest
 
-from hapticop.sim.hallway import Footprint, HallwayGeometry, LidarModel, RangeNoise, World
+from hapticop.measure import grown_bytes
+from hapticop.sim.hallway import (
+    Footprint,
+    HallwayGeometry,
+    LidarModel,
+    RangeNoise,
+    World,
+)
 
 BOX = World([[[0, -1], [4, -1]], [[4, -1], [4, 1]], [[4, 1], [0, 1]], [[0, 1], [0, -1]]])
 """A closed 4 m x 2 m rectangle, x in [0, 4], y in [-1, 1]."""
@@ -116,13 +122,11 @@ def test_811_beams_well_under_a_millisecond_and_without_allocating(capsys):
         t0 = time.perf_counter()
         world.raycast((5.0, 0.1, 0.05), g.lidar.mount, angles, out)
         times.append(time.perf_counter() - t0)
-    tracemalloc.start()
-    before = tracemalloc.take_snapshot()
-    for _ in range(200):
-        world.raycast((5.0, 0.1, 0.05), g.lidar.mount, angles, out)
-    after = tracemalloc.take_snapshot()
-    tracemalloc.stop()
-    grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
+    def cast_200():
+        for _ in range(200):
+            world.raycast((5.0, 0.1, 0.05), g.lidar.mount, angles, out)
+
+    grown = grown_bytes(cast_200)
     assert grown < 4096
     with capsys.disabled():
         print(f"\n[raycast] 811 beams x {len(world.segments)} segments: median {np.median(times) * 1e6:.0f} us, "

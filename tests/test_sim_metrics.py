@@ -1,11 +1,11 @@
 """Metrics of hallway-experiment.md §5 on synthetic runs with known answers, §6 targets, and the recorder."""
 
 import math
-import tracemalloc
 
 import numpy as np
 import pytest
 
+from hapticop.measure import grown_bytes
 from hapticop.sim.hallway import HallwayGeometry
 from hapticop.sim.metrics import (
     CHANNELS,
@@ -248,13 +248,11 @@ def test_recorder_appends_without_allocating_and_counts_what_it_drops():
     pose, f, v = np.zeros(3), np.zeros(3), np.zeros(2)
     for i in range(1000):
         rec.append(i * DT, pose, force_env=f, cmd=v, clearance=0.5)
-    tracemalloc.start()
-    before = tracemalloc.take_snapshot()
-    for i in range(1000, 21000):
-        rec.append(i * DT, pose, force_env=f, cmd=v, clearance=0.5, scan=False)
-    after = tracemalloc.take_snapshot()
-    tracemalloc.stop()
-    grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
+    def record():
+        for i in range(1000, 21000):
+            rec.append(i * DT, pose, force_env=f, cmd=v, clearance=0.5, scan=False)
+
+    grown = grown_bytes(record)
     assert grown < 2048
     small = TrajectoryRecorder(3)
     assert [small.append(i, pose) for i in range(5)] == [True, True, True, False, False]

@@ -1,11 +1,11 @@
 """The blind operator of hallway-experiment.md §3: qualitative behaviour, timing of its rules, seeded variation."""
 
 import time
-import tracemalloc
 
 import numpy as np
 import pytest
 
+from hapticop.measure import grown_bytes
 from hapticop.sim.operator import SWEEP_RANGES, BlindOperator, OperatorProfile, Tremor
 
 KP, KD, M_DEVICE = 55.0, 0.2, 0.1  # the haptic controller's centring PD and §2's device mass
@@ -171,13 +171,11 @@ def test_a_step_allocates_nothing_and_is_fast(capsys):
     fe, p, v, out = np.array([0.3, 0.0, 0.8]), np.array([0.001, 0.0, -0.02]), np.zeros(3), np.zeros(3)
     for k in range(2000):
         op.step(k * 1e-3, fe, p, out, velocity=v)
-    tracemalloc.start()
-    before = tracemalloc.take_snapshot()
-    for k in range(2000, 12000):
-        op.step(k * 1e-3, fe, p, out)
-    after = tracemalloc.take_snapshot()
-    tracemalloc.stop()
-    grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
+    def drive():
+        for k in range(2000, 12000):
+            op.step(k * 1e-3, fe, p, out)
+
+    grown = grown_bytes(drive)
     assert grown < 2048
     t0 = time.perf_counter()
     for k in range(12000, 22000):

@@ -6,13 +6,13 @@ from __future__ import annotations
 import multiprocessing
 import sys
 import threading
-import tracemalloc
 from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 import pytest
 
 from hapticop.blocks.interface import Port
+from hapticop.measure import allocation_stats
 from hapticop.runtime.streams import (
     MAX_RETRIES,
     SAMPLE_ALIGN,
@@ -354,18 +354,7 @@ def test_queue_across_processes_loses_nothing_unaccounted(overflow: str) -> None
 
 def traced_growth(cycle, cycles: int = 10_000) -> tuple[int, int]:
     """Bytes still allocated, and the peak above the start, after `cycles` calls."""
-    for _ in range(1_000):
-        cycle()
-    tracemalloc.start()
-    try:
-        before, _ = tracemalloc.get_traced_memory()
-        tracemalloc.reset_peak()
-        for _ in range(cycles):
-            cycle()
-        after, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    return after - before, peak - before
+    return allocation_stats(cycle, cycles, warmup=1_000)
 
 
 @pytest.mark.parametrize("synchronised", [True, False], ids=["seqlock", "plain"])
