@@ -9,6 +9,7 @@ holds the deepest part of its path.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path as FilePath
 
@@ -72,8 +73,6 @@ def resolve(source: Source, seen: tuple[str, ...] = ()) -> Source:
                                          column=column)) from None
         raise
     overlay = CommentedMap((k, v) for k, v in source.tree.items() if k != "extends")
-    import copy
-
     merged = _merge(copy.deepcopy(base.tree), overlay)
     layers = [source] + (base.layers if isinstance(base, LayeredSource) else [base])
     return LayeredSource(file=source.file, tree=merged, text=_dump(merged), layers=layers)

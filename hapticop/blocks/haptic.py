@@ -81,6 +81,9 @@ class HapticController(Block):
         )
 
     # -- life cycle -------------------------------------------------------------------------
+    def create(self) -> None:
+        self.handle_lost = self.blind = False  # what the flags of the same names last said
+
     def configure_resources(self) -> bool:
         """Wait until the Falcon, the LIDAR and the ropod controller run (the mediator says so)."""
         return self.flags["resources_ready"]
@@ -98,8 +101,8 @@ class HapticController(Block):
         p_in = self.inputs
         out = self.outputs
         handle_ok = p_in.handle_position.valid
-        if handle_ok == self.flags["handle_lost"]:
-            self.flags["handle_lost"] = not handle_ok
+        if handle_ok == self.handle_lost:
+            self.handle_lost = self.flags["handle_lost"] = not handle_ok
             if handle_ok:
                 self.log.info("handle position back: driving resumes")
             else:
@@ -140,8 +143,8 @@ class HapticController(Block):
     # -- helpers ------------------------------------------------------------------------------
     def _blind_policy(self, blind: bool, twist) -> None:
         """Without a fresh scan nothing can be felt nor governed: stop, or creep (the policy says)."""
-        if blind != self.flags["blind"]:
-            self.flags["blind"] = blind
+        if blind != self.blind:
+            self.blind = self.flags["blind"] = blind
             if blind:
                 self.log.warning("scan stale: blind, policy '%s'", self.params.blind)
             else:
