@@ -110,3 +110,34 @@ class Simulator(Block):
     def compute(self):
         np.sin(self.state, out=self.state)
         self.state += 0.001
+
+
+class LoopbackParams(Params):
+    fail_after: int = Field(0, ge=0, description="raise in flush after this many cycles; 0 never")
+
+
+class Loopback(Block):
+    """A device read in compute and written in flush: it counts cycles out and keeps, for every
+    cycle, what came back to be written in that cycle's flush."""
+
+    Params = LoopbackParams
+    inputs = {"command": Port("float64", (), "1")}
+    outputs = {"reading": Port("float64", (), "1")}
+
+    def create(self):
+        self.cycle = 0
+        self.written = np.full(10_000, np.nan)
+
+    def compute(self):
+        self.cycle += 1
+        self.outputs.reading.value[...] = self.cycle
+        self.outputs.reading.publish()
+
+    def flush(self):
+        if self.params.fail_after and self.cycle > self.params.fail_after:
+            raise RuntimeError("the device refused the write")
+        if self.cycle < len(self.written):
+            self.written[self.cycle] = self.inputs.command.value
+
+    def clean(self):
+        np.save(self.run_dir / f"{self.name}.npy", self.written[1 : self.cycle + 1])

@@ -150,3 +150,41 @@ def test_a_virtual_run_without_duration_lasts_as_long_as_the_composition_wants(t
     result = compose(tmp_path, SWITCH.replace("stop_after: 100", "stop_after: 100000"), duration=None)
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert result.timing["activities"]["counter"]["steps"] >= 100_000
+
+
+LOOPBACK = """
+version: 1
+name: loopback
+threads:
+  main:
+    period: 1ms
+    deploy: main
+    schedules: {0: [mediator, device, controller]}
+activities:
+  mediator: {block: mediator}
+  device: {block: "tests.blocks:Loopback", params: {fail_after: FAIL}}
+  controller: {block: echo, params: {dtype: float64}}
+streams:
+  reading: {from: device.reading, to: controller.input}
+  command: {from: controller.output, to: device.command}
+latencies:
+  reading_to_write: {from: device.reading, to: device.command}
+"""
+
+
+def test_a_device_writes_what_the_cycle_computed_from_its_reading_in_the_same_cycle(tmp_path):
+    result = compose(tmp_path, LOOPBACK.replace("FAIL", "0"), duration="300ms")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    written = np.load(tmp_path / "run-c" / "device.npy")
+    assert len(written) > 250
+    # The controller ran after the device's compute and before its flush: each cycle writes its own count.
+    assert np.array_equal(written, np.arange(1, len(written) + 1))
+    path = result.timing["latencies"]["reading_to_write"]
+    assert path["samples"] == len(written) and path["latency_us"]["max"] == 0
+
+
+def test_a_failing_flush_fails_the_activity_like_a_failing_compute(tmp_path):
+    result = compose(tmp_path, LOOPBACK.replace("FAIL", "50"), duration="300ms")
+    assert result.outcome.status is not ExitStatus.SUCCESS
+    assert any("device" in reason and "running failed" in reason for reason in result.outcome.reasons), \
+        result.outcome.reasons

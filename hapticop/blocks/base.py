@@ -10,6 +10,11 @@ activity's Life Cycle State Machine, on the activity's thread, in this order:
     create -> configure_resources -> configure_capabilities -> compute (each cycle while
     running) / pausing (each cycle while paused) ... -> clean
 
+A device block may split its cycle like a PLC scan: `compute` reads the device (a status
+frame, the slaves' inputs) and publishes what it read, and `flush` writes the device once
+every activity of the thread's schedule has computed, with its inputs refreshed, so what the
+cycle computed from this cycle's readings leaves in the same cycle instead of the next.
+
 Every hook is optional and succeeds by default. A configuration hook returns `False` to be
 called again next cycle (waiting for a device, a flag), anything else to say it is complete;
 a hook that raises puts the activity in a reported failed state and the mediator decides
@@ -88,6 +93,10 @@ class Block:
     def compute(self) -> None:
         """One cycle of the service, while running. Time-critical."""
 
+    def flush(self) -> None:
+        """While running, after the whole schedule computed: write the device (time-critical).
+        Overriding it makes the runtime refresh the block's inputs and call it each cycle."""
+
     def pausing(self) -> None:
         """One cycle while paused: hold outputs safe, ready to resume at once."""
 
@@ -97,3 +106,7 @@ class Block:
     @classmethod
     def implements_compute(cls) -> bool:
         return cls.compute is not Block.compute
+
+    @classmethod
+    def implements_flush(cls) -> bool:
+        return cls.flush is not Block.flush

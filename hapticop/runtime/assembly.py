@@ -131,9 +131,8 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
             if activity != name:
                 continue
             target = inputs[port]
-            target.queue = spec.policy.kind == "queue"
-            target.transport = objects[index] if target.queue else objects[0]
-            target.max_age_ns = spec.max_age or 0
+            queue = spec.policy.kind == "queue"
+            target.connect(objects[index] if queue else objects[0], queue, spec.max_age or 0)
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])

@@ -24,7 +24,8 @@ from hapticop.runtime.streams import ORIGINS
 class InputPort:
     """The reader's side of a stream: `value`, and how fresh it is."""
 
-    __slots__ = ("name", "spec", "value", "meta", "origins", "max_age_ns", "transport", "queue", "fresh", "_clock")
+    __slots__ = ("name", "spec", "value", "meta", "origins", "max_age_ns", "transport", "queue", "fresh", "_clock",
+                 "_seen")
 
     def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
@@ -36,14 +37,34 @@ class InputPort:
         self.transport: Any = None  # a LatestSlot or SpscQueue; None while unconnected
         self.queue = False
         self.fresh = False  # a new sample arrived for this step
+        self._seen = 0  # samples the transport had written when `value` was last copied
+
+    def connect(self, transport, queue: bool, max_age_ns: int) -> None:
+        """Read from `transport` from now on (assembly, or a live patch rewiring the stream)."""
+        self.transport, self.queue, self.max_age_ns = transport, queue, max_age_ns
+        self._seen = -1  # whatever the new transport holds is news
+
+    def disconnect(self) -> None:
+        self.transport = None
 
     def refresh(self) -> None:
-        """Copy the newest sample in (runtime, before the step); queue inputs are left to pop()."""
-        if self.transport is None or self.queue:
+        """Copy the newest sample in (runtime, before the step); queue inputs are left to pop().
+
+        An unchanged slot is not copied again: most inputs of a 1 kHz loop change at a lower
+        rate (a scan of 811 ranges at 15 Hz), and the copy is most of what a read costs.
+        """
+        transport = self.transport
+        if transport is None or self.queue:
+            self.fresh = False
+            return
+        written = transport.count
+        if written == self._seen:
             self.fresh = False
             return
         before = self.meta[0]
-        self.fresh = self.transport.read_into(self.value, self.meta, self.origins) and self.meta[0] != before
+        self.fresh = transport.read_into(self.value, self.meta, self.origins) and self.meta[0] != before
+        if self.fresh:
+            self._seen = written
 
     def pop(self) -> bool:
         """Take the next queued sample into `value`; False when the queue is empty."""

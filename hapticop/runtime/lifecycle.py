@@ -27,6 +27,9 @@ FAILURE_TEXT = {CREATION_FAILED: "creation failed", RESOURCE_FAILED: "resource c
                 RUNNING_FAILED: "running failed", CLEANING_FAILED: "cleaning failed"}
 
 
+_STATES = tuple(State(value) for value in range(len(State)))  # by value, without an enum call per cycle
+
+
 def _succeeds(hook: Callable[[], object]) -> bool:
     return hook() is not False
 
@@ -57,7 +60,7 @@ class Lifecycle:
 
     @property
     def state(self) -> State:
-        return State(int(self.states[self.index]))
+        return _STATES[self.states[self.index]]
 
     def _enter(self, new: State) -> None:
         old = self.state
@@ -172,6 +175,17 @@ class Lifecycle:
                 self.hooks.pausing()
             except Exception as error:  # noqa: BLE001
                 self._fail(RUNNING_FAILED, None, error)
+
+    def flush(self, hook: Callable[[], object]) -> None:
+        """A running owner's write phase, after its thread's schedule computed; a failure
+        is one of running, as in compute."""
+        if self.states[self.index] != State.RUNNING:
+            return
+        try:
+            hook()
+        except Exception as error:  # noqa: BLE001
+            self._fail(RUNNING_FAILED, None, error)
+            self._enter(State.PAUSING)
 
     def _configure_capabilities(self) -> None:
         if self.failed[self.index] == CAPABILITY_FAILED:

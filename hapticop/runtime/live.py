@@ -154,9 +154,8 @@ def _connect(system: "System", stream: str, new: Composition) -> None:
         if runner is None:
             continue
         target = getattr(runner.block.inputs, port)
-        target.queue = spec.policy.kind == "queue"
-        target.transport = objects[index] if target.queue else objects[0]
-        target.max_age_ns = spec.max_age or 0
+        queue = spec.policy.kind == "queue"
+        target.connect(objects[index] if queue else objects[0], queue, spec.max_age or 0)
 
 
 def _disconnect(system: "System", spec) -> None:
@@ -167,7 +166,7 @@ def _disconnect(system: "System", spec) -> None:
         if runner is not None:
             target = getattr(runner.block.inputs, port)
             stale = target.transport
-            target.transport = None
+            target.disconnect()
             writer = system.built.runners.get(writer_activity)
             if writer is not None and stale is not None:
                 output = getattr(writer.block.outputs, writer_port)

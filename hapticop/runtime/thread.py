@@ -32,6 +32,8 @@ class ActivityRunner:
         self.name, self.block, self.region, self.log = name, block, region, log
         self.relay = relay
         self.simulator = block.simulator
+        self.flushes = block.implements_flush()
+        self.took = 0  # this cycle's compute time so far (compute, then flush)
         layout = region.layout
         self.index = layout.activity_index[name]
         self.inputs = [port for port in vars(block.inputs).values()]
@@ -54,12 +56,27 @@ class ActivityRunner:
             relay.before_step()
         started = time.perf_counter_ns()
         self.lifecycle.step()
-        took = time.perf_counter_ns() - started
+        self.took = time.perf_counter_ns() - started
+        if not self.flushes:
+            self._finish()
+
+    def flush(self) -> None:
+        """The write phase: fresh inputs (what this cycle computed), then the block's flush."""
+        for port in self.inputs:
+            port.refresh()
+        started = time.perf_counter_ns()
+        self.lifecycle.flush(self.block.flush)
+        self.took += time.perf_counter_ns() - started
+        self._finish()
+
+    def _finish(self) -> None:
+        """Count the cycle's compute time, and the end-to-end latencies ending here."""
+        took = self.took
         record(self.region.compute, self.region.compute_max, self.index, took)
         if self.simulator:
             self.region.sim_ns[self.index] += took
-        if relay is not None:
-            relay.after_step()
+        if self.relay is not None:
+            self.relay.after_step()
 
 
 class CyclicThread:
@@ -111,6 +128,9 @@ class CyclicThread:
         active = self.schedules[self.selected]
         for runner in active:
             runner.step()
+        for runner in active:
+            if runner.flushes:
+                runner.flush()
         self._housekeeping(active)
 
     def _housekeeping(self, active) -> None:
