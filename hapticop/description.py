@@ -71,6 +71,11 @@ class Thread(Strict):
         0, description="spin this long before each deadline instead of sleeping through it: "
         "lower wake-up latency for a core's worth of CPU, e.g. '50us'; 0 sleeps all the way",
     )
+    wake: Literal["deadline", "data"] = Field(
+        "deadline", description="'deadline': cycle at the period's deadlines only; 'data': also cycle as soon "
+        "as a device socket of its activities has data (a LIDAR's telegram is parsed when its last byte "
+        "arrives, not up to a period later). Real time only; the virtual clock cycles at the deadlines",
+    )
     start: StartPolicy = Field("auto", description=START_DOC)
     log: LogLevel = Field("info", description="the most detailed level written to this thread's log")
     doc: str = ""

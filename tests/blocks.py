@@ -141,3 +141,43 @@ class Loopback(Block):
 
     def clean(self):
         np.save(self.run_dir / f"{self.name}.npy", self.written[1 : self.cycle + 1])
+
+
+class PingPong(Block):
+    """A device that sends a byte whenever the block has answered the last one (a thread on the
+    far end of a socket pair): the number of round trips shows how fast data wakes the thread."""
+
+    def configure_resources(self):
+        import socket
+        import threading
+
+        self.host, device = socket.socketpair()
+        self.host.setblocking(False)
+        self.round_trips = 0
+
+        def run():
+            with device:
+                device.settimeout(5.0)
+                try:
+                    while device.send(b"?") and device.recv(1):
+                        pass
+                except OSError:
+                    pass  # the host closed its end: the device is unplugged
+
+        threading.Thread(target=run, daemon=True).start()
+        return True
+
+    def wakeup_fds(self):
+        return (self.host.fileno(),)
+
+    def compute(self):
+        try:
+            if self.host.recv(1):
+                self.round_trips += 1
+                self.host.send(b"!")
+        except BlockingIOError:
+            pass
+
+    def clean(self):
+        self.host.close()
+        (self.run_dir / f"{self.name}.round_trips").write_text(str(self.round_trips))

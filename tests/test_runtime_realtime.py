@@ -11,6 +11,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from hapticop.lcsm import State
 from hapticop.runtime.system import ExitStatus
@@ -143,3 +144,23 @@ def test_a_named_process_needs_deploy_process():
                                           "    process: bus\n    schedules: {0: [relay]}"), "s.yaml").report
     [error] = report.errors
     assert error.path == ("threads", "fieldbus", "process") and "needs 'deploy: process'" in error.message
+
+
+DATA_WOKEN = """
+version: 1
+name: woken
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator]}}
+  device: {period: 250ms, WAKE schedules: {0: [pingpong]}}
+activities:
+  mediator: {block: mediator}
+  pingpong: {block: "tests.blocks:PingPong"}
+"""
+
+
+@pytest.mark.parametrize("wake, least, most", [("data", 50, None), ("deadline", 0, 12)])
+def test_a_data_woken_thread_cycles_when_its_device_sends(tmp_path, wake, least, most):
+    compose(tmp_path, DATA_WOKEN.replace("WAKE", f"wake: {wake},"), clock="realtime", duration="2s")
+    round_trips = int((tmp_path / "run-c" / "pingpong.round_trips").read_text())
+    assert round_trips >= least
+    assert most is None or round_trips <= most  # one per cycle: the reply waits for the deadline

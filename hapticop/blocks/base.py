@@ -97,6 +97,11 @@ class Block:
         """While running, after the whole schedule computed: write the device (time-critical).
         Overriding it makes the runtime refresh the block's inputs and call it each cycle."""
 
+    def wakeup_fds(self) -> tuple[int, ...]:
+        """File descriptors whose incoming data should start a cycle of a `wake: data` thread at
+        once (a connected device socket); asked before each wait, so they may change."""
+        return ()
+
     def pausing(self) -> None:
         """One cycle while paused: hold outputs safe, ready to resume at once."""
 

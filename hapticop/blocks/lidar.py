@@ -135,6 +135,11 @@ class Lidar(Block):
                 "" if connected else f" ({self.client.last_error or 'starting'})")
             self.connected = connected
 
+    def wakeup_fds(self) -> tuple[int, ...]:
+        """The scanner's socket: a `wake: data` thread parses a telegram as its last byte arrives."""
+        fd = self.client.fileno()
+        return (fd,) if fd >= 0 else ()
+
     def _inject(self, fault: str) -> None:
         """Switch the simulated scanner's fault (a patch changed `sim_fault`)."""
         simulator = self.simulator

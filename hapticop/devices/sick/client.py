@@ -159,6 +159,13 @@ class ColaClient:
             self._fail(now, f"stream stalled: no {what} for {(now - self._last_progress_ns) / 1e9:.3f} s")
         return self.scans - before
 
+    def fileno(self) -> int:
+        """The socket a caller may wait on for data, while the client reads it each poll
+        (starting or streaming); -1 otherwise."""
+        if self._sock is None or self.state not in (ClientState.STARTING, ClientState.STREAMING):
+            return -1
+        return self._sock.fileno()
+
     # -- results -------------------------------------------------------------------------
 
     @property
