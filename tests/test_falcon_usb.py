@@ -321,7 +321,8 @@ def test_the_falcon_block_loads_homes_and_renders_forces_through_the_virtual_usb
     assert block.homing.homed and block.virtual.falcon.homed.all()
     block.inputs.force.value[:] = (0.0, 0.0, 2.0)
     for _ in range(50):
-        block.compute()
+        block.compute()  # the runtime runs the schedule in between: then the write phase
+        block.flush()
         clock.advance_to(clock.now_ns() + 1_000_000)
     assert block.flags["frames_ok"] and block.outputs.position.published >= 49
     assert np.abs(block.virtual.falcon.motor).max() > 0  # the force reaches the motors once homed

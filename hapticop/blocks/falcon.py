@@ -119,7 +119,8 @@ class Falcon(Block):
         self.hand = np.zeros(3)
         self.absolute = np.zeros(3)
         self.fk_ok = False
-        self.last_frame_ns = self.started_ns = self.last_ns = self.clock.now_ns()
+        self.last_frame_ns = self.started_ns = self.last_ns = self.last_read_ns = self.clock.now_ns()
+        self.replied = False  # the simulated device's reply to the last command waits in `reply`
         self.frames_ok = False
         self.homing_target = np.zeros(3)
         self.outputs.position.value[:] = 0.0
@@ -189,21 +190,26 @@ class Falcon(Block):
         return False
 
     def compute(self) -> None:
-        if self.usb is not None:
-            self._exchange(self.hand, forces=True)
-            return
-        scene = self.scene
-        np.subtract(self.device.position, self.centre, out=scene.handle_position)
-        np.copyto(scene.handle_velocity, self.device.velocity)
-        np.copyto(scene.device_force, self.inputs.force.value)
-        if scene.operator_since_ns is None:
-            self.hand[:] = 0.0  # hands resting on the grip until told to drive
-        else:
-            with self.context.simulation:
-                scene.operator.step(scene.operator_time(self.clock.now_ns()), scene.environment_force,
-                                    scene.handle_position, self.hand, scene.handle_velocity)
-        np.copyto(scene.hand_force, self.hand)
-        self._exchange(self.hand, forces=True)
+        """Read: the status frame answering the last command (and, simulated, the operator's
+        hand). The force goes out in `flush`, once the haptic controller has computed it from
+        this reading."""
+        if self.usb is None:
+            scene = self.scene
+            np.subtract(self.device.position, self.centre, out=scene.handle_position)
+            np.copyto(scene.handle_velocity, self.device.velocity)
+            np.copyto(scene.device_force, self.inputs.force.value)
+            if scene.operator_since_ns is None:
+                self.hand[:] = 0.0  # hands resting on the grip until told to drive
+            else:
+                with self.context.simulation:
+                    scene.operator.step(scene.operator_time(self.clock.now_ns()), scene.environment_force,
+                                        scene.handle_position, self.hand, scene.handle_velocity)
+            np.copyto(scene.hand_force, self.hand)
+        self._receive()
+
+    def flush(self) -> None:
+        """Write: the command frame with the force this cycle computed."""
+        self._send(self.hand, forces=True)
 
     def pausing(self) -> None:
         self.hand[:] = 0.0
@@ -224,15 +230,14 @@ class Falcon(Block):
             self.usb = None
 
     def _exchange(self, hand_force: np.ndarray, forces: bool) -> None:
-        """One frame each way: forces out (when allowed), encoders in, then kinematics."""
+        """Both halves of a cycle at once, outside running (homing, pausing, the last frame)."""
+        self._receive()
+        self._send(hand_force, forces)
+
+    def _receive(self) -> None:
+        """The status frame answering the last command: encoders in, then kinematics."""
         now = self.clock.now_ns()
-        dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9 or 1e-3
-        self.last_ns = now
-        self.motor[:] = 0
-        if forces and self.homing.forces_allowed and self.fk_ok:
-            self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)
-        self.codec.encode_command(self.motor, self.homing.command_flags(), self.command)
-        if not self._transfer(dt, hand_force):
+        if not self._received():
             self._frames(now)
             return
         self.last_frame_ns = now
@@ -241,6 +246,7 @@ class Falcon(Block):
             self.kinematics.reset()  # the counts just became absolute
         self.fk_ok = self.kinematics.forward(self.status.encoders, self.absolute)
         if self.fk_ok:
+            dt = (now - self.last_read_ns) / 1e9 or 1e-3
             np.copyto(self.previous, self.position)
             np.subtract(self.absolute, self.centre, out=self.position)
             out = self.outputs
@@ -251,7 +257,26 @@ class Falcon(Block):
             out.position.publish()
             out.velocity.publish()
             out.buttons.publish()
+        self.last_read_ns = now
         self._frames(now)
+
+    def _send(self, hand_force: np.ndarray, forces: bool) -> None:
+        """The command frame: forces out when allowed (homed, position known), else zero."""
+        now = self.clock.now_ns()
+        dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9 or 1e-3
+        self.last_ns = now
+        self.motor[:] = 0
+        if forces and self.homing.forces_allowed and self.fk_ok:
+            self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)
+        self.codec.encode_command(self.motor, self.homing.command_flags(), self.command)
+        if self.usb is not None:
+            try:
+                self.usb.send(self.command)
+            except self._usb_error as error:
+                self._usb_lost(error)
+            return
+        with self.context.simulation:
+            self.replied = self.device.exchange(self.command, dt, hand_force, out=self.reply) is not None
 
     def _frames(self, now: int) -> None:
         """`frames_ok` falls 100 ms after the last good frame (the firmware's own force hold) and
@@ -265,20 +290,17 @@ class Falcon(Block):
                 self.log.warning("no good frame for 100 ms: the Falcon holds no force, the robot is stopped")
             self.frames_ok = self.flags["frames_ok"] = ok
 
-    def _transfer(self, dt: float, hand_force: np.ndarray) -> bool:
-        """Send `self.command`; True when `self.status` holds a new status frame."""
+    def _received(self) -> bool:
+        """True when `self.status` holds a new status frame: the reply to the last command."""
         if self.usb is not None:
             try:
-                return self.usb.exchange(self.command, self.status)
-            except self._usb_error as error:  # unplugged, powered off: frames stop, frames_ok tells
-                if not getattr(self, "_usb_failed", False):
-                    self._usb_failed = True
-                    self.log.error("%s", error)
+                return self.usb.receive(self.status)
+            except self._usb_error as error:
+                self._usb_lost(error)
                 return False
-        with self.context.simulation:
-            replied = self.device.exchange(self.command, dt, hand_force, out=self.reply) is not None
-        if not replied:
+        if not self.replied:
             return False
+        self.replied = False
         fault = self.params.sim_fault
         if fault == "silent":
             return False  # the device moved on, but its reply never arrived
@@ -289,3 +311,9 @@ class Falcon(Block):
         except Exception:  # noqa: BLE001 - a corrupted frame is dropped; frames_ok tells
             return False
         return True
+
+    def _usb_lost(self, error: Exception) -> None:
+        """Unplugged, powered off: frames stop and frames_ok tells; the error is logged once."""
+        if not getattr(self, "_usb_failed", False):
+            self._usb_failed = True
+            self.log.error("%s", error)

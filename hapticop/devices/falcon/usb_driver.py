@@ -169,6 +169,7 @@ class FalconUsb:
         self._codec.encode_command((0, 0, 0), 0, self._probe)
         self._pending = False
         self._waited = 0
+        self._got = False  # the last receive brought a reply (send then sends the next command)
         self.latency_ms = 16
         # counters
         self.exchanges = self.frames = self.sends = self.resends = self.empty_reads = self.timeouts = 0
@@ -338,6 +339,13 @@ class FalconUsb:
         One 64-byte USB read per call. Without a reply the command is not resent (the
         firmware answers each one once) until `resend_after` empty reads in a row.
         """
+        got = self.receive(status)
+        self.send(command)
+        return got
+
+    def receive(self, status: Status) -> bool:
+        """The first half of `exchange`, for a loop that computes in between: read the reply
+        to the last command into `status`; True if it is new."""
         self.exchanges += 1
         got = False
         if self._pending:
@@ -353,6 +361,13 @@ class FalconUsb:
             else:
                 self.empty_reads += 1
                 self._waited += 1
+        self._got = got
+        return got
+
+    def send(self, command: NDArray[np.uint8]) -> None:
+        """The second half: send `command`, unless the last one is still unanswered and the
+        firmware may yet reply to it (fewer than `resend_after` empty reads)."""
+        got = self._got
         if got or not self._pending or self._waited >= self.resend_after:
             if self._pending and not got:
                 self.resends += 1
@@ -360,8 +375,7 @@ class FalconUsb:
             self._write(self._command)
             self.sends += 1
             self._pending, self._waited = True, 0
-        return got
-
+        self._got = False
 
 def connect(image: bytes | None, index: int = 0, backend=None, attempts: int = 10,
             log: Callable[[str], None] | None = None, **options) -> FalconUsb:
