@@ -119,6 +119,7 @@ class EthercatMaster(Block):
             self.rx.fill(0)  # drives disabled, zero setpoints: what the wheels get until the controller runs
             self.master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s,
                                      p.frame_timeout_us)
+            self.in_flight = False  # a frame was sent and not yet received
             self.started_ns = self.clock.now_ns()
             self.master.open()
             try:
@@ -148,9 +149,16 @@ class EthercatMaster(Block):
             self.master.write_outputs(position, self.rx[wheel])
 
     def _exchange_pysoem(self) -> None:
-        m, out = self.master, self.outputs
+        """Send and receive at once (bring-up, or a cycle with no frame in flight)."""
         self._write_outputs()
-        wkc = m.exchange()
+        self.master.send()
+        self.in_flight = True
+        self._receive_pysoem()
+
+    def _receive_pysoem(self) -> None:
+        m, out = self.master, self.outputs
+        wkc = m.receive()
+        self.in_flight = False
         for wheel, position in self.positions:
             m.read_inputs(position, self.tx[wheel])
         m.states(out.slave_states.value)
@@ -161,8 +169,31 @@ class EthercatMaster(Block):
         self.flags["operational"] = bool(wkc == m.expected_wkc and np.all(out.slave_states.value == AL_OP))
 
     def compute(self) -> None:
+        """Read: the inputs the frame sent at the end of the last cycle brought back (the
+        simulated robot: its sensors after the last step). Commands go out in `flush`."""
         if self.params.driver == "pysoem":
-            self._exchange_pysoem()
+            if self.in_flight:
+                self._receive_pysoem()
+            else:  # nothing sent yet (the first cycle): one whole exchange
+                self._exchange_pysoem()
+            return
+        out = self.outputs
+        np.copyto(out.robot_pose.value, self.plant.pose)
+        np.copyto(out.robot_twist.value, self.plant.twist)
+        out.robot_pose.publish()
+        out.robot_twist.publish()
+        out.wheel_sensors.publish()
+        out.slave_states.publish()
+        out.working_counter.publish()
+        self.flags["operational"] = True
+
+    def flush(self) -> None:
+        """Write: the wheel commands this cycle computed, sent now (the simulated robot moves
+        under them for one step)."""
+        if self.params.driver == "pysoem":
+            self._write_outputs()
+            self.master.send()
+            self.in_flight = True
             return
         now = self.clock.now_ns()
         dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9  # a late cycle is not a leap in time
@@ -170,20 +201,13 @@ class EthercatMaster(Block):
         if dt > 0:
             with self.context.simulation:
                 self.plant.step(self.rx, dt, self.tx)
-        out = self.outputs
-        np.copyto(out.robot_pose.value, self.plant.pose)
-        np.copyto(out.robot_twist.value, self.plant.twist)
-        out.robot_pose.publish()
-        out.robot_twist.publish()
-        self.outputs.wheel_sensors.publish()
-        self.outputs.slave_states.publish()
-        self.outputs.working_counter.publish()
-        self.flags["operational"] = True
 
     def clean(self) -> None:
         self.flags["operational"] = False
         master = getattr(self, "master", None)
         if master is not None:
+            if self.in_flight:
+                master.receive()
             self.rx.fill(0)
             self._write_outputs()  # drives disabled before the slaves leave OP
             master.exchange()

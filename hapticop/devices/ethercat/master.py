@@ -134,7 +134,16 @@ class SoemMaster:
     # --- the cycle -----------------------------------------------------------------------
     def exchange(self) -> int:
         """One send/receive of the process data; the working counter, or -1 if no frame came back."""
+        self.send()
+        return self.receive()
+
+    def send(self) -> None:
+        """Send the outputs; the frame picks up the inputs on its way round the segment."""
         self.master.send_processdata()
+
+    def receive(self) -> int:
+        """The frame `send` sent, back (a cycle that computes in between sends at its end and
+        receives at the start of the next); its working counter, or -1 if it did not return."""
         self.last_wkc = self.master.receive_processdata(self.receive_timeout_us)
         return self.last_wkc
 
