@@ -2,10 +2,10 @@
 
     python bench/micro_falcon.py [--calls N] [--system SECONDS]
 
-Kinematics, frame codec, the simulated device's 1 ms exchange and the host's side of one
-cycle (what the Falcon block's `_exchange` does around the device: encode, decode, homing,
-forward kinematics, Jacobian-transpose force), on a homed handle moving through the
-workspace. `--system` also runs systems/hallway.yaml on the virtual clock and prints the
+Kinematics, frame codec, the simulated device's 1 ms exchange, and the Falcon block's whole
+cycle (sim driver, homed, operator driving, a force to render) with its host side: the cycle
+less the time its simulation timer counted (device and operator), i.e. decode, forward
+kinematics, velocity, Jacobian-transpose force, encode and publishing. `--system` also runs systems/hallway.yaml on the virtual clock and prints the
 falcon activity's compute time per step as the runtime measures it, of which simulation
 (the simulated device and the scene's operator). Numbers depend on the machine: compare
 changes run on the same machine, never assert them.
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hapticop.devices.falcon import FalconKinematics, Flag, FrameCodec, Homing, SimulatedFalcon, Status, new_frame
+from hapticop.devices.falcon import FalconKinematics, Flag, FrameCodec, SimulatedFalcon, Status, new_frame
 from hapticop.devices.falcon.codec import Command
 from hapticop.measure import allocation_stats, time_per_call
 
@@ -49,34 +49,9 @@ def cases() -> dict[str, Callable[[], object]]:
 
     sim = SimulatedFalcon(rng=np.random.default_rng(3), homed=True)
     reply, hand = new_frame(), np.array([0.5, -0.3, 1.0])
-    host_kin, homing, host_status, host_cmd = FalconKinematics(), Homing(), Status(), new_frame()
-    absolute, position_out, previous, velocity = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
-    fk_ok = [False]
-    sim.exchange(cmd, 0.001, hand, out=reply)
-
-    def host_cycle() -> None:
-        """The block's `_exchange` without the device: force out, frame each way, FK, velocity."""
-        motor[:] = 0
-        if homing.forces_allowed and fk_ok[0]:
-            host_kin.forces_to_motor(None, force, motor)
-        codec.encode_command(motor, homing.command_flags(), host_cmd)
-        codec.decode_status(reply, host_status)
-        homing.update(host_status)
-        if homing.just_homed:
-            host_kin.reset()
-        fk_ok[0] = host_kin.forward(host_status.encoders, absolute)
-        if fk_ok[0]:
-            np.copyto(previous, position_out)
-            np.subtract(absolute, CENTRE, out=position_out)
-            np.subtract(position_out, previous, out=velocity)
-            np.divide(velocity, 1e-3, out=velocity)
-
-    def device_and_host() -> None:
-        host_cycle()
-        sim.exchange(host_cmd, 0.001, hand, out=reply)
-
-    for _ in range(300):  # homed, forces on, handle moving under the hand
-        device_and_host()
+    codec.encode_command([100, -200, 300], Flag.HOMING | Flag.LED_GREEN, cmd)
+    for _ in range(300):
+        sim.exchange(cmd, 0.001, hand, out=reply)
 
     return {
         "kinematics: inverse": lambda: kin.inverse(position, theta),
@@ -90,10 +65,65 @@ def cases() -> dict[str, Callable[[], object]]:
         "codec: decode_command": lambda: codec.decode_command(cmd, command),
         "codec: encode_status": lambda: codec.encode_status(counts, 7, 0, status_frame),
         "codec: decode_status": lambda: codec.decode_status(status_frame, status),
-        "simulated: exchange 1 ms": lambda: sim.exchange(host_cmd, 0.001, hand, out=reply),
-        "host cycle (block's _exchange less device)": host_cycle,
-        "host cycle + device exchange": device_and_host,
+        "simulated: exchange 1 ms": lambda: sim.exchange(cmd, 0.001, hand, out=reply),
     }
+
+
+def falcon_block():
+    """The real Falcon block (sim driver) in a scene of its own, homed, the operator driving,
+    a force coming in; returns a call of one cycle and the timer of its simulation part."""
+    import logging
+    from types import SimpleNamespace
+
+    from hapticop.blocks.falcon import Falcon, FalconParams
+    from hapticop.runtime.clock import VirtualClock
+    from hapticop.runtime.context import ActivityContext, InputPort, OutputPort, SimulationTimer
+    from hapticop.sim.hallway import HallwayGeometry, World
+    from hapticop.sim.operator import BlindOperator
+    from hapticop.sim.scene import Scene, open_scene
+
+    geometry = HallwayGeometry.named("H1")
+    open_scene(Scene("bench", geometry, World.from_geometry(geometry), BlindOperator.variant("nominal")))
+    clock, sim_ns = VirtualClock(), np.zeros(1, dtype=np.int64)
+    inputs = SimpleNamespace(**{n: InputPort(n, q, clock.now_ns) for n, q in Falcon.inputs.items()})
+    outputs = SimpleNamespace(**{n: OutputPort(n, q, clock.now_ns) for n, q in Falcon.outputs.items()})
+    context = ActivityContext("falcon", FalconParams(scene="bench"), inputs, outputs, {}, clock,
+                              logging.getLogger("bench.falcon"), np.random.default_rng(0), Path(tempfile.mkdtemp()),
+                              simulation=SimulationTimer(sim_ns, 0))
+    block = Falcon(context)
+
+    def tick() -> None:
+        clock.advance_to(clock.now_ns() + 1_000_000)
+
+    assert block.configure_resources()
+    while not block.configure_capabilities():
+        tick()
+    block.scene.operator_since_ns = clock.now_ns()
+    inputs.force.value[:] = (0.5, -1.0, 2.0)
+
+    def cycle() -> None:
+        block.compute()
+        tick()
+
+    for _ in range(500):
+        cycle()
+    return cycle, sim_ns
+
+
+def time_host_side(calls: int) -> tuple[float, float, float, float]:
+    """(median, p99) µs of a whole Falcon block cycle and of its host side (less simulation)."""
+    import time
+
+    cycle, sim_ns = falcon_block()
+    whole, host = np.empty(calls), np.empty(calls)
+    clock = time.perf_counter_ns
+    for i in range(calls):
+        sim_before, started = int(sim_ns[0]), clock()
+        cycle()
+        whole[i] = clock() - started
+        host[i] = whole[i] - (int(sim_ns[0]) - sim_before)
+    return (float(np.median(whole)) / 1e3, float(np.percentile(whole, 99)) / 1e3,
+            float(np.median(host)) / 1e3, float(np.percentile(host, 99)) / 1e3)
 
 
 def system(seconds: float) -> None:
@@ -124,6 +154,9 @@ def main(argv: list[str] | None = None) -> None:
         median, p99 = time_per_call(fn, args.calls)
         grown, peak = allocation_stats(fn)
         print(f"{label:44s} {median:10.1f} {p99:8.1f} {grown:8d} {peak:7d}")
+    whole, whole99, host, host99 = time_host_side(args.calls)
+    print(f"{'Falcon block compute (sim driver, whole)':44s} {whole:10.1f} {whole99:8.1f}")
+    print(f"{'  of which host side (less simulation)':44s} {host:10.1f} {host99:8.1f}")
     if args.system > 0:
         system(args.system)
 
