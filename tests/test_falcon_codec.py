@@ -288,3 +288,47 @@ def test_cycle_path_allocates_nothing_that_stays():
     assert grown < 2048
     assert reader.frames == 5500 and reader.discarded == 0
     assert FRAME_SIZE == 16
+
+
+# ---------------------------------------------------------------- the rules, stated directly
+def _rules_say_valid(frame: bytes, kind: str) -> bool:
+    """§4.3 byte by byte: '<', twelve 'A'..'P', byte 13 ('A'..'P', status up to 'A' + 0x7F), 'A'..'P', '>'."""
+    if len(frame) != FRAME_SIZE or frame[0] != 0x3C or frame[15] != 0x3E:
+        return False
+    top13 = 0x41 + (0x7F if kind == "status" else 0xF)
+    return all(0x41 <= b <= 0x50 for b in frame[1:13] + frame[14:15]) and 0x41 <= frame[13] <= top13
+
+
+def _direct_frame(values, b13: int) -> bytes:
+    nibbles = [0x41 + ((v & 0xFFFF) >> (4 * k) & 0xF) for v in values for k in range(4)]
+    return bytes([0x3C, *nibbles, 0x41 + b13, 0x41, 0x3E])
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.lists(st.sampled_from(b"<>@ABHOPQ\x00\x50\x51\xb1\xc0\xc1\xff"), min_size=14, max_size=14),
+       st.booleans(), st.sampled_from([15, 16, 17]))
+def test_validity_is_exactly_the_byte_rules(middle, framed, length):
+    frame = (b"<" + bytes(middle) + b">" if framed else bytes(middle) + b"AA")[:length]
+    codec = FrameCodec()
+    for kind in ("status", "command"):
+        assert codec.is_valid(frame, kind) == _rules_say_valid(frame, kind)
+        assert codec.is_valid(np.frombuffer(frame, dtype=np.uint8), kind) == _rules_say_valid(frame, kind)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.integers(-70000, 70000), min_size=3, max_size=3), st.integers(0, 7), st.integers(0, 15))
+def test_encoding_is_the_nibble_formula(values, homed, buttons):
+    codec, out = FrameCodec(), bytearray(16)
+    codec.encode_status(values, homed, buttons, out)
+    assert bytes(out) == _direct_frame(values, buttons | homed << 4)
+    codec.encode_command(values, buttons, out)
+    assert bytes(out) == _direct_frame([min(max(v, -4095), 4095) for v in values], buttons)
+
+
+def test_a_frame_must_be_a_16_byte_buffer():
+    codec = FrameCodec()
+    for bad in ([0x3C] + [0x41] * 14 + [0x3E], np.frombuffer(b"<AAAAAAAAAAAAAA>", np.uint8).astype(np.int64),
+                "<AAAAAAAAAAAAAA>", None, b"<AAAAAAAAAAAAAA>A"):
+        assert not codec.is_valid(bad)
+        with pytest.raises(FrameError):
+            codec.decode_status(bad, Status())

@@ -264,3 +264,57 @@ def test_cycle_path_allocates_nothing_that_stays(kin):
     cycles(300)
     grown = grown_bytes(lambda: cycles(3000))
     assert grown < 2048
+
+
+# ---------------------------------------------------------------- the float-level API, against the equations
+def _direct_theta1_and_M(p: np.ndarray, g: Geometry = Geometry()) -> tuple[np.ndarray, np.ndarray]:
+    """theta1 of §4 for all legs at once in numpy, and M = d theta1 / d p by central differences."""
+    def theta1(q: np.ndarray) -> np.ndarray:
+        phi = np.radians(g.leg_angles_deg)
+        u = np.cos(phi) * q[0] + np.sin(phi) * q[1] - g.r
+        v = -np.sin(phi) * q[0] + np.cos(phi) * q[1]
+        X, w = u + g.c, q[2]
+        K = g.d + g.e + g.b * np.sin(np.arccos((v + g.f - g.s) / g.b))
+        rho = np.hypot(X, w)
+        return np.arctan2(w, X) - np.arccos((g.a ** 2 + rho ** 2 - K ** 2) / (2 * g.a * rho))
+
+    h = 1e-7
+    M = np.stack([(theta1(p + h * e) - theta1(p - h * e)) / (2 * h) for e in np.eye(3)], axis=1)
+    return theta1(p), M
+
+
+def test_float_level_pose_and_force_agree_with_the_equations_and_the_array_api(kin):
+    rng = np.random.default_rng(11)
+    lo, hi = np.array(WORKSPACE_BOX_M)
+    checked = 0
+    for _ in range(200):
+        p = lo + (hi - lo) * rng.random(3)
+        pose = kin.pose(*p.tolist())
+        if pose is None:
+            assert not kin.inverse(p, np.zeros(3))
+            continue
+        checked += 1
+        theta1, M = _direct_theta1_and_M(p)
+        assert [leg[0] for leg in pose] == pytest.approx(theta1.tolist(), abs=1e-13)
+        tau = rng.normal(size=3)
+        force, F = kin.pose_force(pose, *tau.tolist()), np.zeros(3)
+        assert force == pytest.approx((M.T @ tau).tolist(), rel=1e-6)  # F = M^T tau
+        assert kin.torques_to_force(p, tau, F) and F.tolist() == list(force)
+        t, back = np.zeros(3), np.zeros(3)
+        assert kin.forces_to_torques(p, F, t) and t == pytest.approx(tau, rel=1e-12, abs=1e-12)  # J^T M^T = 1
+        counts = kin.counts_from_angles(theta1, np.zeros(3, dtype=np.int64))
+        assert counts.tolist() == [kin.count(a) for a in theta1.tolist()]
+        assert counts.tolist() == np.rint((theta1 - kin.drive.zero_count_rad) / kin.drive.rad_per_count).tolist()
+        assert kin.forward(counts, back) and kin.inverse(back, t)
+        assert t == pytest.approx(kin.angles_from_counts(counts, np.zeros(3)), abs=1e-12)
+    assert checked > 100
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_non_finite_torque_on_any_axis_gives_zero_commands(kin, axis):
+    tau, motor = np.array([0.1, -0.2, 0.3]), np.full(3, 7, dtype=np.int64)
+    tau[axis] = np.nan
+    assert not kin.torques_to_motor(tau, motor) and motor.tolist() == [0, 0, 0]
+    tau[axis] = np.inf
+    motor[:] = 7
+    assert not kin.torques_to_motor(tau, motor) and motor.tolist() == [0, 0, 0]

@@ -233,3 +233,21 @@ def test_exchange_into_out_allocates_nothing_that_stays():
     cycles(300)
     grown = grown_bytes(lambda: cycles(3000))
     assert grown < 2048
+
+
+def test_one_step_is_the_equation_of_motion():
+    """m dv = (M^T tau + F_operator - c v) h with tau = command / -10000, then p += v h (semi-implicit Euler)."""
+    sim, kin, codec = SimulatedFalcon(rng=2, damping=3.0, handle_mass_kg=0.7), FalconKinematics(), FrameCodec()
+    cmd, rng = new_frame(), np.random.default_rng(5)
+    for _ in range(20):
+        command, push = rng.integers(-3000, 3000, 3), rng.normal(size=3)
+        codec.encode_command(command, 0, cmd)
+        p0, v0, F = sim.position, sim.velocity, np.zeros(3)
+        assert kin.torques_to_force(p0, command / -10000.0, F)
+        sim.exchange(cmd, DT, push)
+        v1 = v0 + (F + push - 3.0 * v0) * DT / 0.7
+        assert sim.velocity == pytest.approx(v1, rel=1e-12, abs=1e-15)
+        assert sim.position == pytest.approx(p0 + v1 * DT, rel=1e-12, abs=1e-15)
+    position, velocity = np.zeros(3), np.zeros(3)
+    sim.copy_state(position, velocity)
+    assert position.tolist() == sim.position.tolist() and velocity.tolist() == sim.velocity.tolist()

@@ -111,10 +111,10 @@ class Falcon(Block):
         self.kinematics, self.codec, self.homing = FalconKinematics(geometry), FrameCodec(), Homing()
         self.status, self.command, self.reply = Status(), new_frame(), new_frame()
         self.centre = np.asarray(WORKSPACE_CENTRE_M, dtype=float)
+        self.centre_xyz = tuple(WORKSPACE_CENTRE_M)
         if self.usb is None:
             self.device = SimulatedFalcon(geometry, handle_mass_kg=0.1 + self.scene.operator.mass_kg, rng=self.rng)
-        self.position = np.zeros(3)  # device frame, workspace origin
-        self.previous = np.zeros(3)
+        self.position = (0.0, 0.0, 0.0)  # device frame, workspace origin: last published, as floats
         self.motor = np.zeros(3, dtype=np.int64)
         self.hand = np.zeros(3)
         self.absolute = np.zeros(3)
@@ -195,11 +195,11 @@ class Falcon(Block):
         this reading."""
         if self.usb is None:
             scene = self.scene
-            np.subtract(self.device.position, self.centre, out=scene.handle_position)
-            np.copyto(scene.handle_velocity, self.device.velocity)
+            self.device.copy_state(scene.handle_position, scene.handle_velocity)
+            np.subtract(scene.handle_position, self.centre, out=scene.handle_position)
             np.copyto(scene.device_force, self.inputs.force.value)
             if scene.operator_since_ns is None:
-                self.hand[:] = 0.0  # hands resting on the grip until told to drive
+                self.hand.fill(0.0)  # hands resting on the grip until told to drive
             else:
                 with self.context.simulation:
                     scene.operator.step(scene.operator_time(self.clock.now_ns()), scene.environment_force,
@@ -245,14 +245,15 @@ class Falcon(Block):
         if self.homing.just_homed:
             self.kinematics.reset()  # the counts just became absolute
         self.fk_ok = self.kinematics.forward(self.status.encoders, self.absolute)
-        if self.fk_ok:
+        if self.fk_ok:  # position from the workspace centre, velocity by difference: on floats
             dt = (now - self.last_read_ns) / 1e9 or 1e-3
-            np.copyto(self.previous, self.position)
-            np.subtract(self.absolute, self.centre, out=self.position)
+            (x, y, z), (cx, cy, cz), (px, py, pz) = self.absolute.tolist(), self.centre_xyz, self.position
+            x, y, z = x - cx, y - cy, z - cz
+            self.position = (x, y, z)
             out = self.outputs
-            np.copyto(out.position.value, self.position)
-            np.subtract(self.position, self.previous, out=out.velocity.value)
-            out.velocity.value /= dt
+            position, velocity = out.position.value, out.velocity.value
+            position[0], position[1], position[2] = x, y, z
+            velocity[0], velocity[1], velocity[2] = (x - px) / dt, (y - py) / dt, (z - pz) / dt
             out.buttons.value[...] = self.status.buttons
             out.position.publish()
             out.velocity.publish()
@@ -265,9 +266,10 @@ class Falcon(Block):
         now = self.clock.now_ns()
         dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9 or 1e-3
         self.last_ns = now
-        self.motor[:] = 0
         if forces and self.homing.forces_allowed and self.fk_ok:
-            self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)
+            self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)  # zeros if it fails
+        else:
+            self.motor.fill(0)
         self.codec.encode_command(self.motor, self.homing.command_flags(), self.command)
         if self.usb is not None:
             try:

@@ -11,13 +11,19 @@ flags (bits 4-6), so it may exceed 'P' (0xB1 = all homed).
 `<`, check `>` 15 bytes later and the range of every byte between (`<` and `>` can never
 occur inside a valid frame, so this resynchronises within one frame), and count what we
 drop. Byte 14's meaning is unknown (0x41 in every observed frame): it is accepted in
-'A'..'P' and exposed as `spare`, never interpreted. Encoding, decoding and reading write into preallocated arrays: nothing is created
-per 1 ms cycle. One codec or reader per thread.
+'A'..'P' and exposed as `spare`, never interpreted.
+
+Frames are checked and packed with bytes operations (`translate`, `struct`) on Python ints:
+numpy's per-call overhead on 16 bytes was most of the cost. Encoding, decoding and reading
+write into caller-provided buffers: nothing created per 1 ms cycle stays. One codec or
+reader per thread.
 """
 
 from __future__ import annotations
 
+import array
 import enum
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Literal
@@ -93,12 +99,14 @@ class Status:
     @property
     def homed_mask(self) -> int:
         """Bit 0 = axis 1 (top), bit 1 = axis 2 (right), bit 2 = axis 3 (left)."""
-        return int(self.homed[0]) | int(self.homed[1]) << 1 | int(self.homed[2]) << 2
+        a, b, c = self.homed.tolist()
+        return a | b << 1 | c << 2
 
     @property
     def all_homed(self) -> bool:
         """libnifalcon's `isHomed()`: all three flags (before 2012 it took any one)."""
-        return bool(self.homed.all())
+        a, b, c = self.homed.tolist()
+        return a and b and c
 
 
 def new_frame() -> U8:
@@ -106,87 +114,95 @@ def new_frame() -> U8:
     return np.zeros(FRAME_SIZE, dtype=np.uint8)
 
 
-def _limits(kind: Kind) -> tuple[U8, U8]:
-    """Per-byte (low, span) of a valid frame: byte - low (mod 256) <= span. The §4.3 rules."""
-    if kind not in ("status", "command"):
-        raise ValueError(f"kind must be 'status' or 'command', not {kind!r}")
-    lo = np.full(FRAME_SIZE, _BASE, dtype=np.uint8)
-    span = np.full(FRAME_SIZE, 0xF, dtype=np.uint8)
-    lo[0], lo[15] = START, END
-    span[0] = span[15] = 0
+#: Byte -> its nibble for 'A'..'P', 0xFF for every other byte: a `bytes.translate` table.
+_NIBBLE = bytes(b - _BASE if _BASE <= b <= _BASE + 0xF else 0xFF for b in range(256))
+_NOT_NIBBLE = 0xFF
+#: Bytes 0..15: '<', three values of four nibble bytes, byte 13, byte 14, '>'.
+_LAYOUT = struct.Struct("<BIIIBBB")
+
+
+def _byte13_max(kind: Kind) -> int:
+    """Highest valid byte 13: commands carry 4 flag bits, status also the homed bits 4-6, so it
+    may exceed 'P'."""
     if kind == "status":
-        span[13] = 0x7F  # buttons | homed << 4 can exceed 'P'
-    return lo, span
+        return _BASE + 0x7F
+    if kind == "command":
+        return _BASE + 0xF
+    raise ValueError(f"kind must be 'status' or 'command', not {kind!r}")
 
 
-_ALL_OK = np.ones(FRAME_SIZE, dtype=np.bool_).tobytes()
+def _checked_nibbles(frame: bytearray, byte13_max: int) -> bytearray | None:
+    """The §4.3 checks on a 16-byte frame: `<` ... `>`, every byte between in its range.
+    Returns the frame translated to nibbles (bytes 1-12 and 14 then hold 0..15), or None."""
+    if frame[0] != START or frame[15] != END or not _BASE <= frame[13] <= byte13_max:
+        return None
+    nibbles = frame.translate(_NIBBLE)
+    if nibbles.find(_NOT_NIBBLE, 1, 13) >= 0 or nibbles[14] == _NOT_NIBBLE:
+        return None
+    return nibbles
 
 
-def _copy_out(out: U8 | bytearray, frame: U8) -> None:
-    """Frame into a numpy array or any writable buffer (bytearray refuses arrays directly)."""
-    if isinstance(out, np.ndarray):
-        np.copyto(out, frame)
-    else:
-        memoryview(out)[:] = frame  # type: ignore[index]
+def _nibble_bytes_table() -> array.array:
+    """For every 16-bit value, its four frame bytes as one little-endian uint32: least
+    significant nibble first, each byte 'A' + nibble. 256 KiB, looked up per value packed."""
+    v = np.arange(1 << 16, dtype=np.uint32)
+    spread = (v & 0xF) | (v & 0xF0) << 4 | (v & 0xF00) << 8 | (v & 0xF000) << 12
+    table = array.array("I")
+    table.frombytes((spread + 0x41414141).astype(f"={table.typecode}").tobytes())
+    return table
+
+
+_NIBBLE_BYTES = _nibble_bytes_table()
+
+
+def _int16(nibbles: bytearray, at: int) -> int:
+    """The signed 16-bit value of the four nibbles from `at`, least significant first."""
+    value = nibbles[at] | nibbles[at + 1] << 4 | nibbles[at + 2] << 8 | nibbles[at + 3] << 12
+    return (value ^ 0x8000) - 0x8000
+
+
+def _three_ints(values: ArrayLike) -> tuple[int, int, int]:
+    """Three values as ints, floats truncated toward zero; arrays through `tolist` (cheap)."""
+    a, b, c = values.tolist() if isinstance(values, np.ndarray) else values  # type: ignore[misc]
+    return int(a), int(b), int(c)
 
 
 class FrameCodec:
-    """Encodes and decodes single frames with preallocated scratch (no per-call arrays)."""
+    """Encodes and decodes single frames with a preallocated 16-byte scratch buffer."""
 
-    _SHIFTS = np.array([0, 4, 8, 12], dtype=np.int64)
-    _WEIGHTS = np.array([1, 16, 256, 4096], dtype=np.int64)
-    _HOMED = tuple(np.array([(m >> i) & 1 for i in range(3)], dtype=np.bool_) for m in range(8))
+    _STATUS_MAX, _COMMAND_MAX = _byte13_max("status"), _byte13_max("command")
 
     def __init__(self) -> None:
-        self._frame = new_frame()
-        self._mv = memoryview(self._frame)  # type: ignore[arg-type]
-        self._payload = self._frame[1:13].reshape(3, 4)  # view: values x nibbles
-        self._d = new_frame()  # frame - low: the nibbles, once checked
-        self._d_payload = self._d[1:13].reshape(3, 4)
-        self._v = np.zeros(3, dtype=np.int64)
-        self._vcol = self._v[:, None]
-        self._nib = np.zeros((3, 4), dtype=np.int64)
-        self._ok = np.zeros(FRAME_SIZE, dtype=np.bool_)
-        self._limits = {k: _limits(k) for k in ("status", "command")}
+        self._frame = bytearray(FRAME_SIZE)
+        self._mv = memoryview(self._frame)
 
     # -------------------------------------------------------------- internals
     def _pack(self, values: ArrayLike, limit: int | None, b13: int, b14: int, out: U8 | bytearray) -> None:
-        v, nib = self._v, self._nib
-        np.copyto(v, values, casting="unsafe")  # floats truncate toward zero
+        a, b, c = _three_ints(values)
         if limit is not None:
-            np.minimum(v, limit, out=v)
-            np.maximum(v, -limit, out=v)
-        np.bitwise_and(v, 0xFFFF, out=v)  # two's complement, low 16 bits
-        np.right_shift(self._vcol, self._SHIFTS, out=nib)
-        np.bitwise_and(nib, 0xF, out=nib)
-        np.add(nib, _BASE, out=nib)
-        f = self._frame
-        f[0], f[15] = START, END
-        np.copyto(self._payload, nib, casting="unsafe")
-        f[13], f[14] = _BASE + b13, _BASE + b14
-        _copy_out(out, f)
+            a, b, c = min(max(a, -limit), limit), min(max(b, -limit), limit), min(max(c, -limit), limit)
+        table = _NIBBLE_BYTES
+        _LAYOUT.pack_into(self._frame, 0, START, table[a & 0xFFFF], table[b & 0xFFFF], table[c & 0xFFFF],
+                          _BASE + b13, _BASE + b14, END)  # & 0xFFFF: two's complement, low 16 bits
+        memoryview(out)[:] = self._frame  # type: ignore[index]  # numpy uint8 array or bytearray
 
-    def _load(self, frame: ArrayLike | bytes, kind: Kind) -> bool:
-        """Copy a frame into scratch and check it; False if malformed or not 16 bytes."""
+    def _load(self, frame: ArrayLike | bytes, byte13_max: int) -> bytearray | None:
+        """Copy a frame into scratch and check it; its nibbles, or None if malformed or not 16 bytes."""
         try:
             self._mv[:] = frame  # type: ignore[index]
         except (ValueError, TypeError):
-            return False
-        lo, span = self._limits[kind]
-        np.subtract(self._frame, lo, out=self._d)
-        np.less_equal(self._d, span, out=self._ok)
-        return self._ok.tobytes() == _ALL_OK
+            return None
+        return _checked_nibbles(self._frame, byte13_max)
 
-    def _unpack(self, out_values: NDArray[np.int64]) -> None:
-        np.copyto(self._nib, self._d_payload)
-        self._nib.dot(self._WEIGHTS, out=out_values)
-        np.bitwise_xor(out_values, 0x8000, out=out_values)  # 16-bit two's complement
-        np.subtract(out_values, 0x8000, out=out_values)
+    def _unpack(self, nibbles: bytearray, out_values: NDArray[np.int64]) -> None:
+        out_values[0] = _int16(nibbles, 1)
+        out_values[1] = _int16(nibbles, 5)
+        out_values[2] = _int16(nibbles, 9)
 
     # -------------------------------------------------------------- public
     def is_valid(self, frame: ArrayLike | bytes, kind: Kind = "status") -> bool:
         """The §4.3 checks: `<` ... `>`, every byte between in its nibble range."""
-        return self._load(frame, kind)
+        return self._load(frame, _byte13_max(kind)) is not None
 
     def encode_command(self, motor: ArrayLike, flags: int, out: U8 | bytearray, *,
                        limit: int | None = MOTOR_LIMIT) -> U8 | bytearray:
@@ -201,11 +217,12 @@ class FrameCodec:
 
     def decode_command(self, frame: ArrayLike | bytes, out: Command) -> Command:
         """Parse a host-to-Falcon frame into `out`; FrameError if it is not one."""
-        if not self._load(frame, "command"):
+        nibbles = self._load(frame, self._COMMAND_MAX)
+        if nibbles is None:
             raise FrameError("not a valid host-to-Falcon frame")
-        self._unpack(out.motor)
-        out.flags = int(self._d[13])
-        out.spare = int(self._d[14])
+        self._unpack(nibbles, out.motor)
+        out.flags = nibbles[13]
+        out.spare = nibbles[14]
         return out
 
     def encode_status(self, encoders: ArrayLike, homed_mask: int, buttons: int,
@@ -220,13 +237,15 @@ class FrameCodec:
         Counts are signed: `<JFKP...>` is -1447 (libnifalcon's comment says +1447; its code
         and this agree on -1447).
         """
-        if not self._load(frame, "status"):
+        nibbles = self._load(frame, self._STATUS_MAX)
+        if nibbles is None:
             raise FrameError("not a valid Falcon-to-host frame")
-        self._unpack(out.encoders)
-        b13 = int(self._d[13])
+        self._unpack(nibbles, out.encoders)
+        b13 = self._frame[13] - _BASE  # may exceed a nibble: homed bits 4-6
         out.buttons = b13 & 0xF
-        np.copyto(out.homed, self._HOMED[b13 >> 4])
-        out.spare = int(self._d[14])
+        homed = out.homed
+        homed[0], homed[1], homed[2] = b13 >> 4 & 1, b13 >> 5 & 1, b13 >> 6 & 1
+        out.spare = nibbles[14]
         return out
 
 
@@ -250,13 +269,10 @@ class FrameReader:
         if capacity < FRAME_SIZE:
             raise ValueError("capacity must hold at least one frame")
         self.kind: Kind = kind
-        self._lo, self._span = _limits(kind)
+        self._byte13_max = _byte13_max(kind)
         self._cap = int(capacity)
         self._buf = bytearray(self._cap)
-        self._arr = np.frombuffer(self._buf, dtype=np.uint8)
         self._start = self._end = 0
-        self._cand, self._d = new_frame(), new_frame()
-        self._ok = np.zeros(FRAME_SIZE, dtype=np.bool_)
         self.discarded = 0
         self.rejected = 0
         self.frames = 0
@@ -294,11 +310,6 @@ class FrameReader:
         self._buf[self._end:self._end + n] = chunk
         self._end += n
 
-    def _valid(self) -> bool:
-        np.subtract(self._cand, self._lo, out=self._d)
-        np.less_equal(self._d, self._span, out=self._ok)
-        return self._ok.tobytes() == _ALL_OK
-
     def _drop_to(self, i: int) -> None:
         self.discarded += i - self._start
         self._start = i
@@ -321,13 +332,13 @@ class FrameReader:
                 self.rejected += 1
                 self._drop_to(j)
                 continue
-            self._cand[:] = self._arr[i:i + FRAME_SIZE]
-            if self._valid():
+            candidate = buf[i:i + FRAME_SIZE]
+            if _checked_nibbles(candidate, self._byte13_max) is not None:
                 self._start = i + FRAME_SIZE
                 if self._start == self._end:
                     self._start = self._end = 0
                 self.frames += 1
-                _copy_out(out, self._cand)
+                memoryview(out)[:] = candidate  # type: ignore[index]  # numpy uint8 array or bytearray
                 return True
             self.rejected += 1
             self._drop_to(i + 1)

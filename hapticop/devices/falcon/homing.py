@@ -23,6 +23,11 @@ from hapticop.devices.falcon.codec import Flag, Status
 
 __all__ = ["Homing"]
 
+# As plain ints: IntFlag arithmetic builds enum members, too slow for every 1 ms frame.
+_HOMED_FLAGS = int(Flag.HOMING | Flag.LED_GREEN)
+_WAITING_FLAGS = int(Flag.HOMING | Flag.LED_RED)
+_BLUE = int(Flag.LED_BLUE)
+
 
 @dataclass(slots=True)
 class Homing:
@@ -41,8 +46,7 @@ class Homing:
 
     def command_flags(self, extra_leds: int = 0) -> int:
         """Byte-13 flags for the next command: homing always, red while waiting, green once homed."""
-        led = Flag.LED_GREEN if self.homed else Flag.LED_RED
-        return int(Flag.HOMING | led) | (int(extra_leds) & int(Flag.LED_BLUE))
+        return (_HOMED_FLAGS if self.homed else _WAITING_FLAGS) | (int(extra_leds) & _BLUE)
 
     def update(self, status: Status) -> bool:
         """Take the latest status; returns whether the device is homed now."""

@@ -10,8 +10,10 @@ Jacobian transpose, tau = J^T F; libnifalcon's `getForces` uses a symmetrised J 
 wrong z column (§5, §8): over the reference poses its torque vector is off by up to 94 %
 (norm), so the force felt is not the force asked for.
 
-Everything a 1 kHz cycle calls writes into caller-provided arrays and preallocated work
-arrays: no numpy array is created per call. One `FalconKinematics` per thread.
+The per-call maths is scalar `math` on Python floats, three legs unrolled: at 3-vectors and
+3x3 matrices numpy's per-call overhead, not arithmetic, would be the cost. Array outputs are
+written in place into caller-provided arrays: nothing is created per 1 kHz cycle that stays.
+One `FalconKinematics` per thread.
 """
 
 from __future__ import annotations
@@ -28,6 +30,12 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
+#: One leg's IK state: (theta1, theta2, theta3, sin theta3, cos theta3, K, n0, n1), where
+#: K = d + e + b sin theta3 and (n0, n1) = K (sin theta2, cos theta2) is the platform joint
+#: seen from the elbow.
+Leg = tuple[float, float, float, float, float, float, float, float]
+#: The three legs' IK states at one handle position (legs 1, 2, 3).
+Pose = tuple[Leg, Leg, Leg]
 
 #: Centre of the sampled reachable box (§9: x, y in +-45 mm, z in 80..170 mm). The device
 #: frame has no agreed origin (libnifalcon 0.150, ros_falcon_interface 0.125 ...): blocks
@@ -93,23 +101,69 @@ class Drive:
         return math.radians(self.zero_count_deg)
 
 
-class _Legs:
-    """IK results of the three legs at one position, laid out for few numpy calls."""
-
-    def __init__(self) -> None:
-        self.q = np.zeros(9)  # [w (3), X = u + c (3), cos theta3 (3)]
-        self.wX = self.q[0:6].reshape(2, 3)
-        self.w, self.X, self.c3 = self.q[0:3], self.q[3:6], self.q[6:9]
-        self.t1, self.t2, self.t3 = np.zeros(3), np.zeros(3), np.zeros(3)
-        self.s3, self.K = np.zeros(3), np.zeros(3)  # sin theta3, K = d + e + b sin theta3
-        self.n = np.zeros((2, 3))  # K (sin theta2, cos theta2): platform joint seen from the elbow
-        self.n0, self.n1 = self.n[0], self.n[1]
+def _three(values: ArrayLike) -> tuple[float, float, float]:
+    """The three numbers of a 3-vector; arrays through `tolist`, far cheaper than iterating them."""
+    a, b, c = values.tolist() if isinstance(values, np.ndarray) else values  # type: ignore[misc]
+    return a, b, c
 
 
-def _in_unit(values: list[float]) -> bool:
-    """All three within [-1, 1] (False for NaN): the arccos domain, checked before calling it."""
-    a, b, c = values
-    return -1.0 <= a <= 1.0 and -1.0 <= b <= 1.0 and -1.0 <= c <= 1.0
+def _put(out: np.ndarray, a: float, b: float, c: float) -> None:
+    """Write three values into a caller's (3,) array: three item stores beat one sequence copy."""
+    out[0] = a
+    out[1] = b
+    out[2] = c
+
+
+class _LegMaths:
+    """One leg's constants (§2) and its per-call IK and Jacobian row, on floats."""
+
+    __slots__ = ("cphi", "sphi", "sphi_b", "cphi_b", "u0", "v0", "a", "a2", "two_a", "b", "de")
+
+    def __init__(self, g: Geometry, phi_deg: float) -> None:
+        phi = math.radians(phi_deg)
+        self.cphi, self.sphi = math.cos(phi), math.sin(phi)
+        # Leg frame: w = z, X = u + c = cphi x + sphi y + (c - r), cos theta3 = (v + f) / b.
+        self.sphi_b, self.cphi_b = self.sphi / g.b, self.cphi / g.b
+        self.u0, self.v0 = g.c - g.r, (g.f - g.s) / g.b
+        self.a, self.a2, self.two_a, self.b, self.de = g.a, g.a * g.a, 2.0 * g.a, g.b, g.d + g.e
+
+    def ik(self, x: float, y: float, z: float) -> Leg | None:
+        """Analytic IK of §4; None if unreachable (an arccos argument leaves [-1, 1])."""
+        X = self.cphi * x + self.sphi * y + self.u0
+        c3 = self.cphi_b * y - self.sphi_b * x + self.v0
+        if not -1.0 <= c3 <= 1.0:  # also False for NaN
+            return None
+        t3 = math.acos(c3)
+        s3 = math.sin(t3)
+        K = s3 * self.b + self.de
+        rho2 = X * X + z * z
+        if not rho2 > 0.0:
+            return None
+        # cosine of the angle between thigh and platform joint
+        cosine = (rho2 - K * K + self.a2) / (math.sqrt(rho2) * self.two_a)
+        if not -1.0 <= cosine <= 1.0:
+            return None
+        t1 = math.atan2(z, X) - math.acos(cosine)  # libnifalcon's elbow branch
+        # theta2 = direction of (X - a cos t1, w - a sin t1). It equals libnifalcon's
+        # acos((X - a cos t1) / K) wherever w - a sin t1 >= 0 (every sampled point).
+        n0 = z - self.a * math.sin(t1)
+        n1 = X - self.a * math.cos(t1)
+        return (t1, math.atan2(n0, n1), t3, s3, c3, K, n0, n1)
+
+    def row(self, leg: Leg) -> tuple[float, float, float] | None:
+        """Row of M = d theta1 / d p for this leg; None if D = -a sin t3 sin(t1 - t2) ~ 0.
+
+        (cos phi cos t2 sin t3 - sin phi cos t3, sin phi cos t2 sin t3 + cos phi cos t3,
+        sin t2 sin t3) / D. libnifalcon's z entry is sin^2 t2 / D (its issue #66); this is
+        the correct one.
+        """
+        t1, t2, _, s3, c3, K, n0, n1 = leg
+        D = -self.a * (math.sin(t1 - t2) * s3)
+        if not abs(D) > 1e-12:  # theta3 at 0 or pi, or thigh along link
+            return None
+        c2s3 = n1 / K * s3
+        return ((self.cphi * c2s3 - self.sphi * c3) / D, (self.sphi * c2s3 + self.cphi * c3) / D,
+                n0 / K * s3 / D)
 
 
 class FalconKinematics:
@@ -120,9 +174,9 @@ class FalconKinematics:
     `out` array is then left as it was (motor commands are zeroed, the safe value).
 
     `forward` remembers its last solution as the next starting point and the leg angles
-    there, so `forces_to_motor(None, ...)` right after it needs no second IK. The work is
-    laid out so a Newton iteration is ~45 numpy calls on 3-vectors: at this size numpy's
-    per-call overhead, not arithmetic, is the cost.
+    there, so `forces_to_motor(None, ...)` right after it needs no second IK. `pose` and
+    `pose_force` are the same maths for callers that keep their state in floats (the
+    simulator): no arrays at all.
     """
 
     def __init__(self, geometry: Geometry | None = None, drive: Drive | None = None, *,
@@ -134,55 +188,27 @@ class FalconKinematics:
         self.drive = dr = drive if drive is not None else Drive()
         self.tol_rad, self.tol_m = float(tol_rad), float(tol_m)
         self.max_iterations, self.max_halvings = int(max_iterations), int(max_halvings)
-        # IK evaluations per `forward`: bounds the cost of a failure (unreachable counts:
-        # ~0.8 ms on our machine, against ~80 us for a warm 1 kHz call). libnifalcon instead
-        # silently keeps the old position.
+        # IK evaluations per `forward`: bounds the cost of a failure (unreachable counts).
+        # libnifalcon instead silently keeps the old position.
         self.max_evaluations, self.warm_evaluations = int(max_evaluations), int(warm_evaluations)
         self._budget = 0
         self.max_condition = float(max_condition)
-        self._guess0 = np.array(initial_guess_m, dtype=np.float64).reshape(3)
-        phi = np.radians(np.asarray(g.leg_angles_deg, dtype=np.float64))
-        cphi, sphi = np.cos(phi), np.sin(phi)
-        # Leg frames (§2) as one product: [w, X = u + c, cos theta3 = (v + f) / b] = R p + o.
-        self._R = np.zeros((9, 3))
-        self._R[0:3, 2] = 1.0
-        self._R[3:6, 0], self._R[3:6, 1] = cphi, sphi
-        self._R[6:9, 0], self._R[6:9, 1] = -sphi / g.b, cphi / g.b
-        self._o = np.concatenate([np.zeros(3), np.full(3, g.c - g.r), np.full(3, (g.f - g.s) / g.b)])
-        self._phi_a = np.stack([cphi, sphi])  # x, y rows of M^T: phi_a c2 s3 + phi_b c3
-        self._phi_b = np.stack([-sphi, cphi])
+        x, y, z = np.array(initial_guess_m, dtype=np.float64).reshape(3).tolist()
+        self._guess0: tuple[float, float, float] = (x, y, z)
+        self._leg1, self._leg2, self._leg3 = (_LegMaths(g, phi) for phi in g.leg_angles_deg)
         self._rad_per_count = dr.rad_per_count
         self._zero_rad = dr.zero_count_rad
-        z = lambda: np.zeros(3)  # noqa: E731
-        self._cur, self._trial = _Legs(), _Legs()  # swapped by reference during Newton
-        self._p, self._t, self._rho = z(), z(), z()
-        self._sq = np.zeros((2, 3))
-        self._sq0, self._sq1 = self._sq[0], self._sq[1]
-        # Jacobian work. G rows: M^T (x, y, z rows; leg columns), then cos theta2 sin theta3.
-        # M = d theta1 / d p; Q[i] = M^T[i+1] x M^T[i+2], so J = M^-1 = Q / det.
-        self._G = np.zeros((4, 3))
-        self._Mt = self._G[0:3]
-        self._Mt_flat = self._Mt.reshape(9)
-        self._Mt01, self._Mt0 = self._G[0:2], self._G[0]
-        self._S = self._G[2:4]  # [sin t2 sin t3, cos t2 sin t3]
-        self._c2s3 = self._G[3]
-        self._T23 = np.zeros((2, 3))
-        self._D = z()
-        self._Q = np.zeros((3, 3))
-        self._Q_flat, self._Q0 = self._Q.reshape(9), self._Q[0]
-        i, k = np.divmod(np.arange(9), 3)
-        row = lambda di, dk: 3 * ((i + di) % 3) + (k + dk) % 3  # noqa: E731
-        self._cross_idx = np.stack([row(1, 1), row(1, 2), row(2, 2), row(2, 1)]).astype(np.intp)
-        self._cross_T = np.zeros((4, 9))
-        self._cross_a, self._cross_b = self._cross_T[0:2], self._cross_T[2:4]
-        self._cross_P = np.zeros((2, 9))
-        self._cross_P0, self._cross_P1 = self._cross_P[0], self._cross_P[1]
+        self._motor_per_nm = float(dr.motor_per_nm)
+        self._motor_cap = min(float(dr.motor_limit), dr.torque_limit_nm * abs(dr.motor_per_nm))
+        # The last Jacobian: M^T row-major (rows x, y, z; columns legs), Q = det * M^-1
+        # row-major (the cofactors of M^T), and det M^T.
+        self._Mt: tuple[float, ...] = (0.0,) * 9
+        self._Q: tuple[float, ...] = (0.0,) * 9
         self._det = 0.0
-        # Newton and force work.
-        self._meas, self._res, self._step, self._ptrial = z(), z(), z(), z()
-        self._vec, self._tau, self._motor_f = z(), z(), z()
-        self._last = self._guess0.copy()  # warm start
-        self._have_last = False  # _cur holds IK at _last
+        self._meas = (0.0, 0.0, 0.0)  # measured thigh angles `forward` solves for
+        self._last = self._guess0  # warm start
+        self._cur: Pose | None = None  # IK at _last while _have_last
+        self._have_last = False
         #: Iterations and final |residual| (rad, Euclidean) of the last `forward` call.
         self.iterations = 0
         self.residual = math.inf
@@ -190,55 +216,37 @@ class FalconKinematics:
     # ------------------------------------------------------------------ encoders
     def angles_from_counts(self, counts: ArrayLike, out: F64) -> F64:
         """Thigh angles theta1 (rad) of encoder counts (§7): 35 deg + 6.359e-4 rad per count."""
-        np.multiply(counts, self._rad_per_count, out=out)
-        np.add(out, self._zero_rad, out=out)
+        a, b, c = _three(counts)
+        r, z = self._rad_per_count, self._zero_rad
+        _put(out, a * r + z, b * r + z, c * r + z)
         return out
 
+    def count(self, theta1: float) -> int:
+        """Nearest encoder count of one thigh angle (ties to even), not wrapped."""
+        return round((theta1 - self._zero_rad) / self._rad_per_count)
+
     def counts_from_angles(self, theta1: ArrayLike, out: I64) -> I64:
-        """Nearest encoder counts of thigh angles (the simulator's encoder), not wrapped."""
-        t = self._t
-        np.subtract(theta1, self._zero_rad, out=t)
-        np.divide(t, self._rad_per_count, out=t)
-        np.rint(t, out=t)
-        np.copyto(out, t, casting="unsafe")
+        """Nearest encoder counts of thigh angles (the simulator's encoder), not wrapped.
+
+        ValueError/OverflowError for NaN or infinite angles: they have no count.
+        """
+        a, b, c = _three(theta1)
+        _put(out, self.count(a), self.count(b), self.count(c))
         return out
 
     # ------------------------------------------------------------------ inverse
-    def _ik(self, p: F64, L: _Legs) -> bool:
-        """Analytic IK of §4 into `L`; False if unreachable (an arccos argument leaves [-1, 1])."""
-        g = self.geometry
-        t, rho, sq = self._t, self._rho, self._sq
-        self._R.dot(p, out=L.q)
-        np.add(L.q, self._o, out=L.q)
-        if not _in_unit(L.c3.tolist()):
-            return False
-        np.arccos(L.c3, out=L.t3)
-        np.sin(L.t3, out=L.s3)
-        np.multiply(L.s3, g.b, out=L.K)
-        np.add(L.K, g.d + g.e, out=L.K)
-        np.multiply(L.wX, L.wX, out=sq)
-        np.add(self._sq0, self._sq1, out=rho)  # rho^2 = X^2 + w^2
-        if not min(rho.tolist()) > 0.0:
-            return False
-        np.multiply(L.K, L.K, out=t)
-        np.subtract(rho, t, out=t)
-        np.add(t, g.a * g.a, out=t)  # a^2 + rho^2 - K^2
-        np.sqrt(rho, out=rho)
-        np.multiply(rho, 2.0 * g.a, out=rho)
-        np.divide(t, rho, out=t)  # cosine of the angle between thigh and platform joint
-        if not _in_unit(t.tolist()):
-            return False
-        np.arccos(t, out=t)
-        np.arctan2(L.w, L.X, out=L.t1)
-        np.subtract(L.t1, t, out=L.t1)  # theta1 = alpha - acos(.): libnifalcon's elbow branch
-        # theta2 = direction of (X - a cos t1, w - a sin t1). It equals libnifalcon's
-        # acos((X - a cos t1) / K) wherever w - a sin t1 >= 0 (every sampled point).
-        np.sin(L.t1, out=L.n0)
-        np.cos(L.t1, out=L.n1)
-        np.multiply(L.n, -g.a, out=L.n)
-        np.add(L.n, L.wX, out=L.n)
-        np.arctan2(L.n0, L.n1, out=L.t2)
-        return True
+    def pose(self, x: float, y: float, z: float) -> Pose | None:
+        """The three legs' IK at a handle position (m); None if unreachable."""
+        leg1 = self._leg1.ik(x, y, z)
+        if leg1 is None:
+            return None
+        leg2 = self._leg2.ik(x, y, z)
+        if leg2 is None:
+            return None
+        leg3 = self._leg3.ik(x, y, z)
+        if leg3 is None:
+            return None
+        return (leg1, leg2, leg3)
 
     def inverse(self, position: ArrayLike, out_theta1: F64,
                 out_theta2: F64 | None = None, out_theta3: F64 | None = None) -> bool:
@@ -246,166 +254,169 @@ class FalconKinematics:
 
         libnifalcon returns NaN and "success" there (§4); we say so instead.
         """
-        np.copyto(self._p, position)
-        if not self._ik(self._p, self._trial):
+        pose = self.pose(*_three(position))
+        if pose is None:
             return False
-        np.copyto(out_theta1, self._trial.t1)
+        l1, l2, l3 = pose
+        _put(out_theta1, l1[0], l2[0], l3[0])
         if out_theta2 is not None:
-            np.copyto(out_theta2, self._trial.t2)
+            _put(out_theta2, l1[1], l2[1], l3[1])
         if out_theta3 is not None:
-            np.copyto(out_theta3, self._trial.t3)
+            _put(out_theta3, l1[2], l2[2], l3[2])
         return True
 
     def counts_from_position(self, position: ArrayLike, out: I64) -> bool:
         """Encoder counts (absolute, homed) for a handle position; False if unreachable."""
-        np.copyto(self._p, position)
-        if not self._ik(self._p, self._trial):
+        pose = self.pose(*_three(position))
+        if pose is None:
             return False
-        self.counts_from_angles(self._trial.t1, out)
+        _put(out, self.count(pose[0][0]), self.count(pose[1][0]), self.count(pose[2][0]))
         return True
 
     # ------------------------------------------------------------------ Jacobian
-    def _jac(self, L: _Legs) -> bool:
-        """M = d theta1 / d p (§5) and Q = det * M^-1 at IK state `L`; False if near-singular.
-
-        Row i of M: (cos phi cos t2 sin t3 - sin phi cos t3, sin phi cos t2 sin t3 +
-        cos phi cos t3, sin t2 sin t3) / D with D = -a sin t3 sin(t1 - t2). libnifalcon's
-        z entry is sin^2 t2 / D (its issue #66); this is the correct one.
-        """
-        D = self._D
-        np.subtract(L.t1, L.t2, out=D)
-        np.sin(D, out=D)
-        np.multiply(D, L.s3, out=D)
-        np.multiply(D, -self.geometry.a, out=D)
-        d0, d1, d2 = D.tolist()
-        if not min(abs(d0), abs(d1), abs(d2)) > 1e-12:  # theta3 at 0 or pi, or thigh along link
+    def _jac(self, pose: Pose) -> bool:
+        """M = d theta1 / d p (§5) and Q = det * M^-1 at `pose`; False if near-singular."""
+        r1 = self._leg1.row(pose[0])
+        r2 = self._leg2.row(pose[1])
+        r3 = self._leg3.row(pose[2])
+        if r1 is None or r2 is None or r3 is None:
             return False
-        np.divide(L.n, L.K, out=self._S)  # sin t2, cos t2
-        np.multiply(self._S, L.s3, out=self._S)
-        np.multiply(self._phi_a, self._c2s3, out=self._Mt01)
-        np.multiply(self._phi_b, L.c3, out=self._T23)
-        np.add(self._Mt01, self._T23, out=self._Mt01)
-        np.divide(self._Mt, D, out=self._Mt)  # M^T: columns are legs, each over its D
-        # Q[i] = M^T[i+1] x M^T[i+2] for all i at once through one gather.
-        self._Mt_flat.take(self._cross_idx, out=self._cross_T, mode="wrap")
-        np.multiply(self._cross_a, self._cross_b, out=self._cross_P)
-        np.subtract(self._cross_P0, self._cross_P1, out=self._Q_flat)
-        det = float(self._Mt0.dot(self._Q0))
+        # M^T: column k is leg k's row of M.
+        a00, a10, a20 = r1
+        a01, a11, a21 = r2
+        a02, a12, a22 = r3
+        # Q[i] = M^T[i+1] x M^T[i+2]: the cofactors of M^T, so that J = M^-1 = Q / det.
+        q00, q01, q02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+        q10, q11, q12 = a21 * a02 - a22 * a01, a22 * a00 - a20 * a02, a20 * a01 - a21 * a00
+        q20, q21, q22 = a01 * a12 - a02 * a11, a02 * a10 - a00 * a12, a00 * a11 - a01 * a10
+        det = a00 * q00 + a01 * q01 + a02 * q02
         # Frobenius condition number ||M|| ||M^-1|| guards the inversion, as the notes ask.
-        norms = float(self._Mt_flat.dot(self._Mt_flat)) * float(self._Q_flat.dot(self._Q_flat))
-        if not (det != 0.0 and math.sqrt(norms) <= self.max_condition * abs(det)):
+        norm_m = (a00 * a00 + a01 * a01 + a02 * a02 + a10 * a10 + a11 * a11 + a12 * a12
+                  + a20 * a20 + a21 * a21 + a22 * a22)
+        norm_q = (q00 * q00 + q01 * q01 + q02 * q02 + q10 * q10 + q11 * q11 + q12 * q12
+                  + q20 * q20 + q21 * q21 + q22 * q22)
+        if not (det != 0.0 and math.sqrt(norm_m * norm_q) <= self.max_condition * abs(det)):
             return False
+        self._Mt = (a00, a01, a02, a10, a11, a12, a20, a21, a22)
+        self._Q = (q00, q01, q02, q10, q11, q12, q20, q21, q22)
         self._det = det
         return True
 
     def jacobian(self, position: ArrayLike, out_J: F64, out_M: F64 | None = None) -> bool:
         """J = d p / d theta1 (m/rad, 3x3) at a position, and optionally M = J^-1 (rad/m)."""
-        np.copyto(self._p, position)
-        if not (self._ik(self._p, self._trial) and self._jac(self._trial)):
+        pose = self.pose(*_three(position))
+        if pose is None or not self._jac(pose):
             return False
-        np.divide(self._Q, self._det, out=out_J)
+        np.divide(np.reshape(self._Q, (3, 3)), self._det, out=out_J)  # off the cycle path
         if out_M is not None:
-            np.copyto(out_M, self._Mt.T)
+            np.copyto(out_M, np.reshape(self._Mt, (3, 3)).T)
         return True
 
     # ------------------------------------------------------------------ forward
     def forward(self, encoders: ArrayLike, out_position: F64) -> bool:
         """Handle position (m) from encoder counts; False if unreachable or not converged."""
-        self.angles_from_counts(encoders, self._meas)
+        a, b, c = _three(encoders)
+        r, z = self._rad_per_count, self._zero_rad
+        self._meas = (a * r + z, b * r + z, c * r + z)
         return self._solve(out_position)
 
     def forward_angles(self, theta1: ArrayLike, out_position: F64) -> bool:
         """Handle position (m) from thigh angles (rad); see `forward`."""
-        np.copyto(self._meas, theta1)
+        self._meas = _three(theta1)
         return self._solve(out_position)
 
     def reset(self) -> None:
         """Forget the warm start (e.g. after homing made the counts jump)."""
-        np.copyto(self._last, self._guess0)
+        self._last = self._guess0
         self._have_last = False
-
-    def _residual(self, L: _Legs) -> float:
-        np.subtract(self._meas, L.t1, out=self._res)
-        return math.sqrt(float(self._res.dot(self._res)))
 
     def _solve(self, out_position: F64) -> bool:
         """Newton from the last solution; if that fails within `warm_evaluations` IK calls (a
         jump across the workspace), once more from the initial guess with what is left of
         `max_evaluations`. The warm start stays at the last good solution."""
-        p = self._p
-        np.copyto(p, self._last)
-        warm = self._have_last or self._ik(p, self._cur)
-        self._have_last = False  # p moves away from _last from here on
+        cur = self._cur if self._have_last else self.pose(*self._last)
+        self._have_last = False  # the solution moves away from _last from here on
         self._budget = self.warm_evaluations
-        converged = warm and self._newton(p)
-        if not converged:
-            iterations = self.iterations if warm else 0
+        solution = None if cur is None else self._newton(self._last, cur)
+        if solution is None:
+            iterations = self.iterations if cur is not None else 0
             self._budget = self.max_evaluations - (self.warm_evaluations - self._budget) - 1
-            np.copyto(p, self._guess0)
-            converged = self._ik(p, self._cur) and self._newton(p)
+            cur = self.pose(*self._guess0)
+            solution = None if cur is None else self._newton(self._guess0, cur)
             self.iterations += iterations
-        if not converged:
+        if solution is None:
             return False
-        np.copyto(self._last, p)
+        self._last, self._cur = solution
         self._have_last = True
-        np.copyto(out_position, p)
+        _put(out_position, *self._last)
         return True
 
-    def _newton(self, p: F64) -> bool:
-        """Newton-Raphson p <- p + J (theta_meas - theta1(p)) from p, whose IK is in _cur.
+    def _newton(self, p: tuple[float, float, float], cur: Pose
+                ) -> tuple[tuple[float, float, float], Pose] | None:
+        """Newton-Raphson p <- p + J (theta_meas - theta1(p)) from p, whose IK is `cur`.
 
         Full steps, halved while the trial is unreachable or the residual does not fall.
         Stops when |residual| <= tol_rad or after a step <= tol_m (quadratic convergence
         puts the root far closer than that); at most max_iterations. At 1 kHz a warm start
-        needs 1-3 iterations.
+        needs 1-3 iterations. Returns the root and its IK, or None if not converged.
         """
-        trial, step = self._ptrial, self._step
-        rn = self._residual(self._cur)
-        converged = rn <= self.tol_rad
+        tol_rad, tol_m, pose = self.tol_rad, self.tol_m, self.pose
+        m0, m1, m2 = self._meas
+        x, y, z = p
+        e0, e1, e2 = m0 - cur[0][0], m1 - cur[1][0], m2 - cur[2][0]
+        rn = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        converged = rn <= tol_rad
         it = 0
         while not converged and it < self.max_iterations and self._budget > 0:
             it += 1
-            if not self._jac(self._cur):
+            if not self._jac(cur):
                 break
-            self._Q.dot(self._res, out=step)  # det * J e
-            np.multiply(step, 1.0 / self._det, out=step)
-            norm = math.sqrt(float(step.dot(step)))
-            lam, accepted, rt = 1.0, False, math.inf
+            q00, q01, q02, q10, q11, q12, q20, q21, q22 = self._Q
+            inv_det = 1.0 / self._det
+            s0 = (q00 * e0 + q01 * e1 + q02 * e2) * inv_det  # J e
+            s1 = (q10 * e0 + q11 * e1 + q12 * e2) * inv_det
+            s2 = (q20 * e0 + q21 * e1 + q22 * e2) * inv_det
+            norm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+            lam, trial, rt = 1.0, None, math.inf
             for _ in range(min(self.max_halvings, self._budget)):
                 self._budget -= 1
-                if lam == 1.0:
-                    np.add(p, step, out=trial)
-                else:
-                    np.multiply(step, lam, out=trial)
-                    np.add(trial, p, out=trial)
-                if self._ik(trial, self._trial):
-                    rt = self._residual(self._trial)
-                    if rt < rn or rt <= self.tol_rad:
-                        accepted = True
+                tx, ty, tz = s0 * lam + x, s1 * lam + y, s2 * lam + z
+                trial = pose(tx, ty, tz)
+                if trial is not None:
+                    f0, f1, f2 = m0 - trial[0][0], m1 - trial[1][0], m2 - trial[2][0]
+                    rt = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+                    if rt < rn or rt <= tol_rad:
                         break
+                    trial = None
                 lam *= 0.5
-            if not accepted:
-                self._residual(self._cur)
-                converged = norm <= self.tol_m  # rounding floor, within tol_m of the root
+            if trial is None:
+                converged = norm <= tol_m  # rounding floor, within tol_m of the root
                 break
-            np.copyto(p, trial)
-            self._cur, self._trial = self._trial, self._cur
-            rn = rt
-            converged = rn <= self.tol_rad or lam * norm <= self.tol_m
+            x, y, z, cur = tx, ty, tz, trial
+            e0, e1, e2, rn = f0, f1, f2, rt
+            converged = rn <= tol_rad or lam * norm <= tol_m
         self.iterations, self.residual = it, rn
-        return converged
+        return ((x, y, z), cur) if converged else None
 
     # ------------------------------------------------------------------ forces
     def _pose(self, position: ArrayLike | None) -> bool:
         """IK and Jacobian at `position`, or at the last `forward` solution for None."""
         if position is None:
             if not self._have_last:  # the last forward failed: its last good pose
-                if not self._ik(self._last, self._cur):
+                cur = self.pose(*self._last)
+                if cur is None:
                     return False
-                self._have_last = True
-            return self._jac(self._cur)
-        np.copyto(self._p, position)
-        return self._ik(self._p, self._trial) and self._jac(self._trial)
+                self._cur, self._have_last = cur, True
+            return self._jac(self._cur)  # type: ignore[arg-type]
+        pose = self.pose(*_three(position))
+        return pose is not None and self._jac(pose)
+
+    def _torques(self, f0: float, f1: float, f2: float) -> tuple[float, float, float]:
+        """tau = J^T F = (Q^T F) / det at the last Jacobian."""
+        q00, q01, q02, q10, q11, q12, q20, q21, q22 = self._Q
+        inv_det = 1.0 / self._det
+        return ((f0 * q00 + f1 * q10 + f2 * q20) * inv_det, (f0 * q01 + f1 * q11 + f2 * q21) * inv_det,
+                (f0 * q02 + f1 * q12 + f2 * q22) * inv_det)
 
     def forces_to_torques(self, position: ArrayLike | None, force: ArrayLike, out_tau: F64) -> bool:
         """Thigh torques tau = J^T F (N m) for a handle force F (N) at a position (m).
@@ -414,17 +425,25 @@ class FalconKinematics:
         """
         if not self._pose(position):
             return False
-        np.copyto(self._vec, force)
-        self._vec.dot(self._Q, out=out_tau)  # (Q^T F) = det * J^T F
-        np.multiply(out_tau, 1.0 / self._det, out=out_tau)
+        _put(out_tau, *self._torques(*_three(force)))
         return True
+
+    def pose_force(self, pose: Pose, tau1: float, tau2: float, tau3: float) -> tuple[float, float, float] | None:
+        """Handle force F = J^-T tau = M^T tau (N) that thigh torques produce at `pose`; None if singular."""
+        if not self._jac(pose):
+            return None
+        a00, a01, a02, a10, a11, a12, a20, a21, a22 = self._Mt
+        return (a00 * tau1 + a01 * tau2 + a02 * tau3, a10 * tau1 + a11 * tau2 + a12 * tau3,
+                a20 * tau1 + a21 * tau2 + a22 * tau3)
 
     def torques_to_force(self, position: ArrayLike | None, tau: ArrayLike, out_force: F64) -> bool:
         """Handle force F = J^-T tau = M^T tau (N) that thigh torques produce (the simulator's motors)."""
         if not self._pose(position):
             return False
-        np.copyto(self._vec, tau)
-        self._Mt.dot(self._vec, out=out_force)
+        a00, a01, a02, a10, a11, a12, a20, a21, a22 = self._Mt
+        t0, t1, t2 = _three(tau)
+        _put(out_force, a00 * t0 + a01 * t1 + a02 * t2, a10 * t0 + a11 * t1 + a12 * t2,
+             a20 * t0 + a21 * t1 + a22 * t2)
         return True
 
     def torques_to_motor(self, tau: ArrayLike, out_motor: I64) -> bool:
@@ -434,18 +453,20 @@ class FalconKinematics:
         libnifalcon does for its 30 N m torque clamp), so the rendered force keeps its
         direction; per-axis clipping would bend it. Non-finite torques give zeros, False.
         """
-        dr, m = self.drive, self._motor_f
-        np.multiply(tau, dr.motor_per_nm, out=m)
-        a, b, c = m.tolist()
-        peak = max(abs(a), abs(b), abs(c))
-        if not math.isfinite(peak):
+        return self._motor(*_three(tau), out_motor)
+
+    def _motor(self, t0: float, t1: float, t2: float, out_motor: I64) -> bool:
+        """`torques_to_motor` on floats."""
+        k = self._motor_per_nm
+        m0, m1, m2 = t0 * k, t1 * k, t2 * k
+        if not (math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2)):
             out_motor.fill(0)
             return False
-        limit = min(float(dr.motor_limit), dr.torque_limit_nm * abs(dr.motor_per_nm))
-        if peak > limit:
-            np.multiply(m, limit / peak, out=m)
-        np.trunc(m, out=m)
-        np.copyto(out_motor, m, casting="unsafe")
+        peak, cap = max(abs(m0), abs(m1), abs(m2)), self._motor_cap
+        if peak > cap:
+            scale = cap / peak
+            m0, m1, m2 = m0 * scale, m1 * scale, m2 * scale
+        _put(out_motor, int(m0), int(m1), int(m2))  # int() truncates toward zero
         return True
 
     def forces_to_motor(self, position: ArrayLike | None, force: ArrayLike, out_motor: I64) -> bool:
@@ -453,7 +474,7 @@ class FalconKinematics:
 
         False (and zero commands) if the pose is unreachable/singular or the force not finite.
         """
-        if not self.forces_to_torques(position, force, self._tau):
+        if not self._pose(position):
             out_motor.fill(0)
             return False
-        return self.torques_to_motor(self._tau, out_motor)
+        return self._motor(*self._torques(*_three(force)), out_motor)

@@ -17,7 +17,9 @@ What the notes say the firmware does, and the sim therefore does:
 The two angles are our choice (the real reference position is not documented), as are the
 hard end stop (a step that leaves the reachable workspace is refused, velocity zeroed) and
 the default damping. The default handle mass is the thesis's 0.89 kg (chapter 4.3).
-Deterministic: the only randomness is the power-on pose, drawn from `rng`.
+Deterministic: the only randomness is the power-on pose, drawn from `rng`. The state is
+kept in Python floats and the maths is the kinematics' float-level API: at 3-vectors numpy's
+per-call overhead would be most of the cost of a 1 ms step.
 """
 
 from __future__ import annotations
@@ -28,9 +30,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hapticop.devices.falcon.codec import MOTOR_LIMIT, Command, Flag, FrameCodec, FrameError, new_frame
-from hapticop.devices.falcon.kinematics import WORKSPACE_CENTRE_M, Drive, FalconKinematics, Geometry
+from hapticop.devices.falcon.kinematics import WORKSPACE_CENTRE_M, Drive, FalconKinematics, Geometry, Pose
 
 __all__ = ["SimulatedFalcon"]
+
+_HOMING = int(Flag.HOMING)  # a plain int: IntFlag arithmetic builds enum members, too slow per substep
 
 
 class SimulatedFalcon:
@@ -45,7 +49,7 @@ class SimulatedFalcon:
                  max_step_s: float = 0.001) -> None:
         if handle_mass_kg <= 0.0:
             raise ValueError("handle_mass_kg must be positive")
-        self.kinematics = FalconKinematics(geometry, drive)
+        self.kinematics = k = FalconKinematics(geometry, drive)
         self.mass = float(handle_mass_kg)
         self.damping = float(damping)
         self.motor_limit = int(motor_limit)
@@ -53,26 +57,25 @@ class SimulatedFalcon:
         self.max_step_s = float(max_step_s)
         self._out_rad = math.radians(homing_out_deg)
         self._ref_rad = math.radians(homing_reference_deg)
+        self._motor_per_nm = float(k.drive.motor_per_nm)  # tau = command / motor_per_nm
         self._rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng or 0)
         if initial_position is None:
             jitter = self._rng.uniform(-power_on_jitter_m, power_on_jitter_m, 3)
             initial_position = np.asarray(WORKSPACE_CENTRE_M) + jitter
-        self._p = np.array(initial_position, dtype=np.float64).reshape(3)
-        self._v = np.zeros(3)
-        self._theta = np.zeros(3)
-        self._counts = np.zeros(3, dtype=np.int64)
-        if not self.kinematics.inverse(self._p, self._theta):
-            raise ValueError(f"initial position {self._p} is outside the workspace")
-        self._power_on = np.zeros(3, dtype=np.int64)
-        self.kinematics.counts_from_angles(self._theta, self._power_on)
-        self._homed = np.full(3, bool(homed))
-        self._armed = np.zeros(3, dtype=np.bool_)
-        self._cmp = np.zeros(3, dtype=np.bool_)
+        start = np.array(initial_position, dtype=np.float64).reshape(3)
+        x, y, z = start.tolist()
+        pose = k.pose(x, y, z)
+        if pose is None:
+            raise ValueError(f"initial position {start} is outside the workspace")
+        self._p, self._v = (x, y, z), (0.0, 0.0, 0.0)
+        self._pose: Pose = pose  # IK at _p: thigh angles are pose[axis][0]
+        self._power_on = tuple(k.count(leg[0]) for leg in pose)
+        self._homed = [bool(homed)] * 3
+        self._armed = [False] * 3
+        self._fext = (0.0, 0.0, 0.0)
         self._codec = FrameCodec()
         self._command = Command()
-        self._motor = np.zeros(3, dtype=np.int64)
-        self._tau, self._force, self._fext, self._acc = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
-        self._trial = np.zeros(3)
+        self._motor = (0, 0, 0)  # saturated commands of the last valid frame
         self._reply = new_frame()
         self.flags = 0  # last command's Flag bits (homing, LEDs)
         self.buttons = 0  # Button bits the "user" presses; scriptable
@@ -84,15 +87,20 @@ class SimulatedFalcon:
     @property
     def position(self) -> NDArray[np.float64]:
         """True handle position (m), device frame: what an operator's hand feels."""
-        return self._p.copy()
+        return np.array(self._p)
 
     @property
     def velocity(self) -> NDArray[np.float64]:
-        return self._v.copy()
+        return np.array(self._v)
+
+    def copy_state(self, out_position: NDArray[np.float64], out_velocity: NDArray[np.float64]) -> None:
+        """`position` and `velocity` into caller arrays, for a caller's 1 kHz cycle."""
+        out_position[0], out_position[1], out_position[2] = self._p
+        out_velocity[0], out_velocity[1], out_velocity[2] = self._v
 
     @property
     def homed(self) -> NDArray[np.bool_]:
-        return self._homed.copy()
+        return np.array(self._homed)
 
     @property
     def leds(self) -> int:
@@ -101,7 +109,7 @@ class SimulatedFalcon:
     @property
     def motor(self) -> NDArray[np.int64]:
         """Motor commands in force now (after saturation; zero once the hold expired)."""
-        return self._motor.copy() if self._holding() else np.zeros(3, dtype=np.int64)
+        return np.array(self._motor if self._holding() else (0, 0, 0), dtype=np.int64)
 
     def _holding(self) -> bool:
         return self.time_s - self._last_command_s <= self.command_hold_s
@@ -125,66 +133,68 @@ class SimulatedFalcon:
             self.malformed += 1
         if valid:
             self.frames_in += 1
-            np.clip(self._command.motor, -self.motor_limit, self.motor_limit, out=self._motor)
+            limit = self.motor_limit
+            a, b, c = self._command.motor.tolist()
+            self._motor = (min(max(a, -limit), limit), min(max(b, -limit), limit), min(max(c, -limit), limit))
             self.flags = self._command.flags
             self._last_command_s = self.time_s
         self.step(dt, external_force)
         if not valid:
             return None
         self.frames_out += 1
-        self._status_counts()
-        mask = int(self._homed[0]) | int(self._homed[1]) << 1 | int(self._homed[2]) << 2
-        if not self.flags & Flag.HOMING:
-            mask = 0  # flags are reported only while the host asks for homing
         target = self._reply if out is None else out
-        self._codec.encode_status(self._counts, mask, self.buttons, target)
+        self._codec.encode_status(self._status_counts(), self._homed_mask(), self.buttons, target)
         return self._reply.tobytes() if out is None else out
 
-    def _status_counts(self) -> None:
+    def _status_counts(self) -> tuple[int, int, int]:
         """Encoder counts as the firmware reports them: relative until each axis is homed."""
-        self.kinematics.counts_from_angles(self._theta, self._counts)
-        np.logical_not(self._homed, out=self._cmp)
-        np.subtract(self._counts, self._power_on, out=self._counts, where=self._cmp)
+        count, (leg1, leg2, leg3) = self.kinematics.count, self._pose
+        (h1, h2, h3), (z1, z2, z3) = self._homed, self._power_on
+        return (count(leg1[0]) - (0 if h1 else z1), count(leg2[0]) - (0 if h2 else z2),
+                count(leg3[0]) - (0 if h3 else z3))
+
+    def _homed_mask(self) -> int:
+        """Homed flags are reported only while the host asks for homing."""
+        if not self.flags & _HOMING:
+            return 0
+        h1, h2, h3 = self._homed
+        return h1 | h2 << 1 | h3 << 2
 
     # ------------------------------------------------------------ physics
     def step(self, dt: float, external_force: ArrayLike = (0.0, 0.0, 0.0)) -> None:
         """Advance `dt` seconds without a frame (the motor command holds, then drops)."""
-        np.copyto(self._fext, external_force)
+        a, b, c = external_force.tolist() if isinstance(external_force, np.ndarray) else external_force
+        self._fext = (float(a), float(b), float(c))
         n = max(1, math.ceil(dt / self.max_step_s - 1e-9))
         h = dt / n
         for _ in range(n):
             self._substep(h)
 
     def _substep(self, h: float) -> None:
-        k, acc = self.kinematics, self._acc
+        force = None
         if self._holding():
-            np.divide(self._motor, k.drive.motor_per_nm, out=self._tau)
-            if not k.torques_to_force(self._p, self._tau, self._force):
-                self._force.fill(0.0)
-        else:
-            self._force.fill(0.0)
+            (m1, m2, m3), k = self._motor, self._motor_per_nm
+            force = self.kinematics.pose_force(self._pose, m1 / k, m2 / k, m3 / k)
+        f1, f2, f3 = force if force is not None else (0.0, 0.0, 0.0)
+        e1, e2, e3 = self._fext
+        (x, y, z), (v1, v2, v3) = self._p, self._v
         # semi-implicit Euler: m a = F_motor + F_operator - c v
-        np.multiply(self._v, -self.damping, out=acc)
-        np.add(acc, self._force, out=acc)
-        np.add(acc, self._fext, out=acc)
-        np.multiply(acc, h / self.mass, out=acc)
-        np.add(self._v, acc, out=self._v)
-        np.multiply(self._v, h, out=self._trial)
-        np.add(self._trial, self._p, out=self._trial)
-        if k.inverse(self._trial, self._theta):
-            np.copyto(self._p, self._trial)
+        c, hm = -self.damping, h / self.mass
+        v1, v2, v3 = v1 + (v1 * c + f1 + e1) * hm, v2 + (v2 * c + f2 + e2) * hm, v3 + (v3 * c + f3 + e3) * hm
+        x, y, z = v1 * h + x, v2 * h + y, v3 * h + z
+        pose = self.kinematics.pose(x, y, z)
+        if pose is not None:
+            self._p, self._v, self._pose = (x, y, z), (v1, v2, v3), pose
         else:  # end stop: the mechanism refuses to leave its workspace
-            self._v.fill(0.0)
-            k.inverse(self._p, self._theta)
+            self._v = (0.0, 0.0, 0.0)
         self.time_s += h
-        self._home(self._theta)
+        if self.flags & _HOMING:
+            self._home()
 
-    def _home(self, theta: NDArray[np.float64]) -> None:
+    def _home(self) -> None:
         """Per-axis homing: armed beyond the out angle, homed when back past the reference."""
-        if not self.flags & Flag.HOMING:
-            return
-        np.greater_equal(theta, self._out_rad, out=self._cmp)
-        np.logical_or(self._armed, self._cmp, out=self._armed)
-        np.less_equal(theta, self._ref_rad, out=self._cmp)
-        np.logical_and(self._cmp, self._armed, out=self._cmp)
-        np.logical_or(self._homed, self._cmp, out=self._homed)
+        armed, homed = self._armed, self._homed
+        for axis, leg in enumerate(self._pose):
+            theta = leg[0]
+            armed[axis] = armed[axis] or theta >= self._out_rad
+            homed[axis] = homed[axis] or (theta <= self._ref_rad and armed[axis])
