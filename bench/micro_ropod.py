@@ -36,11 +36,14 @@ def library_cases() -> dict[str, Callable[[], object]]:
     for _ in range(1000):
         ctrl.step(setpoint, tx, rx, v_meas)
         plant.step(rx, 0.001, tx)
+    kin, bank = ctrl.kinematics, ctrl.bank
+    delta, enable = ctrl.delta.tolist(), ctrl.unit_enable.tolist()
+    errors, outputs = np.concatenate([ctrl.v_sp - ctrl.v_meas, ctrl.wheel_speed_sp - ctrl.phidot]).tolist(), [0.0] * 11
     return {
         "controller.step": lambda: ctrl.step(setpoint, tx, rx, v_meas),
         "plant.step (RK4, 1 substep)": lambda: plant.step(rx, 0.001, tx),
-        "  controller bank (11 ch)": lambda: ctrl.bank.step(ctrl._err, ctrl._y, ctrl._reset),
-        "  kinematics.update": lambda: ctrl.kinematics.update(ctrl.delta, ctrl.unit_enable),
+        "  controller bank (11 ch)": lambda: bank.step_values(errors, outputs),
+        "  kinematics.evaluate": lambda: kin.evaluate(delta, enable),
     }
 
 
