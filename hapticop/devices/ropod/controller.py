@@ -219,21 +219,25 @@ class PlatformVelocityController:
         ws_sp = self._ws_sp
         kin.wheel_speeds_into(sx, sy, sw, ws_sp)
         mask = kin.unit_mask
-        for j, (w, p) in enumerate(zip(ws_sp, phidot)):
-            err[3 + j] = (w - p) * mask[j >> 1]
+        for i, m in enumerate(mask):  # the wheel loop damps the inverse-kinematics speed error
+            j = 2 * i
+            err[3 + j] = (ws_sp[j] - phidot[j]) * m
+            err[4 + j] = (ws_sp[j + 1] - phidot[j + 1]) * m
         self.bank.step_values(err, y)
         self._distribute()
         inv_kt, ilim = self._inv_kt, self._ilim
-        tau, current, current_hw = self._tau, self._current, self._current_hw
-        for j, t_dist in enumerate(self._tau_dist):
-            t = (t_dist + y[3 + j]) * mask[j >> 1]
-            tau[j] = t
-            i = t * inv_kt
-            current[j] = i
-            i_hw = -i if j & 1 else i  # the drive's wheel 2 turns the other way
+        tau_dist, tau, current, current_hw = self._tau_dist, self._tau, self._current, self._current_hw
+        for i, m in enumerate(mask):
+            j = 2 * i
+            t1, t2 = (tau_dist[j] + y[3 + j]) * m, (tau_dist[j + 1] + y[4 + j]) * m
+            i1, i2 = t1 * inv_kt, t2 * inv_kt
+            tau[j], tau[j + 1], current[j], current[j + 1] = t1, t2, i1, i2
+            i2 = -i2  # the drive's wheel 2 turns the other way
             if ilim is not None:
-                i_hw = ilim if i_hw > ilim else -ilim if i_hw < -ilim else i_hw
-            current_hw[j] = i_hw
+                i1 = ilim if i1 > ilim else -ilim if i1 < -ilim else i1
+                i2 = ilim if i2 > ilim else -ilim if i2 < -ilim else i2
+            current_hw[j], current_hw[j + 1] = i1, i2
+
     def _condition(self, vx: float, vy: float, wz: float, stop: bool) -> list[float]:
         """§7 step 2: the setpoint clipped per axis and, optionally, rate limited; zero while stopping."""
         v, vmax, dvmax = self._v_sp, self._vmax, self._dvmax

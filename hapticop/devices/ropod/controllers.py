@@ -142,24 +142,27 @@ class ControllerBank:
             reset = self._no_reset
         for j, (e, r, (k, sat, h_wi, dd, ll_a, ll_b, g, lp_a)) in enumerate(zip(error, reset, self._coef)):
             x = k * e
-            xi = xi_[j]
-            chk = x + xi  # the clamp test uses the state before any reset
-            if r or prev[j]:
-                xi = 0.0
+            if h_wi:
+                xi = xi_[j]
+                chk = x + xi  # the clamp test uses the state before any reset
+                if r or prev[j]:
+                    xi = 0.0
+                hui = h_wi * x
+                # PI with clamping anti-windup: stop integrating when the unclamped output is beyond
+                # +-S and the input pushes further.
+                clamped = (chk > sat and hui > 0.0) or (chk < -sat and hui < 0.0)
+                if clamped:
+                    hui = 0.0
+                xi += hui  # trapezoidal integrator output yi = xi + h*ui
+                ypi = x + xi
+                xi_[j] = xi + hui  # state update: xi += Ts*ui
+            else:  # no integrator (i_fhz = 0): its state stays zero, the PI is the clamped gain
+                clamped, ypi = False, x
             prev[j] = r
-            hui = h_wi * x
-            # PI with clamping anti-windup: stop integrating when the unclamped output is beyond
-            # +-S and the input pushes further.
-            clamped = (chk > sat and hui > 0.0) or (chk < -sat and hui < 0.0)
-            if clamped:
-                hui = 0.0
-            xi += hui  # trapezoidal integrator output yi = xi + h*ui
-            ypi = x + xi
             if ypi > sat:
                 ypi = sat
             elif ypi < -sat:
                 ypi = -sat
-            xi_[j] = xi + hui  # state update: xi += Ts*ui
             # Lead-lag: Tustin of 1 + Dd*wp*s/(s + wp).
             xd = xd_[j]
             w = dd * ypi + ll_a * xd

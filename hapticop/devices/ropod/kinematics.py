@@ -134,8 +134,8 @@ class SmartWheelKinematics:
         """Forward kinematics: least-squares twist over the enabled units, pinv(M G) M phidot."""
         k = self._k
         a0 = a1 = a2 = 0.0  # G^T M phidot, r times
-        for i, (c, s, u3, q3) in enumerate(self._units()):
-            if self.unit_mask[i]:
+        for i, (c, s, u3, q3, m) in enumerate(zip(self._cos, self._sin, self._u3, self._q3, self.unit_mask)):
+            if m:
                 p1, p2 = wheel_speeds[2 * i], wheel_speeds[2 * i + 1]
                 a, b = p1 + p2, k * (p2 - p1)
                 a0 += a * c - b * s
@@ -181,12 +181,14 @@ class SmartWheelKinematics:
         x0, x1, x2 = i00 * fx + i01 * fy + i02 * mz, i01 * fx + i11 * fy + i12 * mz, i02 * fx + i12 * fy + i22 * mz
         k, inv_r = self._k, self._inv_r
         peak = 0.0
-        for i, (c, s, u3, q3) in enumerate(self._units()):
-            m = self.unit_mask[i]
+        for i, (c, s, u3, q3, m) in enumerate(zip(self._cos, self._sin, self._u3, self._q3, self.unit_mask)):
             u, q = c * x0 + s * x1 + u3 * x2, c * x1 - s * x0 + q3 * x2
             t1, t2 = (u - k * q) * inv_r * m, (u + k * q) * inv_r * m
             out[2 * i], out[2 * i + 1] = t1, t2
-            peak = max(peak, abs(t1), abs(t2))
+            if abs(t1) > peak:
+                peak = abs(t1)
+            if abs(t2) > peak:
+                peak = abs(t2)
         if peak > tau_max:
             scale = tau_max / peak
             for j in range(len(out)):

@@ -145,6 +145,9 @@ def record_struct(dtype: np.dtype, names: list[str] | tuple[str, ...]) -> struct
     `iter_unpack(image)` then yields each wheel's values, `pack_into(image, wheel * itemsize, ...)`
     writes one wheel.
     """
+    unknown = sorted(set(names) - set(dtype.names))
+    if unknown:
+        raise ValueError(f"no field {', '.join(map(repr, unknown))} in a {dtype.itemsize}-byte PDO record")
     fmt, at = "<", 0
     for offset, name in sorted((dtype.fields[n][1], n) for n in names):
         ftype = dtype.fields[name][0]
