@@ -186,12 +186,18 @@ class PlatformVelocityController:
 
         Units also need `params.units_enabled`; the drives of the units taking part get enable bits.
         """
-        self._delta[:] = np.asarray(delta, np.float64).tolist()
-        self._phidot[:] = np.asarray(phidot, np.float64).tolist()
-        for i, (e, configured) in enumerate(zip(np.asarray(unit_enable, np.float64).tolist(), self._configured)):
+        sizes = {"velocity_setpoint": 3, "delta": self.units, "phidot": self.wheels, "unit_enable": self.units}
+        arrays = {name: np.asarray(value, np.float64) for name, value in
+                  zip(sizes, (velocity_setpoint, delta, phidot, unit_enable))}
+        for name, array in arrays.items():
+            if array.shape != (sizes[name],):
+                raise ValueError(f"{name} needs {sizes[name]} values, got shape {array.shape}")
+        self._delta[:] = arrays["delta"].tolist()
+        self._phidot[:] = arrays["phidot"].tolist()
+        for i, (e, configured) in enumerate(zip(arrays["unit_enable"].tolist(), self._configured)):
             self._enable[i] = e * configured
             self._healthy[i] = e * configured > 0.0
-        vx, vy, wz = np.asarray(velocity_setpoint, np.float64).tolist()
+        vx, vy, wz = arrays["velocity_setpoint"].tolist()
         self._cycle(vx, vy, wz, stop)
 
     def write_safe_commands(self, rx_image_out: NDArray[np.uint8]) -> None:

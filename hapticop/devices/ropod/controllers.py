@@ -127,7 +127,11 @@ class ControllerBank:
     def step(self, error: ArrayLike, out: F64, reset: NDArray[np.bool_] | None = None) -> F64:
         """One sample: `out[:] = C(error)`. `reset` (bool per channel) zeroes the integrator (level reset)."""
         values, flags, result = self._error, self._reset, self._out
-        values[:] = np.asarray(error, np.float64).tolist()
+        error = np.asarray(error, np.float64)
+        if error.shape != (self.n,) or (reset is not None and np.shape(reset) != (self.n,)):
+            raise ValueError(f"a bank of {self.n} channels needs {self.n} errors and resets, got shapes "
+                             f"{error.shape} and {None if reset is None else np.shape(reset)}")
+        values[:] = error.tolist()
         if reset is not None:
             flags[:] = np.asarray(reset, bool).tolist()
         self.step_values(values, result, None if reset is None else flags)

@@ -222,11 +222,17 @@ class SmartWheelKinematics:
     # --- the same on arrays (tests, set-up; allocates) ------------------------------------------
     def update(self, delta: ArrayLike, enable: ArrayLike | None = None) -> None:
         """Evaluate G(delta) and the masked normal inverse; `enable` is 0/1 per unit (default all)."""
-        self.evaluate(np.asarray(delta, np.float64).tolist(), None if enable is None else np.asarray(enable).tolist())
+        self.evaluate(self._per_unit(delta, "delta"), None if enable is None else self._per_unit(enable, "enable"))
 
     def update_jacobian(self, delta: ArrayLike) -> None:
         """Evaluate U, Q and G(delta) (with every unit enabled)."""
-        self.evaluate(np.asarray(delta, np.float64).tolist())
+        self.evaluate(self._per_unit(delta, "delta"))
+
+    def _per_unit(self, values: ArrayLike, what: str) -> list[float]:
+        array = np.asarray(values, np.float64)
+        if array.shape != (self.units,):
+            raise ValueError(f"{what} needs one value per unit ({self.units}), got shape {array.shape}")
+        return array.tolist()
 
     @property
     def cos(self) -> F64:
