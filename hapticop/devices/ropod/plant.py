@@ -20,20 +20,21 @@ Deterministic: noise, if enabled, comes from the generator passed in.
 
 The state is a few dozen numbers, so one step works on Python floats (numpy's per-call overhead
 would cost more than the arithmetic) and publishes `state` once at its end; the images are
-read and written with precompiled structs.
+read and written with precompiled structs (`record_struct`).
 """
 
 from __future__ import annotations
 
 import math
-import struct
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, inverse_sym3
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, Stat1, rxpdo_view, txpdo_view
+from hapticop.devices.ropod.pdo import (
+    RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, Com1, Stat1, record_struct, rxpdo_view, txpdo_view,
+)
 
 __all__ = ["PlantParams", "RopodPlant"]
 
@@ -49,12 +50,13 @@ _ENABLED1, _ENABLED2 = int(Stat1.ENABLED1), int(Stat1.ENABLED2)
 _ENCODERS_OK = int(Stat1.ENCODERS_OK)
 _TWO_PI = 2.0 * math.pi
 
-# One wheel's RxPDO (cmd_ROPOD_SmartWheel_t), all fields.
-_RX_WHEEL = "HH6fQ"
-# One wheel's TxPDO with the quantities the model has; pad bytes ('x') are the unmodelled fields
-# (d/u/v/w currents, motor voltages, accel_x/y, gyro_x/y), which a step writes as zero.
-_TX_WHEEL = struct.Struct("<HHQQ ff4xf28xf ff4xf28xf fffQ 8xf8xfff")
-assert struct.calcsize("<" + _RX_WHEEL) == RXPDO_BYTES and _TX_WHEEL.size == TXPDO_BYTES
+# A wheel's whole command record, and the sensor fields the model has, in offset order; the
+# unmodelled ones (d/u/v/w currents, motor voltages, accel_x/y, gyro_x/y) are written as zero.
+_COMMANDS = record_struct(RXPDO_DTYPE, RXPDO_DTYPE.names)
+_SENSORS = record_struct(TXPDO_DTYPE, (
+    "status1", "status2", "sensor_ts", "setpoint_ts", "encoder_1", "velocity_1", "current_1_q", "temperature_1",
+    "encoder_2", "velocity_2", "current_2_q", "temperature_2", "encoder_pivot", "velocity_pivot", "voltage_bus",
+    "imu_ts", "accel_z", "gyro_z", "temperature_imu", "pressure"))
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,6 @@ class RopodPlant:
         self._diag = (float(p.mass_kg), float(p.mass_kg), float(p.yaw_inertia_kgm2))
         self._inv_diag = tuple(1.0 / d for d in self._diag)
         self._ilim = float(p.drive_current_limit_a)
-        self._rx_struct = struct.Struct("<" + _RX_WHEEL * units)
         # State: pose (3), twist (3), pivot angles (units), wheel angles (wheels), model convention.
         # `_y` is the working copy, `state` the published one.
         size = 6 + units + wheels
@@ -305,9 +306,7 @@ class RopodPlant:
         ilim, kt, inv_r, k_inv_r = self._ilim, p.torque_constant_nm_per_a, self._inv_r, self._k_inv_r
         gain, speeds = p.drive_velocity_gain_a_per_rad_s, self._speeds
         currents, torques, status = self._currents_hw, self._torques, self._status
-        commands = self._rx_struct.unpack_from(self._rx_src)
-        for i in range(self.units):
-            cmd1, _, sp1, sp2, l1p, l1n, l2p, l2n, _ = commands[9 * i:9 * i + 9]
+        for i, (cmd1, _, sp1, sp2, l1p, l1n, l2p, l2n, _) in enumerate(_COMMANDS.iter_unpack(self._rx_src)):
             mode = cmd1 & _MODE_MASK
             supported = mode == _MODE_TORQUE or mode == _MODE_VELOCITY
             en1 = supported and cmd1 & _ENABLE1_BITS == _ENABLE1
@@ -338,7 +337,7 @@ class RopodPlant:
         if noisy_pivots:
             self.rng.standard_normal(out=self._noise_p)
         now, setpoint_ns, wz = self.time_ns, self._setpoint_ns, y[5]
-        volts, temp, pack = p.bus_voltage_v, p.motor_temperature_k, _TX_WHEEL.pack_into
+        volts, temp, pack = p.bus_voltage_v, p.motor_temperature_k, _SENSORS.pack_into
         for i in range(units):
             v1, v2 = speeds[2 * i], -speeds[2 * i + 1]  # hardware convention: wheel 2 negated
             if noisy_wheels:
