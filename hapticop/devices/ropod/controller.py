@@ -15,6 +15,7 @@ the images are read and written with precompiled structs. `step` allocates nothi
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -105,10 +106,11 @@ class PlatformVelocityController:
         )
         self._tau_max = p.tau_max
         self._inv_kt = 1.0 / p.torque_constant_nm_per_a
-        self._ilim = float(p.current_limit_a) if p.clip_current else None
+        self._ilim = float(p.current_limit_a) if p.clip_current else math.inf
         self._limit_fields = float(p.current_limit_a if p.command_limits is None else p.command_limits)
         # The per-unit clip is a no-op after the uniformly scaled pseudo-inverse in normal mode.
         self._needs_unit_clip = p.distribution != "pinv" or p.flip_kmax != 1.0
+        self._qp = p.distribution == "qp"
         self._offsets = tuple(float(o) for o in p.pivot_offsets_rad)
         self._configured = tuple(1.0 if e else 0.0 for e in p.units_enabled)
         self._vmax = None if p.max_velocity is None else tuple(float(v) for v in p.max_velocity)
@@ -130,7 +132,6 @@ class PlatformVelocityController:
         self._y = [0.0] * (3 + wheels)
         self._tau_dist = [0.0] * wheels
         self._tau = [0.0] * wheels
-        self._current = [0.0] * wheels  # model convention [A]
         self._current_hw = [0.0] * wheels  # as sent: wheel 2 of each unit negated
         self.scale = 1.0
         self.operational = False
@@ -149,7 +150,7 @@ class PlatformVelocityController:
     tau_wheel = property(lambda self: np.array(self._y[3:]), doc="wheel controllers' torques [Nm]")
     tau_dist = property(lambda self: np.array(self._tau_dist), doc="distributed wrench [Nm]")
     tau = property(lambda self: np.array(self._tau), doc="total wheel torques [Nm]")
-    current = property(lambda self: np.array(self._current), doc="motor currents, model convention [A]")
+    current = property(lambda self: np.array(self._tau) * self._inv_kt, doc="motor currents, model convention [A]")
     current_hw = property(lambda self: np.array(self._current_hw), doc="current setpoints as sent [A]")
 
     # --- life cycle ---------------------------------------------------------------------
@@ -234,17 +235,14 @@ class PlatformVelocityController:
         self.bank.step_values(err, y)
         self._distribute()
         inv_kt, ilim = self._inv_kt, self._ilim
-        tau_dist, tau, current, current_hw = self._tau_dist, self._tau, self._current, self._current_hw
+        tau_dist, tau, current_hw = self._tau_dist, self._tau, self._current_hw
         for i, m in enumerate(mask):
             j = 2 * i
             t1, t2 = (tau_dist[j] + y[3 + j]) * m, (tau_dist[j + 1] + y[4 + j]) * m
-            i1, i2 = t1 * inv_kt, t2 * inv_kt
-            tau[j], tau[j + 1], current[j], current[j + 1] = t1, t2, i1, i2
-            i2 = -i2  # the drive's wheel 2 turns the other way
-            if ilim is not None:
-                i1 = ilim if i1 > ilim else -ilim if i1 < -ilim else i1
-                i2 = ilim if i2 > ilim else -ilim if i2 < -ilim else i2
-            current_hw[j], current_hw[j + 1] = i1, i2
+            tau[j], tau[j + 1] = t1, t2
+            i1, i2 = t1 * inv_kt, -(t2 * inv_kt)  # the drive's wheel 2 turns the other way
+            current_hw[j] = ilim if i1 > ilim else -ilim if i1 < -ilim else i1
+            current_hw[j + 1] = ilim if i2 > ilim else -ilim if i2 < -ilim else i2
 
     def _condition(self, vx: float, vy: float, wz: float, stop: bool) -> list[float]:
         """§7 step 2: the setpoint clipped per axis and, optionally, rate limited; zero while stopping."""
@@ -262,20 +260,21 @@ class PlatformVelocityController:
         return v
 
     def _distribute(self) -> None:
-        kin, p, y, tau = self.kinematics, self.params, self._y, self._tau_dist
-        if p.distribution == "qp":
+        kin, y, tau = self.kinematics, self._y, self._tau_dist
+        if self._qp:
             result, self.scale = distribute_qp(kin.G, np.array(y[:3]), np.array(self._enable), self._tau_max)
             tau[:] = result.tolist()
         else:
             self.scale = kin.distribute_into(y[0], y[1], y[2], self._tau_max, tau)
         if self._needs_unit_clip:
+            p = self.params
             kin.flip_compensate_list(tau, p.flip_kmax, p.flip_force_threshold_n)
             kin.clip_per_unit_list(tau, self._tau_max)
 
     def _safe_outputs(self) -> None:
         self.bank.reset()
         self._v_meas = (0.0, 0.0, 0.0)
-        for values in (self._v_sp, self._y, self._tau_dist, self._tau, self._current, self._current_hw):
+        for values in (self._v_sp, self._y, self._tau_dist, self._tau, self._current_hw):
             _zero(values)
         _zero(self._healthy, False)
 

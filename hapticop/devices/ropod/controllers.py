@@ -151,6 +151,7 @@ class ControllerBank:
                 chk = x + xi  # the clamp test uses the state before any reset
                 if r or prev[j]:
                     xi = 0.0
+                prev[j] = r
                 hui = h_wi * x
                 # PI with clamping anti-windup: stop integrating when the unclamped output is beyond
                 # +-S and the input pushes further.
@@ -160,9 +161,8 @@ class ControllerBank:
                 xi += hui  # trapezoidal integrator output yi = xi + h*ui
                 ypi = x + xi
                 xi_[j] = xi + hui  # state update: xi += Ts*ui
-            else:  # no integrator (i_fhz = 0): its state stays zero, the PI is the clamped gain
+            else:  # no integrator (i_fhz = 0): nothing to hold or reset, the PI is the clamped gain
                 clamped, ypi = False, x
-            prev[j] = r
             if ypi > sat:
                 ypi = sat
             elif ypi < -sat:

@@ -88,8 +88,7 @@ class SmartWheelKinematics:
         self._k = g.k
         # Per unit (ua, ub, qa, qb): U_i = [c, s, ua c + ub s] and Q_i = [-s, c, qa c + qb s].
         self.unit_rows = tuple((-py, px, px, py) for px, py in g.pivots_m)
-        self._cos, self._sin = [1.0] * n, [0.0] * n
-        self._u3, self._q3 = [0.0] * n, [0.0] * n  # third entries of U_i and Q_i
+        self._units = [(1.0, 0.0, 0.0, 0.0, 1.0)] * n  # per unit (c, s, U_i[2], Q_i[2], enabled 0/1)
         self.unit_mask = [1.0] * n  # 0/1 per unit from the enable (read-only)
         self._n = (0.0,) * 6  # N = G^T M G: n00, n01, n02, n11, n12, n22
         self._n_inv = (0.0,) * 6
@@ -102,21 +101,22 @@ class SmartWheelKinematics:
 
         Needs >= 2 enabled units (then N has full rank 3); otherwise raises `np.linalg.LinAlgError`.
         """
-        cos_, sin_, u3_, q3_, mask = self._cos, self._sin, self._u3, self._q3, self.unit_mask
+        units, mask = self._units, self.unit_mask
         k2 = self._k * self._k
+        one_minus_k2 = 1.0 - k2
         n00 = n01 = n02 = n11 = n12 = n22 = 0.0
         for i, (d, (ua, ub, qa, qb)) in enumerate(zip(delta, self.unit_rows)):
             c, s = cos(d), sin(d)
             u3, q3 = c * ua + s * ub, c * qa + s * qb
-            cos_[i], sin_[i], u3_[i], q3_[i] = c, s, u3, q3
-            if enable is not None and not enable[i]:
-                mask[i] = 0.0
+            on = 1.0 if enable is None or enable[i] else 0.0
+            units[i], mask[i] = (c, s, u3, q3, on), on
+            if not on:
                 continue
-            mask[i] = 1.0
-            n00 += c * c + k2 * (s * s)
-            n01 += c * s - k2 * (s * c)
+            cc, ss = c * c, s * s
+            n00 += cc + k2 * ss
+            n01 += c * s * one_minus_k2
             n02 += c * u3 - k2 * (s * q3)
-            n11 += s * s + k2 * (c * c)
+            n11 += ss + k2 * cc
             n12 += s * u3 + k2 * (c * q3)
             n22 += u3 * u3 + k2 * (q3 * q3)
         f = 2.0 * self._inv_r * self._inv_r
@@ -127,14 +127,11 @@ class SmartWheelKinematics:
             raise np.linalg.LinAlgError("fewer than 2 smart-wheel units enabled: the platform is not controllable")
         self._n_inv = (i00, i01, i02, i11, i12, i22)
 
-    def _units(self) -> zip:
-        return zip(self._cos, self._sin, self._u3, self._q3)
-
     def twist_of(self, wheel_speeds: Sequence[float]) -> tuple[float, float, float]:
         """Forward kinematics: least-squares twist over the enabled units, pinv(M G) M phidot."""
         k = self._k
         a0 = a1 = a2 = 0.0  # G^T M phidot, r times
-        for i, (c, s, u3, q3, m) in enumerate(zip(self._cos, self._sin, self._u3, self._q3, self.unit_mask)):
+        for i, (c, s, u3, q3, m) in enumerate(self._units):
             if m:
                 p1, p2 = wheel_speeds[2 * i], wheel_speeds[2 * i + 1]
                 a, b = p1 + p2, k * (p2 - p1)
@@ -149,7 +146,7 @@ class SmartWheelKinematics:
     def wheel_speeds_into(self, vx: float, vy: float, wz: float, out: list[float]) -> None:
         """Inverse kinematics: the no-slip wheel speeds [rad/s] for a platform twist (unmasked)."""
         k, inv_r = self._k, self._inv_r
-        for i, (c, s, u3, q3) in enumerate(self._units()):
+        for i, (c, s, u3, q3, _) in enumerate(self._units):
             u, q = c * vx + s * vy + u3 * wz, c * vy - s * vx + q3 * wz
             out[2 * i] = (u - k * q) * inv_r
             out[2 * i + 1] = (u + k * q) * inv_r
@@ -157,14 +154,14 @@ class SmartWheelKinematics:
     def pivot_rates_into(self, vx: float, vy: float, wz: float, out: list[float]) -> None:
         """The pivot rates delta_dot = q_i/s - wz the twist forces on the trailing casters."""
         inv_s = self._inv_s
-        for i, (c, s, _, q3) in enumerate(self._units()):
+        for i, (c, s, _, q3, _) in enumerate(self._units):
             out[i] = (c * vy - s * vx + q3 * wz) * inv_s - wz
 
     def wrench_of(self, torques: Sequence[float]) -> tuple[float, float, float]:
         """Statics: the platform wrench [Fx, Fy, Mz] at the origin of R from the wheel torques, G^T tau."""
         k, inv_r = self._k, self._inv_r
         fx = fy = mz = 0.0
-        for i, (c, s, u3, q3) in enumerate(self._units()):
+        for i, (c, s, u3, q3, _) in enumerate(self._units):
             t1, t2 = torques[2 * i], torques[2 * i + 1]
             a, b = t1 + t2, k * (t2 - t1)
             fx += a * c - b * s
@@ -181,7 +178,7 @@ class SmartWheelKinematics:
         x0, x1, x2 = i00 * fx + i01 * fy + i02 * mz, i01 * fx + i11 * fy + i12 * mz, i02 * fx + i12 * fy + i22 * mz
         k, inv_r = self._k, self._inv_r
         peak = 0.0
-        for i, (c, s, u3, q3, m) in enumerate(zip(self._cos, self._sin, self._u3, self._q3, self.unit_mask)):
+        for i, (c, s, u3, q3, m) in enumerate(self._units):
             u, q = c * x0 + s * x1 + u3 * x2, c * x1 - s * x0 + q3 * x2
             t1, t2 = (u - k * q) * inv_r * m, (u + k * q) * inv_r * m
             out[2 * i], out[2 * i + 1] = t1, t2
@@ -236,21 +233,21 @@ class SmartWheelKinematics:
 
     @property
     def cos(self) -> F64:
-        return np.array(self._cos)
+        return np.array([unit[0] for unit in self._units])
 
     @property
     def sin(self) -> F64:
-        return np.array(self._sin)
+        return np.array([unit[1] for unit in self._units])
 
     @property
     def U(self) -> F64:
         """Along-unit rows of the pivot velocities, (units, 3)."""
-        return np.array([self._cos, self._sin, self._u3]).T
+        return np.array([(c, s, u3) for c, s, u3, _, _ in self._units])
 
     @property
     def Q(self) -> F64:
         """Across-unit rows of the pivot velocities, (units, 3)."""
-        return np.array([np.negative(self._sin), self._cos, self._q3]).T
+        return np.array([(-s, c, q3) for c, s, _, q3, _ in self._units])
 
     @property
     def G(self) -> F64:

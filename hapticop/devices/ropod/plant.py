@@ -204,7 +204,9 @@ class RopodPlant:
 
         Per unit, with U_i and Q_i of its pivot angle: the yaw rate Omega_i = Q_i v / s, the pivot
         rate Omega_i - wz, the wheel speeds (U_i v -+ k Q_i v) / r, and its share of the wrench
-        G^T tau = sum (t1 + t2)/r U_i + k (t2 - t1)/r Q_i.
+        G^T tau = sum (t1 + t2)/r U_i + k (t2 - t1)/r Q_i. The casters' steering inertia and their
+        bearings' friction both act through Q_i: rhs += sum Q_i delta_dot_i (I_c/s^2 U_i v - b_p/s),
+        plus b_p sum delta_dot_i on the yaw; the mass matrix is M + I_c/s^2 sum Q_i^T Q_i.
         """
         p, units = self.params, self.units
         theta, vx, vy, wz = y[2], y[3], y[4], y[5]
@@ -212,15 +214,15 @@ class RopodPlant:
         dy[0] = c * vx - s * vy
         dy[1] = s * vx + c * vy
         dy[2] = wz
-        inv_s, inv_r, k = self._inv_s, self._inv_r, self._k
+        inv_s, inv_r, k, ic = self._inv_s, self._inv_r, self._k, self._ic_s2
+        friction = p.pivot_damping_nms * inv_s
         fx = fy = mz = 0.0  # wrench
-        sdd = qd0 = qd1 = qd2 = 0.0  # sum of pivot rates, Q^T ddelta
-        qu0 = qu1 = qu2 = 0.0  # Q^T (u * ddelta)
-        m00 = m01 = m02 = m11 = m12 = m22 = 0.0  # Q^T Q
+        sdd = w0 = w1 = w2 = 0.0  # sum of pivot rates, sum Q_i delta_dot_i (I_c/s^2 u_i - b_p/s)
+        m00 = m01 = m02 = m11 = m12 = m22 = 0.0  # sum Q_i^T Q_i
         for i, ((ua, ub, qa, qb), a, b) in enumerate(zip(self._rows, self._torque_sum, self._torque_diff)):
             ci, si = math.cos(y[6 + i]), math.sin(y[6 + i])
             u3, q3 = ci * ua + si * ub, ci * qa + si * qb
-            q = -si * vx + ci * vy + q3 * wz
+            q = ci * vy - si * vx + q3 * wz
             u = ci * vx + si * vy + u3 * wz
             dd = q * inv_s - wz
             dy[6 + i] = dd
@@ -231,13 +233,10 @@ class RopodPlant:
             fy += a * si + b * ci
             mz += a * u3 + b * q3
             sdd += dd
-            qd0 -= si * dd
-            qd1 += ci * dd
-            qd2 += q3 * dd
-            ud = u * dd
-            qu0 -= si * ud
-            qu1 += ci * ud
-            qu2 += q3 * ud
+            w = dd * (ic * u - friction)
+            w0 -= si * w
+            w1 += ci * w
+            w2 += q3 * w
             m00 += si * si
             m01 -= si * ci
             m02 -= si * q3
@@ -245,17 +244,10 @@ class RopodPlant:
             m12 += ci * q3
             m22 += q3 * q3
         m = p.mass_kg
-        r0 = fx + (m * wz * vy - p.linear_damping_ns_per_m * vx)
-        r1 = fy + (-m * wz * vx - p.linear_damping_ns_per_m * vy)
-        r2 = mz - p.yaw_damping_nms * wz
-        bp = p.pivot_damping_nms
-        if bp:
-            r2 += bp * sdd
-            bs = bp * inv_s
-            r0, r1, r2 = r0 - qd0 * bs, r1 - qd1 * bs, r2 - qd2 * bs
-        ic = self._ic_s2
+        r0 = fx + (m * wz * vy - p.linear_damping_ns_per_m * vx) + w0
+        r1 = fy + (-m * wz * vx - p.linear_damping_ns_per_m * vy) + w1
+        r2 = mz - p.yaw_damping_nms * wz + p.pivot_damping_nms * sdd + w2
         if ic:
-            r0, r1, r2 = r0 + qu0 * ic, r1 + qu1 * ic, r2 + qu2 * ic
             d0, d1, d2 = self._diag
             _, i00, i01, i02, i11, i12, i22 = inverse_sym3(m00 * ic + d0, m01 * ic, m02 * ic, m11 * ic + d1, m12 * ic,
                                                           m22 * ic + d2)
