@@ -225,3 +225,15 @@ def test_configured_units_and_the_update_path_agree_with_the_image_path():
     np.testing.assert_array_equal(a.current_hw, b.current_hw)
     assert not a.current_hw[4:6].any() and a.current_hw.any()
     assert rxpdo_view(rx)["command1"].tolist() == [RUNNING, RUNNING, 0, RUNNING]
+
+
+def test_model_quantities_of_the_wrong_size_are_refused_by_name():
+    ctrl = PlatformVelocityController()
+    with pytest.raises(ValueError, match="delta"):
+        ctrl.update(np.zeros(3), np.zeros(3), np.zeros(8), np.ones(4))
+    with pytest.raises(ValueError, match="phidot"):
+        ctrl.update(np.zeros(3), np.zeros(4), np.zeros(4), np.ones(4))
+    with pytest.raises(ValueError, match="11 channels"):
+        ctrl.bank.step(np.zeros(6), np.zeros(6))
+    with pytest.raises(ValueError, match="enable"):
+        ctrl.kinematics.update(np.zeros(4), [1, 1])

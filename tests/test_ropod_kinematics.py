@@ -131,3 +131,34 @@ def test_one_unit_cannot_steer_the_platform():
     with pytest.raises(np.linalg.LinAlgError):
         _kin(np.zeros(4), [1, 0, 0, 0])
     _kin(np.zeros(4), [0, 1, 0, 1])  # two are enough
+
+
+def test_the_unit_by_unit_evaluation_is_the_stacked_jacobian_and_its_normal_equations():
+    """G from its definition, then N, its inverse, the twist, the wheel speeds, the statics and the
+    distribution straight from numpy's linear algebra, on random seeded angles and enables."""
+    rng = np.random.default_rng(21)
+    geo = Geometry()
+    px, py = np.array(geo.pivots_m).T
+    for trial in range(50):
+        delta = rng.uniform(-7.0, 7.0, 4)
+        enable = np.ones(4) if trial % 2 else rng.permutation([1.0, 1.0, 0.0, float(trial % 3 == 0)])
+        c, s = np.cos(delta), np.sin(delta)
+        u = np.stack([c, s, px * s - py * c], axis=1)
+        q = np.stack([-s, c, px * c + py * s], axis=1)
+        g = np.stack([u - geo.k * q, u + geo.k * q], axis=1).reshape(8, 3) / geo.wheel_radius_m
+        m = np.repeat(enable, 2)
+        n = g.T @ (m[:, None] * g)
+        kin = _kin(delta, enable)
+        np.testing.assert_allclose(kin.G, g, rtol=1e-13, atol=1e-12)
+        np.testing.assert_allclose(kin.N, n, rtol=1e-12, atol=1e-12 * np.abs(n).max())
+        np.testing.assert_allclose(kin.N_inv @ n, np.eye(3), atol=1e-10)
+        v, phidot, tau = rng.normal(size=3), rng.normal(0, 10, 8), rng.normal(size=8)
+        np.testing.assert_allclose(kin.wheel_speeds(v, np.zeros(8)), g @ v, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(kin.twist(phidot, np.zeros(3)), np.linalg.solve(n, g.T @ (m * phidot)),
+                                   rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(kin.wrench(tau, np.zeros(3)), g.T @ tau, rtol=1e-12, atol=1e-12)
+        w, out = rng.normal(0, 50, 3), np.zeros(8)
+        scale = kin.distribute(w, 2.8, out)
+        unscaled = np.linalg.pinv(g.T * m) @ w
+        assert scale == pytest.approx(min(1.0, 2.8 / np.abs(unscaled).max()), rel=1e-10)
+        np.testing.assert_allclose(out, unscaled * scale, rtol=1e-9, atol=1e-12)

@@ -9,7 +9,7 @@ import pytest
 
 from hapticop.devices.ropod.pdo import (
     RXPDO_BYTES, RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, Com1, Stat1, new_rx_image, new_tx_image, pdo_image,
-    rxpdo_view, txpdo_view,
+    record_struct, rxpdo_view, txpdo_view,
 )
 
 from .test_ropod_data import load
@@ -101,6 +101,26 @@ def test_views_share_memory_both_ways():
     assert rec["status1"][0] == 0x0010
     cmd = new_rx_image(3)
     assert np.shares_memory(pdo_image(rxpdo_view(cmd)), cmd)
+
+
+def test_record_structs_read_and_write_the_named_fields_of_each_wheel():
+    rng = np.random.default_rng(11)
+    image = rng.integers(0, 256, (4, TXPDO_BYTES), dtype=np.uint8)
+    rec = txpdo_view(image)
+    rec["encoder_pivot"] = rng.normal(size=4)  # finite floats where the struct reads floats
+    rec["velocity_1"], rec["velocity_2"] = rng.normal(size=4), rng.normal(size=4)
+    names = ("velocity_2", "status1", "encoder_pivot", "velocity_1")  # any order: values come in offset order
+    reader = record_struct(TXPDO_DTYPE, names)
+    assert reader.size == TXPDO_BYTES
+    expected = [tuple(r[n].item() for n in ("status1", "velocity_1", "velocity_2", "encoder_pivot")) for r in rec]
+    assert list(reader.iter_unpack(image)) == expected
+    writer = record_struct(TXPDO_DTYPE, ("status1", "sensor_ts", "gyro_z"))
+    writer.pack_into(image, 2 * TXPDO_BYTES, 0x1F, 2**60 + 1, 0.5)
+    assert (rec["status1"][2], rec["sensor_ts"][2], rec["gyro_z"][2]) == (0x1F, 2**60 + 1, 0.5)
+    assert not rec["status2"][2] and not rec["pressure"][2]  # the other fields of that wheel are zeroed
+    assert record_struct(RXPDO_DTYPE, RXPDO_DTYPE.names).format == "<HHffffffQ"
+    with pytest.raises(ValueError, match="'no_such_field'"):
+        record_struct(RXPDO_DTYPE, ("setpoint1", "no_such_field"))
 
 
 def test_malformed_images_are_refused():

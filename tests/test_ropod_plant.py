@@ -208,3 +208,45 @@ def test_step_allocates_nothing():
     plant, tx, rx = RopodPlant(PlantParams(initial_twist=(0.3, 0.1, 0.2))), new_tx_image(4), _commands(TORQUE, 1, -1)
     retained, peak = allocation_stats(lambda: plant.step(rx, DT, tx), 300)
     assert retained < 256 and peak < 2048
+
+
+def _level1_derivative(y: np.ndarray, tau: np.ndarray, p: PlantParams) -> np.ndarray:
+    """The Level 1 equations (ropod-controller.md §8) written out with numpy's linear algebra."""
+    g = p.geometry
+    theta, v, delta = y[2], y[3:6], y[6:10]
+    px, py = np.array(g.pivots_m).T
+    c, s = np.cos(delta), np.sin(delta)
+    u = np.stack([c, s, px * s - py * c], axis=1)
+    q = np.stack([-s, c, px * c + py * s], axis=1)
+    jac = np.stack([u - g.k * q, u + g.k * q], axis=1).reshape(8, 3) / g.wheel_radius_m
+    pivot_rates = q @ v / g.caster_offset_m - v[2]
+    ic = p.unit_yaw_inertia_kgm2 / g.caster_offset_m**2
+    m, vx, vy, wz = p.mass_kg, *v
+    rhs = (jac.T @ tau + [m * wz * vy - p.linear_damping_ns_per_m * vx, -m * wz * vx - p.linear_damping_ns_per_m * vy,
+                          -p.yaw_damping_nms * wz + p.pivot_damping_nms * pivot_rates.sum()]
+           - p.pivot_damping_nms / g.caster_offset_m * q.T @ pivot_rates + ic * q.T @ ((u @ v) * pivot_rates))
+    mass = np.diag([m, m, p.yaw_inertia_kgm2]) + ic * q.T @ q
+    rotation = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    return np.concatenate([rotation @ v[:2], [wz], np.linalg.solve(mass, rhs), pivot_rates, jac @ v])
+
+
+def test_a_step_is_one_runge_kutta_step_of_the_level1_equations():
+    """The float evaluation against the equations in matrix form, on random seeded states and torques."""
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        params = PlantParams(pivot_damping_nms=0.02 * (trial % 2), unit_yaw_inertia_kgm2=0.011 * (trial % 3 != 0),
+                             initial_pose=tuple(rng.normal(size=3)), initial_twist=tuple(rng.normal(0, 0.5, 3)),
+                             initial_pivot_angles_rad=tuple(rng.uniform(-4, 4, 4)))
+        plant, tx, rx = RopodPlant(params), new_tx_image(4), _commands(TORQUE, 0.0, 0.0)
+        rec = rxpdo_view(rx)
+        rec["setpoint1"], rec["setpoint2"] = rng.normal(0, 4, 4), rng.normal(0, 4, 4)
+        y, h = plant.state.copy(), 0.002
+        plant.step(rx, h, tx)
+        tau = plant.wheel_torques
+        currents = np.clip(np.stack([rec["setpoint1"], -rec["setpoint2"]], axis=1).ravel().astype(float), -10.0, 10.0)
+        np.testing.assert_allclose(tau, currents * 0.28, rtol=1e-15)
+        k1 = _level1_derivative(y, tau, params)
+        k2 = _level1_derivative(y + 0.5 * h * k1, tau, params)
+        k3 = _level1_derivative(y + 0.5 * h * k2, tau, params)
+        k4 = _level1_derivative(y + h * k3, tau, params)
+        np.testing.assert_allclose(plant.state, y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), rtol=1e-12, atol=1e-14)

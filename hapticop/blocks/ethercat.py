@@ -178,10 +178,11 @@ class EthercatMaster(Block):
                 self._exchange_pysoem()
             return
         out = self.outputs
-        np.copyto(out.robot_pose.value, self.plant.pose)
-        np.copyto(out.robot_twist.value, self.plant.twist)
-        out.robot_pose.publish()
-        out.robot_twist.publish()
+        pose, twist = out.robot_pose, out.robot_twist
+        np.copyto(pose.value, self.plant.pose)
+        np.copyto(twist.value, self.plant.twist)
+        pose.publish()
+        twist.publish()
         out.wheel_sensors.publish()
         out.slave_states.publish()
         out.working_counter.publish()
@@ -255,6 +256,12 @@ class EthercatWatchdog(Block):
         self.check = None
         self.last_poll_ns = 0
 
+    def configure_resources(self) -> None:
+        """What the cycle compares against, from the parameters (again after a live change)."""
+        p = self.params
+        self.all_in_op = bytes([AL_OP]) * p.slaves
+        self.expected_wkc, self.lost_after = p.expected_working_counter, p.lost_after_cycles
+
     def _recover(self) -> bool:
         """SOEM's check on the master of this process: True while every slave is in OP."""
         from hapticop.devices.ethercat.master import find_master
@@ -279,20 +286,21 @@ class EthercatWatchdog(Block):
         self.flags["all_operational"] = False
 
     def compute(self) -> None:
-        states, counter = self.inputs.slave_states, self.inputs.working_counter
-        self.stale_cycles = 0 if states.fresh else self.stale_cycles + 1
+        states, counter, lost_after = self.inputs.slave_states, self.inputs.working_counter, self.lost_after
+        stale = self.stale_cycles = 0 if states.fresh else self.stale_cycles + 1
         in_op = self._recover() if self.params.interface else True
-        short = int(counter.value) != self.params.expected_working_counter
-        self.short_cycles = self.short_cycles + 1 if short else 0
-        healthy = (in_op and states.seq > 0 and self.stale_cycles < self.params.lost_after_cycles
-                   and bool(np.all(states.value == AL_OP)) and self.short_cycles < self.params.lost_after_cycles)
+        short = self.short_cycles = self.short_cycles + 1 if int(counter.value) != self.expected_wkc else 0
+        seen = states.seq > 0
+        healthy = (in_op and seen and stale < lost_after and short < lost_after
+                   and states.value.tobytes() == self.all_in_op)
         if healthy != self.healthy:
             if healthy:
                 self.log.info("all %d slaves operational", self.params.slaves)
             else:
                 self.log.warning("slave fault: states %s, working counter %d (%d cycles short), "
                                  "%d cycles without process data", states.value.tolist(), int(counter.value),
-                                 self.short_cycles, self.stale_cycles)
+                                 short, stale)
             self.healthy = healthy
-        self.flags["all_operational"] = healthy
-        self.flags["slave_fault"] = not healthy and states.seq > 0
+        flags = self.flags
+        flags["all_operational"] = healthy
+        flags["slave_fault"] = not healthy and seen

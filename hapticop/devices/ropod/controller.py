@@ -8,11 +8,14 @@ convert torque to current and write the drive commands. The platform loop tracks
 loop only damps, and its torque is added after the distribution, not fed through it.
 
 The two controller stages take independent inputs, so their 3 + 8 channels run as one
-11-channel bank. All state and scratch is allocated here once; `step` allocates nothing.
+11-channel bank. A cycle is a few hundred multiplications, so it runs on Python floats in
+lists allocated here once (numpy's per-call overhead would cost more than the arithmetic);
+the images are read and written with precompiled structs. `step` allocates nothing that stays.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -23,13 +26,19 @@ from hapticop.devices.ropod.controllers import (
     THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL, ControllerBank, LinearControllerParams,
 )
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp
-from hapticop.devices.ropod.pdo import Com1, Stat1, rxpdo_view, txpdo_view
+from hapticop.devices.ropod.pdo import (
+    RXPDO_BYTES, RXPDO_DTYPE, TXPDO_DTYPE, Com1, Stat1, record_struct, rxpdo_view, txpdo_view,
+)
 
 __all__ = ["PlatformControllerParams", "PlatformVelocityController", "THESIS_PIVOT_OFFSETS_RAD"]
 
 F64 = NDArray[np.float64]
 
 THESIS_PIVOT_OFFSETS_RAD = (4.691878, 3.224157, 0.028178, 5.856820)
+
+# What the controller reads of each wheel's sensors (in offset order), and its whole command record.
+_SENSORS = record_struct(TXPDO_DTYPE, ("status1", "velocity_1", "velocity_2", "encoder_pivot"))
+_COMMANDS = record_struct(RXPDO_DTYPE, RXPDO_DTYPE.names)
 
 
 @dataclass(frozen=True)
@@ -75,8 +84,9 @@ class PlatformVelocityController:
     `step(v_sp, tx_image, rx_image_out, out_platform_velocity, stop=False)` runs one cycle on
     the raw process-data images. `update(v_sp, delta, phidot, unit_enable, stop)` is the same
     cycle on decoded model quantities (no PDO), for tests and other transports. The last
-    cycle's intermediate values stay readable as attributes (wrench, tau_dist, tau_wheel,
-    tau, current, current_hw, scale, operational).
+    cycle's values stay readable as attributes: `scale` and `operational`, and as arrays made
+    on access v_sp, v_meas, delta, phidot, unit_enable, wheel_speed_sp, wrench, tau_dist,
+    tau_wheel, tau, current and current_hw.
 
     `stop` holds a zero velocity setpoint: the platform is braked actively and held, the
     drives stay enabled. With fewer than two healthy units, or after `disable()`, the
@@ -96,54 +106,58 @@ class PlatformVelocityController:
         )
         self._tau_max = p.tau_max
         self._inv_kt = 1.0 / p.torque_constant_nm_per_a
-        self._ilim, self._neg_ilim = np.float64(p.current_limit_a), np.float64(-p.current_limit_a)
-        self._limit_fields = p.current_limit_a if p.command_limits is None else p.command_limits
+        self._ilim = float(p.current_limit_a) if p.clip_current else math.inf
+        self._limit_fields = float(p.current_limit_a if p.command_limits is None else p.command_limits)
         # The per-unit clip is a no-op after the uniformly scaled pseudo-inverse in normal mode.
         self._needs_unit_clip = p.distribution != "pinv" or p.flip_kmax != 1.0
-        self._offsets = np.array(p.pivot_offsets_rad, np.float64)
-        self._configured = np.array(p.units_enabled, np.float64)
-        self._vmax = None if p.max_velocity is None else np.array(p.max_velocity, np.float64)
-        self._neg_vmax = None if self._vmax is None else -self._vmax
-        self._dvmax = None if p.max_acceleration is None else np.array(p.max_acceleration, np.float64) * p.ts_s
-        self._neg_dvmax = None if self._dvmax is None else -self._dvmax
-        self._required = np.uint16(p.required_status)
-        self._faults = np.uint16(p.fault_status)
-        self._command = np.uint16(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_TORQUE
-                                  | (Com1.USE_TS if p.use_timestamp else 0))
+        self._qp = p.distribution == "qp"
+        self._offsets = tuple(float(o) for o in p.pivot_offsets_rad)
+        self._configured = tuple(1.0 if e else 0.0 for e in p.units_enabled)
+        self._vmax = None if p.max_velocity is None else tuple(float(v) for v in p.max_velocity)
+        self._dvmax = None if p.max_acceleration is None else tuple(float(a) * p.ts_s for a in p.max_acceleration)
+        self._required = int(p.required_status)
+        self._faults = int(p.fault_status)
+        self._command = int(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_TORQUE | (Com1.USE_TS if p.use_timestamp else 0))
         # Decoded sensors.
-        self.delta = np.zeros(units)
-        self.phidot = np.zeros(wheels)
-        self.unit_enable = np.zeros(units)
-        self._healthy = np.zeros(units, bool)
-        self._ok = np.zeros(units, bool)
-        self._status = np.zeros(units, np.uint16)
-        # Cycle values.
-        self.v_sp = np.zeros(3)  # conditioned setpoint
-        self.v_meas = np.zeros(3)
-        self.wheel_speed_sp = np.zeros(wheels)
-        self._err = np.zeros(3 + wheels)
-        self._y = np.zeros(3 + wheels)
-        self._reset = np.zeros(3 + wheels, bool)
-        self.wrench = self._y[:3]
-        self.tau_wheel = self._y[3:]
-        self.tau_dist = np.zeros(wheels)
-        self.tau = np.zeros(wheels)
-        self.current = np.zeros(wheels)  # model convention [A]
-        self.current_hw = np.zeros(wheels)  # as sent: wheel 2 of each unit negated
-        self._hw_sign = np.tile([1.0, -1.0], units)
+        self._delta = [0.0] * units
+        self._phidot = [0.0] * wheels
+        self._enable = [0.0] * units
+        self._healthy = [False] * units  # these drives get enable bits
+        # Cycle values: setpoint (conditioned), measured twist, wheel speed setpoints, the bank's
+        # errors and outputs (3 platform channels, then the wheels), torques and currents.
+        self._v_sp = [0.0] * 3
+        self._v_meas = (0.0, 0.0, 0.0)
+        self._ws_sp = [0.0] * wheels
+        self._err = [0.0] * (3 + wheels)
+        self._y = [0.0] * (3 + wheels)
+        self._tau_dist = [0.0] * wheels
+        self._tau = [0.0] * wheels
+        self._current_hw = [0.0] * wheels  # as sent: wheel 2 of each unit negated
         self.scale = 1.0
         self.operational = False
         self._enabled = True
-        self._dv = np.zeros(3)
-        self._mask8 = self.kinematics.mask
         self._tx_src: np.ndarray | None = None
         self._rx_src: np.ndarray | None = None
+
+    # --- the last cycle's values, as arrays (diagnostics and tests) ---------------------------
+    v_sp = property(lambda self: np.array(self._v_sp), doc="conditioned setpoint")
+    v_meas = property(lambda self: np.array(self._v_meas), doc="measured twist (forward kinematics)")
+    delta = property(lambda self: np.array(self._delta), doc="pivot angles [rad]")
+    phidot = property(lambda self: np.array(self._phidot), doc="model wheel speeds [rad/s]")
+    unit_enable = property(lambda self: np.array(self._enable), doc="0/1 per unit taking part")
+    wheel_speed_sp = property(lambda self: np.array(self._ws_sp), doc="wheel speeds of the setpoint [rad/s]")
+    wrench = property(lambda self: np.array(self._y[:3]), doc="platform controllers' wrench [N, N, Nm]")
+    tau_wheel = property(lambda self: np.array(self._y[3:]), doc="wheel controllers' torques [Nm]")
+    tau_dist = property(lambda self: np.array(self._tau_dist), doc="distributed wrench [Nm]")
+    tau = property(lambda self: np.array(self._tau), doc="total wheel torques [Nm]")
+    current = property(lambda self: np.array(self._tau) * self._inv_kt, doc="motor currents, model convention [A]")
+    current_hw = property(lambda self: np.array(self._current_hw), doc="current setpoints as sent [A]")
 
     # --- life cycle ---------------------------------------------------------------------
     def reset(self) -> None:
         """Controller states and the setpoint history to zero (start of running)."""
         self.bank.reset()
-        self.v_sp.fill(0.0)
+        _zero(self._v_sp)
 
     def enable(self) -> None:
         self._enabled = True
@@ -158,16 +172,16 @@ class PlatformVelocityController:
         """One cycle on the process-data images: read sensors, control, write commands.
 
         `out_platform_velocity` receives the measured twist (forward kinematics), [m/s, m/s, rad/s].
-        The field views of an image are built when a new image object is first seen: pass the same
-        arrays every cycle.
+        The images are checked when a new image object is first seen: pass the same arrays every cycle.
         """
         if tx_image is not self._tx_src:
             self._bind_tx(tx_image)
         if rx_image_out is not self._rx_src:
             self._bind_rx(rx_image_out)
         self._read_sensors()
-        self.update(velocity_setpoint, self.delta, self.phidot, self.unit_enable, stop)
-        np.copyto(out_platform_velocity, self.v_meas)
+        vx, vy, wz = velocity_setpoint.tolist()
+        self._cycle(vx, vy, wz, stop)
+        out_platform_velocity[0], out_platform_velocity[1], out_platform_velocity[2] = self._v_meas
         self._write_commands(timestamp_ns)
 
     def update(self, velocity_setpoint: F64, delta: F64, phidot: F64, unit_enable: F64, stop: bool = False) -> None:
@@ -175,121 +189,129 @@ class PlatformVelocityController:
 
         Units also need `params.units_enabled`; the drives of the units taking part get enable bits.
         """
-        kin, mask8 = self.kinematics, self._mask8
-        unit_enable = np.multiply(unit_enable, self._configured, out=self.unit_enable)
-        np.greater(unit_enable, 0.0, out=self._healthy)  # these drives get enable bits
-        self.operational = self._enabled and float(unit_enable.sum()) >= 2.0
-        if not self.operational:
-            self._safe_outputs()
-            return
-        self._condition(velocity_setpoint, stop)
-        kin.update(delta, unit_enable)
-        kin.twist(phidot, out=self.v_meas)
-        err = self._err
-        np.subtract(self.v_sp, self.v_meas, out=err[:3])
-        kin.wheel_speeds(self.v_sp, out=self.wheel_speed_sp)
-        np.subtract(self.wheel_speed_sp, phidot, out=err[3:])
-        err[3:] *= mask8
-        self.bank.step(err, self._y, self._reset)
-        self._distribute()
-        np.add(self.tau_dist, self.tau_wheel, out=self.tau)
-        self.tau *= mask8
-        np.multiply(self.tau, self._inv_kt, out=self.current)
-        np.multiply(self.current, self._hw_sign, out=self.current_hw)  # the drive's wheel 2 turns the other way
-        if self.params.clip_current:
-            np.minimum(self.current_hw, self._ilim, out=self.current_hw)
-            np.maximum(self.current_hw, self._neg_ilim, out=self.current_hw)
+        sizes = {"velocity_setpoint": 3, "delta": self.units, "phidot": self.wheels, "unit_enable": self.units}
+        arrays = {name: np.asarray(value, np.float64) for name, value in
+                  zip(sizes, (velocity_setpoint, delta, phidot, unit_enable))}
+        for name, array in arrays.items():
+            if array.shape != (sizes[name],):
+                raise ValueError(f"{name} needs {sizes[name]} values, got shape {array.shape}")
+        self._delta[:] = arrays["delta"].tolist()
+        self._phidot[:] = arrays["phidot"].tolist()
+        for i, (e, configured) in enumerate(zip(arrays["unit_enable"].tolist(), self._configured)):
+            self._enable[i] = e * configured
+            self._healthy[i] = e * configured > 0.0
+        vx, vy, wz = arrays["velocity_setpoint"].tolist()
+        self._cycle(vx, vy, wz, stop)
 
     def write_safe_commands(self, rx_image_out: NDArray[np.uint8]) -> None:
         """Drives disabled, zero current setpoints (for pausing and cleaning up)."""
         if rx_image_out is not self._rx_src:
             self._bind_rx(rx_image_out)
-        self._healthy.fill(False)
-        self.current_hw.fill(0.0)
+        _zero(self._healthy, False)
+        _zero(self._current_hw)
         self._write_commands(0)
 
     # --- pieces ---------------------------------------------------------------------------
-    def _condition(self, velocity_setpoint: F64, stop: bool) -> None:
-        v = self.v_sp
-        if self._dvmax is None:
-            if stop:
-                v.fill(0.0)
-            else:
-                np.copyto(v, velocity_setpoint)
-            if self._vmax is not None:
-                np.minimum(v, self._vmax, out=v)
-                np.maximum(v, self._neg_vmax, out=v)
+    def _cycle(self, vx: float, vy: float, wz: float, stop: bool) -> None:
+        """§7 steps 2-8 on the decoded sensors (`_delta`, `_phidot`, `_enable`, `_healthy`)."""
+        enable = self._enable
+        self.operational = self._enabled and sum(enable) >= 2.0
+        if not self.operational:
+            self._safe_outputs()
             return
-        dv = self._dv
-        if stop:
-            dv.fill(0.0)
-        else:
-            np.copyto(dv, velocity_setpoint)
-        if self._vmax is not None:
-            np.minimum(dv, self._vmax, out=dv)
-            np.maximum(dv, self._neg_vmax, out=dv)
-        dv -= v
-        np.minimum(dv, self._dvmax, out=dv)
-        np.maximum(dv, self._neg_dvmax, out=dv)
-        v += dv
+        v_sp = self._condition(vx, vy, wz, stop)
+        kin, phidot, err, y = self.kinematics, self._phidot, self._err, self._y
+        kin.evaluate(self._delta, enable)
+        mx, my, mw = self._v_meas = kin.twist_of(phidot)
+        sx, sy, sw = v_sp
+        err[0], err[1], err[2] = sx - mx, sy - my, sw - mw
+        ws_sp = self._ws_sp
+        kin.wheel_speeds_into(sx, sy, sw, ws_sp)
+        mask = kin.unit_mask
+        for i, m in enumerate(mask):  # the wheel loop damps the inverse-kinematics speed error
+            j = 2 * i
+            err[3 + j] = (ws_sp[j] - phidot[j]) * m
+            err[4 + j] = (ws_sp[j + 1] - phidot[j + 1]) * m
+        self.bank.step_values(err, y)
+        self._distribute()
+        inv_kt, ilim = self._inv_kt, self._ilim
+        tau_dist, tau, current_hw = self._tau_dist, self._tau, self._current_hw
+        for i, m in enumerate(mask):
+            j = 2 * i
+            t1, t2 = (tau_dist[j] + y[3 + j]) * m, (tau_dist[j + 1] + y[4 + j]) * m
+            tau[j], tau[j + 1] = t1, t2
+            i1, i2 = t1 * inv_kt, -(t2 * inv_kt)  # the drive's wheel 2 turns the other way
+            current_hw[j] = ilim if i1 > ilim else -ilim if i1 < -ilim else i1
+            current_hw[j + 1] = ilim if i2 > ilim else -ilim if i2 < -ilim else i2
+
+    def _condition(self, vx: float, vy: float, wz: float, stop: bool) -> list[float]:
+        """§7 step 2: the setpoint clipped per axis and, optionally, rate limited; zero while stopping."""
+        v, vmax, dvmax = self._v_sp, self._vmax, self._dvmax
+        for axis, wanted in enumerate((0.0, 0.0, 0.0) if stop else (vx, vy, wz)):
+            if vmax is not None:
+                limit = vmax[axis]
+                wanted = limit if wanted > limit else -limit if wanted < -limit else wanted
+            if dvmax is not None:
+                limit, previous = dvmax[axis], v[axis]
+                change = wanted - previous
+                change = limit if change > limit else -limit if change < -limit else change
+                wanted = previous + change
+            v[axis] = wanted
+        return v
 
     def _distribute(self) -> None:
-        kin, p = self.kinematics, self.params
-        if p.distribution == "qp":
-            tau, self.scale = distribute_qp(kin.G, self.wrench, self.unit_enable, self._tau_max)
-            np.copyto(self.tau_dist, tau)
+        kin, y, tau = self.kinematics, self._y, self._tau_dist
+        if self._qp:
+            result, self.scale = distribute_qp(kin.G, np.array(y[:3]), np.array(self._enable), self._tau_max)
+            tau[:] = result.tolist()
         else:
-            self.scale = kin.distribute(self.wrench, self._tau_max, out=self.tau_dist)
+            self.scale = kin.distribute_into(y[0], y[1], y[2], self._tau_max, tau)
         if self._needs_unit_clip:
-            kin.flip_compensate(self.tau_dist, p.flip_kmax, p.flip_force_threshold_n)
-            kin.clip_per_unit(self.tau_dist, self._tau_max)
+            p = self.params
+            kin.flip_compensate_list(tau, p.flip_kmax, p.flip_force_threshold_n)
+            kin.clip_per_unit_list(tau, self._tau_max)
 
     def _safe_outputs(self) -> None:
         self.bank.reset()
-        self.v_sp.fill(0.0)
-        self.v_meas.fill(0.0)
-        for a in (self._y, self.tau_dist, self.tau, self.current, self.current_hw):
-            a.fill(0.0)
-        self._healthy.fill(False)
+        self._v_meas = (0.0, 0.0, 0.0)
+        for values in (self._v_sp, self._y, self._tau_dist, self._tau, self._current_hw):
+            _zero(values)
+        _zero(self._healthy, False)
 
     def _bind_tx(self, image: NDArray[np.uint8]) -> None:
         rec = txpdo_view(image)
         if rec.shape[0] != self.units:
             raise ValueError(f"sensor image has {rec.shape[0]} wheels, controller has {self.units}")
         self._tx_src = image
-        self._tx = (rec["status1"], rec["encoder_pivot"], rec["velocity_1"], rec["velocity_2"])
 
     def _bind_rx(self, image: NDArray[np.uint8]) -> None:
         rec = rxpdo_view(image)
         if rec.shape[0] != self.units:
             raise ValueError(f"command image has {rec.shape[0]} wheels, controller has {self.units}")
         self._rx_src = image
-        self._rx = tuple(rec[name] for name in ("command1", "command2", "setpoint1", "setpoint2",
-                                                "limit1_p", "limit1_n", "limit2_p", "limit2_n", "timestamp"))
 
     def _read_sensors(self) -> None:
-        status, pivot, vel1, vel2 = self._tx
-        healthy, ok, tmp = self._healthy, self._ok, self._status
-        np.bitwise_and(status, self._required, out=tmp)
-        np.equal(tmp, self._required, out=healthy)
-        np.bitwise_and(status, self._faults, out=tmp)
-        np.equal(tmp, 0, out=ok)
-        healthy &= ok
-        np.copyto(self.unit_enable, healthy)
-        np.subtract(pivot, self._offsets, out=self.delta)  # no re-wrapping: only sin/cos are used
-        np.copyto(self.phidot[0::2], vel1)
-        np.negative(vel2, out=self.phidot[1::2])  # model wheel 2 = -velocity_2
+        """§7 step 1: a unit takes part while healthy and configured; pivot angles without the encoder
+        offsets (no re-wrapping: only sin/cos are used); model wheel 2 = -velocity_2."""
+        required, faults = self._required, self._faults
+        delta, phidot, enable, healthy = self._delta, self._phidot, self._enable, self._healthy
+        for i, ((status, vel1, vel2, pivot), offset, configured) in enumerate(
+                zip(_SENSORS.iter_unpack(self._tx_src), self._offsets, self._configured)):
+            ok = status & required == required and not status & faults
+            enable[i] = configured if ok else 0.0
+            healthy[i] = ok and configured > 0.0
+            delta[i] = pivot - offset
+            phidot[2 * i] = vel1
+            phidot[2 * i + 1] = -vel2
 
     def _write_commands(self, timestamp_ns: int) -> None:
-        cmd1, cmd2, sp1, sp2, l1p, l1n, l2p, l2n, ts = self._rx
-        lim = self._limit_fields
-        cmd1.fill(0)
-        np.copyto(cmd1, self._command, where=self._healthy)
-        cmd2.fill(0)
-        np.copyto(sp1, self.current_hw[0::2])
-        np.copyto(sp2, self.current_hw[1::2])
-        l1p.fill(lim)
-        l1n.fill(-lim)
-        l2p.fill(lim)
-        l2n.fill(-lim)
-        ts.fill(timestamp_ns)
+        lim, command, current_hw, image, pack = self._limit_fields, self._command, self._current_hw, self._rx_src, \
+            _COMMANDS.pack_into
+        for i, healthy in enumerate(self._healthy):
+            pack(image, i * RXPDO_BYTES, command if healthy else 0, 0, current_hw[2 * i], current_hw[2 * i + 1],
+                 lim, -lim, lim, -lim, timestamp_ns)
+
+
+def _zero(values: list, zero: float | bool = 0.0) -> None:
+    for j in range(len(values)):
+        values[j] = zero

@@ -5,7 +5,7 @@ anti-windup -> lead-lag -> first-order low-pass, each the Tustin (bilinear, no p
 discretisation at Ts. The order and the integrator update follow the Simulink-generated
 code (ropod-controller.md §6.2), so the saturated and reset behaviour match the ropod,
 not just the linear transfer function. The ropod runs eleven of these (x, y, theta and
-eight wheels); a bank steps them all with a fixed number of numpy calls and no allocation.
+eight wheels); a bank steps them all on Python floats with no allocation.
 """
 
 from __future__ import annotations
@@ -73,7 +73,11 @@ class ControllerBank:
     """`n` generic controllers stepped together; state and scratch preallocated.
 
     `params` holds scalars (shared) or length-`n` arrays; `n` is taken from the arrays
-    unless given. `step(error, out, reset)` writes the `n` outputs into `out`.
+    unless given. `step(error, out, reset)` writes the `n` outputs into `out`. The channels
+    run on Python floats (a dozen channels are too few for numpy to pay off); `step_values`
+    is the same step on float sequences, for callers that keep their signals in floats.
+    The states (`xi`, `xd`, `xl`) and last step's stage outputs (`y_pi`, `y_leadlag`,
+    `clamped`) read as arrays, made on access (diagnostics and tests).
     """
 
     def __init__(self, params: LinearControllerParams, ts: float, n: int | None = None):
@@ -91,81 +95,85 @@ class ControllerBank:
         w_p = two_pi * p["ll_pole_fhz"]
         w_l = two_pi * p["lpf_fhz"]
         a_n = w_p * h
-        self._k = p["p_gain"]
-        self._sat = p["i_saturation"]
-        self._neg_sat = -self._sat
-        self._h_wi = h * two_pi * p["i_fhz"]  # h*ui = (h*wi)*x
-        self._dd = 1.0 / (two_pi * p["ll_zero_fhz"]) - 1.0 / w_p  # lead-lag "D" of the PID form
-        self._ll_a = (1.0 - a_n) / (1.0 + a_n)
-        self._ll_b = w_p / (1.0 + a_n)
-        self._g = w_l * h / (1.0 + w_l * h)
-        self._lp_a = 1.0 - 2.0 * self._g
+        h_wi = h * two_pi * p["i_fhz"]  # h*ui = (h*wi)*x
+        dd = 1.0 / (two_pi * p["ll_zero_fhz"]) - 1.0 / w_p  # lead-lag "D" of the PID form
+        ll_a = (1.0 - a_n) / (1.0 + a_n)
+        ll_b = w_p / (1.0 + a_n)
+        g = w_l * h / (1.0 + w_l * h)
+        lp_a = 1.0 - 2.0 * g
+        # Per channel: gain, saturation, h*wi, lead-lag D, a, b, low-pass g, a.
+        self._coef = tuple(zip(*(c.tolist() for c in (p["p_gain"], p["i_saturation"], h_wi, dd, ll_a, ll_b, g, lp_a))))
         # States: PI integrator, lead-lag, low-pass; level-reset memory.
-        self.xi = np.zeros(n)
-        self.xd = np.zeros(n)
-        self.xl = np.zeros(n)
-        self._prev_reset = np.zeros(n, bool)
-        # Per-stage outputs of the last step (read-only use: diagnostics and tests).
-        self.y_pi = np.zeros(n)
-        self.y_leadlag = np.zeros(n)
-        self.clamped = np.zeros(n, bool)
-        # Scratch.
-        self._x = np.zeros(n)
-        self._chk = np.zeros(n)
-        self._hui = np.zeros(n)
-        self._w = np.zeros(n)
-        self._b1 = np.zeros(n, bool)
-        self._b2 = np.zeros(n, bool)
+        self._xi, self._xd, self._xl = [0.0] * n, [0.0] * n, [0.0] * n
+        self._prev_reset = [False] * n
+        # Per-stage outputs of the last step.
+        self._y_pi, self._y_leadlag, self._clamped = [0.0] * n, [0.0] * n, [False] * n
+        self._no_reset = (False,) * n
+        self._error, self._reset, self._out = [0.0] * n, [False] * n, [0.0] * n
 
     def reset(self) -> None:
         """All states to zero, as at start."""
-        self.xi.fill(0.0)
-        self.xd.fill(0.0)
-        self.xl.fill(0.0)
-        self._prev_reset.fill(False)
+        for j in range(self.n):
+            self._xi[j] = self._xd[j] = self._xl[j] = 0.0
+            self._prev_reset[j] = False
+
+    xi = property(lambda self: np.array(self._xi), doc="PI integrator states")
+    xd = property(lambda self: np.array(self._xd), doc="lead-lag states")
+    xl = property(lambda self: np.array(self._xl), doc="low-pass states")
+    y_pi = property(lambda self: np.array(self._y_pi), doc="PI output (after its clamp) of the last step")
+    y_leadlag = property(lambda self: np.array(self._y_leadlag), doc="lead-lag output of the last step")
+    clamped = property(lambda self: np.array(self._clamped), doc="channels whose integrator held in the last step")
 
     def step(self, error: ArrayLike, out: F64, reset: NDArray[np.bool_] | None = None) -> F64:
         """One sample: `out[:] = C(error)`. `reset` (bool per channel) zeroes the integrator (level reset)."""
-        x, chk, hui, b1, b2 = self._x, self._chk, self._hui, self._b1, self._b2
-        np.multiply(self._k, error, out=x)
-        # PI with clamping anti-windup. The clamp test uses the state before any reset.
-        np.add(x, self.xi, out=chk)
+        values, flags, result = self._error, self._reset, self._out
+        error = np.asarray(error, np.float64)
+        if error.shape != (self.n,) or (reset is not None and np.shape(reset) != (self.n,)):
+            raise ValueError(f"a bank of {self.n} channels needs {self.n} errors and resets, got shapes "
+                             f"{error.shape} and {None if reset is None else np.shape(reset)}")
+        values[:] = error.tolist()
         if reset is not None:
-            np.logical_or(reset, self._prev_reset, out=b1)
-            np.copyto(self.xi, 0.0, where=b1)
-            np.copyto(self._prev_reset, reset)
-        elif self._prev_reset.any():
-            np.copyto(self.xi, 0.0, where=self._prev_reset)
-            self._prev_reset.fill(False)
-        np.multiply(self._h_wi, x, out=hui)
-        # Stop integrating when the unclamped output is beyond +-S and the input pushes further.
-        np.greater(chk, self._sat, out=b1)
-        np.greater(hui, 0.0, out=b2)
-        np.logical_and(b1, b2, out=b1)
-        np.copyto(self.clamped, b1)
-        np.less(chk, self._neg_sat, out=b1)
-        np.less(hui, 0.0, out=b2)
-        np.logical_and(b1, b2, out=b1)
-        np.logical_or(self.clamped, b1, out=self.clamped)
-        np.copyto(hui, 0.0, where=self.clamped)
-        xi = self.xi
-        xi += hui  # trapezoidal integrator output yi = xi + h*ui
-        np.add(x, xi, out=self.y_pi)
-        np.minimum(self.y_pi, self._sat, out=self.y_pi)
-        np.maximum(self.y_pi, self._neg_sat, out=self.y_pi)
-        xi += hui  # state update: xi += Ts*ui
-        # Lead-lag: Tustin of 1 + Dd*wp*s/(s + wp).
-        w = self._w
-        np.multiply(self._dd, self.y_pi, out=w)
-        np.multiply(self._ll_a, self.xd, out=hui)
-        w += hui  # wk
-        np.subtract(w, self.xd, out=hui)
-        hui *= self._ll_b
-        np.add(self.y_pi, hui, out=self.y_leadlag)
-        np.copyto(self.xd, w)
-        # Low-pass: Tustin of wl/(s + wl).
-        np.add(self.y_leadlag, self.xl, out=w)  # wl
-        np.multiply(self._g, w, out=out)
-        np.multiply(self._lp_a, w, out=self.xl)
-        self.xl += self.y_leadlag
+            flags[:] = np.asarray(reset, bool).tolist()
+        self.step_values(values, result, None if reset is None else flags)
+        out[:] = result
         return out
+
+    def step_values(self, error: Sequence[float], out: list[float], reset: Sequence[bool] | None = None) -> None:
+        """`step` on Python floats: `out[j] = C_j(error[j])`."""
+        xi_, xd_, xl_, prev = self._xi, self._xd, self._xl, self._prev_reset
+        y_pi, y_ll, clamped_ = self._y_pi, self._y_leadlag, self._clamped
+        if reset is None:
+            reset = self._no_reset
+        for j, (e, r, (k, sat, h_wi, dd, ll_a, ll_b, g, lp_a)) in enumerate(zip(error, reset, self._coef)):
+            x = k * e
+            if h_wi:
+                xi = xi_[j]
+                chk = x + xi  # the clamp test uses the state before any reset
+                if r or prev[j]:
+                    xi = 0.0
+                prev[j] = r
+                hui = h_wi * x
+                # PI with clamping anti-windup: stop integrating when the unclamped output is beyond
+                # +-S and the input pushes further.
+                clamped = (chk > sat and hui > 0.0) or (chk < -sat and hui < 0.0)
+                if clamped:
+                    hui = 0.0
+                xi += hui  # trapezoidal integrator output yi = xi + h*ui
+                ypi = x + xi
+                xi_[j] = xi + hui  # state update: xi += Ts*ui
+            else:  # no integrator (i_fhz = 0): nothing to hold or reset, the PI is the clamped gain
+                clamped, ypi = False, x
+            if ypi > sat:
+                ypi = sat
+            elif ypi < -sat:
+                ypi = -sat
+            # Lead-lag: Tustin of 1 + Dd*wp*s/(s + wp).
+            xd = xd_[j]
+            w = dd * ypi + ll_a * xd
+            yll = ypi + (w - xd) * ll_b
+            xd_[j] = w
+            # Low-pass: Tustin of wl/(s + wl).
+            wl = yll + xl_[j]
+            out[j] = g * wl
+            xl_[j] = lp_a * wl + yll
+            y_pi[j], y_ll[j], clamped_[j] = ypi, yll, clamped

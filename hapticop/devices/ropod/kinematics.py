@@ -7,7 +7,7 @@ pivot angle delta_i) the wheel speeds are `(U_i -+ k Q_i) v / r` with k = d/(2s)
 so one masked normal matrix N = G^T M G serves both directions: the least-squares twist
 from the wheel speeds (forward kinematics) and the minimum-norm torques for a wrench
 (the pseudo-inverse distribution, the ropod's June-2019 default). Everything is evaluated
-in place on preallocated arrays, once per cycle after `update(delta, enable)`.
+on Python floats, once per cycle after `update(delta, enable)` (or `evaluate`).
 
 Wheel order: [SW1w1, SW1w2, SW2w1, ..., SW4w2]; w1 is on the unit's +y side. Positive
 speed/torque rolls/pushes along the unit's +x (the model convention; the hardware's w2
@@ -16,43 +16,30 @@ sign flip is the controller's business).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from math import cos, hypot, sin
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Geometry", "SmartWheelKinematics", "jacobian", "distribute_qp", "Inverse3"]
+__all__ = ["Geometry", "SmartWheelKinematics", "jacobian", "distribute_qp", "inverse_sym3"]
 
 F64 = NDArray[np.float64]
 
-# Flat indices of the cyclic cofactor formula cof[i, j] = a[i+1, j+1] a[i+2, j+2] - a[i+1, j+2] a[i+2, j+1].
-_R1 = (np.arange(3)[:, None] + 1) % 3
-_R2 = (np.arange(3)[:, None] + 2) % 3
-_C1 = (np.arange(3)[None, :] + 1) % 3
-_C2 = (np.arange(3)[None, :] + 2) % 3
-# Ordered [P, R, Q, S] so that cof = t[0] t[2] - t[1] t[3]; transposed, so the take yields adj(a).
-_ADJ = np.ascontiguousarray(np.stack([3 * r + c for r, c in ((_R1, _C1), (_R1, _C2), (_R2, _C2), (_R2, _C1))])
-                            .transpose(0, 2, 1))
 
+def inverse_sym3(n00: float, n01: float, n02: float, n11: float, n12: float, n22: float,
+                 ) -> tuple[float, float, float, float, float, float, float]:
+    """(det, i00, i01, i02, i11, i12, i22): the inverse of a symmetric 3x3 matrix by cofactors, on floats.
 
-class Inverse3:
-    """In-place inverse of a 3x3 matrix by cofactors: numpy's inv/solve allocate on every call."""
-
-    def __init__(self) -> None:
-        t = self._t = np.zeros((4, 3, 3))
-        p = self._p = np.zeros((2, 3, 3))
-        self._t_lo, self._t_hi, self._p0, self._p1 = t[:2], t[2:], p[0], p[1]
-        self._cof_t = np.zeros((3, 3))  # transposed cofactors (the adjugate)
-        self._col0 = self._cof_t[:, 0]
-
-    def __call__(self, a: F64, out: F64) -> float:
-        """out = inv(a) for a C-contiguous (3, 3) float64 `a`; returns det(a)."""
-        a.reshape(9).take(_ADJ, out=self._t, mode="wrap")
-        np.multiply(self._t_lo, self._t_hi, out=self._p)
-        np.subtract(self._p0, self._p1, out=self._cof_t)
-        det = float(a[0].dot(self._col0))
-        np.multiply(self._cof_t, 1.0 / det, out=out)
-        return det
+    A singular matrix (det == 0) gives a zero inverse: check det."""
+    c00 = n11 * n22 - n12 * n12
+    c01 = n12 * n02 - n01 * n22
+    c02 = n01 * n12 - n11 * n02
+    det = n00 * c00 + n01 * c01 + n02 * c02
+    inv = 1.0 / det if det else 0.0
+    return (det, c00 * inv, c01 * inv, c02 * inv, (n22 * n00 - n02 * n02) * inv, (n02 * n01 - n12 * n00) * inv,
+            (n00 * n11 - n01 * n01) * inv)
 
 
 @dataclass(frozen=True)
@@ -82,143 +69,254 @@ class Geometry:
 
 
 class SmartWheelKinematics:
-    """G(delta) and its masked normal inverse for the current pivot angles; no allocation per cycle."""
+    """G(delta) and its masked normal inverse for the current pivot angles; no allocation per cycle.
+
+    The numbers live in Python floats, per unit c, s and the third entries of U_i and Q_i (numpy's
+    per-call overhead would cost more than the arithmetic); a unit's two wheel rows are
+    (U_i -+ k Q_i) / r, so every map runs unit by unit. The 1 kHz users call the float methods
+    (`evaluate`, `twist_of`, `wheel_speeds_into`, `distribute_into`, ...); the array methods and
+    the array attributes (G, U, Q, N, N_inv, mask, cos, sin) are the same values for tests and
+    set-up, and allocate.
+    """
 
     def __init__(self, geometry: Geometry = Geometry()):
         self.geometry = g = geometry
         n = g.units
-        self._px = np.array([p[0] for p in g.pivots_m], np.float64)
-        self._py = np.array([p[1] for p in g.pivots_m], np.float64)
+        self.units, self.wheels = n, 2 * n
         self._inv_r = 1.0 / g.wheel_radius_m
         self._inv_s = 1.0 / g.caster_offset_m
-        # Rows of U, Q and G are linear in [cos, sin] of the pivot angle: per unit, [c, s] @ coefficients.
-        uq = np.zeros((n, 2, 6))
-        uq[:, 0, 0], uq[:, 1, 1], uq[:, 0, 2], uq[:, 1, 2] = 1.0, 1.0, -self._py, self._px  # U
-        uq[:, 1, 3], uq[:, 0, 4], uq[:, 0, 5], uq[:, 1, 5] = -1.0, 1.0, self._px, self._py  # Q
-        gc = np.concatenate([uq[:, :, :3] - g.k * uq[:, :, 3:], uq[:, :, :3] + g.k * uq[:, :, 3:]], axis=2)
-        self._uq_coef, self._g_coef = uq, gc * self._inv_r
-        self._cs = np.zeros((n, 1, 2))
-        self.cos = self._cs[:, 0, 0]
-        self.sin = self._cs[:, 0, 1]
-        self._uq = np.zeros((n, 1, 6))
-        self.U = self._uq[:, 0, :3]  # along-unit row of the pivot velocity
-        self.Q = self._uq[:, 0, 3:]  # across-unit row of the pivot velocity
-        self.G = np.zeros((2 * n, 3))
-        self._G3 = self.G.reshape(n, 1, 6)
-        self.mask = np.ones(2 * n)  # per wheel, 0/1 from the unit enable
-        self._mask2 = self.mask.reshape(-1, 2)
-        self._mask_col = self.mask[:, None]
-        self._Gm = np.zeros((2 * n, 3))  # M G
-        self._GmT, self._GT = self._Gm.T, self.G.T
-        self.N = np.zeros((3, 3))
-        self.N_inv = np.zeros((3, 3))
-        self._inverse3 = Inverse3()
-        self._v3 = np.zeros(3)
-        self._u4 = np.zeros(n)
-        self._w4 = np.zeros(n)
-        self._x4 = np.zeros(n)
-        self._b4 = np.zeros(n, bool)
-        self._abs8 = np.zeros(2 * n)
-        self.update(np.zeros(n))
+        self._k = g.k
+        # Per unit (ua, ub, qa, qb): U_i = [c, s, ua c + ub s] and Q_i = [-s, c, qa c + qb s].
+        self.unit_rows = tuple((-py, px, px, py) for px, py in g.pivots_m)
+        self._units = [(1.0, 0.0, 0.0, 0.0, 1.0)] * n  # per unit (c, s, U_i[2], Q_i[2], enabled 0/1)
+        self.unit_mask = [1.0] * n  # 0/1 per unit from the enable (read-only)
+        self._n = (0.0,) * 6  # N = G^T M G: n00, n01, n02, n11, n12, n22
+        self._n_inv = (0.0,) * 6
+        self.evaluate([0.0] * n)
 
-    # --- per-cycle evaluation -------------------------------------------------------------
-    def update(self, delta: ArrayLike, enable: ArrayLike | None = None) -> None:
-        """Evaluate G(delta) and the masked normal inverse; `enable` is 0/1 per unit (default all).
+    # --- per-cycle evaluation, on floats -------------------------------------------------------
+    def evaluate(self, delta: Sequence[float], enable: Sequence[float] | None = None) -> None:
+        """U_i, Q_i for the pivot angles, and the normal matrix N = G^T M G and its inverse over the
+        units enabled (0/1 each; None: all). A unit adds (2/r^2) (U U^T + k^2 Q Q^T) to N.
 
         Needs >= 2 enabled units (then N has full rank 3); otherwise raises `np.linalg.LinAlgError`.
         """
-        self.update_jacobian(delta)
-        m2 = self._mask2
-        if enable is None:
-            m2.fill(1.0)
-        else:
-            m2[:, 0] = enable
-            m2[:, 1] = enable
-        np.multiply(self.G, self._mask_col, out=self._Gm)
-        np.matmul(self._GmT, self.G, out=self.N)
-        det = self._inverse3(self.N, self.N_inv)
-        n = self.N
-        if not det > 1e-12 * float(n[0, 0] + n[1, 1] + n[2, 2]) ** 3:
+        units, mask = self._units, self.unit_mask
+        k2 = self._k * self._k
+        one_minus_k2 = 1.0 - k2
+        n00 = n01 = n02 = n11 = n12 = n22 = 0.0
+        for i, (d, (ua, ub, qa, qb)) in enumerate(zip(delta, self.unit_rows)):
+            c, s = cos(d), sin(d)
+            u3, q3 = c * ua + s * ub, c * qa + s * qb
+            on = 1.0 if enable is None or enable[i] else 0.0
+            units[i], mask[i] = (c, s, u3, q3, on), on
+            if not on:
+                continue
+            cc, ss = c * c, s * s
+            n00 += cc + k2 * ss
+            n01 += c * s * one_minus_k2
+            n02 += c * u3 - k2 * (s * q3)
+            n11 += ss + k2 * cc
+            n12 += s * u3 + k2 * (c * q3)
+            n22 += u3 * u3 + k2 * (q3 * q3)
+        f = 2.0 * self._inv_r * self._inv_r
+        n00, n01, n02, n11, n12, n22 = n00 * f, n01 * f, n02 * f, n11 * f, n12 * f, n22 * f
+        self._n = (n00, n01, n02, n11, n12, n22)
+        det, i00, i01, i02, i11, i12, i22 = inverse_sym3(n00, n01, n02, n11, n12, n22)
+        if not det > 1e-12 * (n00 + n11 + n22) ** 3:
             raise np.linalg.LinAlgError("fewer than 2 smart-wheel units enabled: the platform is not controllable")
+        self._n_inv = (i00, i01, i02, i11, i12, i22)
 
-    def update_jacobian(self, delta: ArrayLike) -> None:
-        """Evaluate U, Q and G(delta) only (what a simulator needs)."""
-        np.cos(delta, out=self.cos)
-        np.sin(delta, out=self.sin)
-        np.matmul(self._cs, self._uq_coef, out=self._uq)
-        np.matmul(self._cs, self._g_coef, out=self._G3)
-
-    # --- maps ---------------------------------------------------------------------------
-    def wheel_speeds(self, twist: ArrayLike, out: F64) -> F64:
-        """Inverse kinematics: the 8 no-slip wheel speeds [rad/s] for a platform twist (unmasked)."""
-        return np.matmul(self.G, twist, out=out)
-
-    def pivot_rates(self, twist: ArrayLike, out: F64) -> F64:
-        """The 4 pivot rates delta_dot = q_i/s - wz the twist forces on the trailing casters."""
-        np.matmul(self.Q, twist, out=out)
-        out *= self._inv_s
-        out -= twist[2]
-        return out
-
-    def twist(self, wheel_speeds: ArrayLike, out: F64) -> F64:
+    def twist_of(self, wheel_speeds: Sequence[float]) -> tuple[float, float, float]:
         """Forward kinematics: least-squares twist over the enabled units, pinv(M G) M phidot."""
-        np.matmul(self._GmT, wheel_speeds, out=self._v3)
-        return np.matmul(self.N_inv, self._v3, out=out)
+        k = self._k
+        a0 = a1 = a2 = 0.0  # G^T M phidot, r times
+        for i, (c, s, u3, q3, m) in enumerate(self._units):
+            if m:
+                p1, p2 = wheel_speeds[2 * i], wheel_speeds[2 * i + 1]
+                a, b = p1 + p2, k * (p2 - p1)
+                a0 += a * c - b * s
+                a1 += a * s + b * c
+                a2 += a * u3 + b * q3
+        inv_r = self._inv_r
+        a0, a1, a2 = a0 * inv_r, a1 * inv_r, a2 * inv_r
+        i00, i01, i02, i11, i12, i22 = self._n_inv
+        return i00 * a0 + i01 * a1 + i02 * a2, i01 * a0 + i11 * a1 + i12 * a2, i02 * a0 + i12 * a1 + i22 * a2
 
-    def wrench(self, torques: ArrayLike, out: F64) -> F64:
-        """Statics: the platform wrench [Fx, Fy, Mz] at the origin of R from 8 wheel torques."""
-        return np.matmul(self._GT, torques, out=out)
+    def wheel_speeds_into(self, vx: float, vy: float, wz: float, out: list[float]) -> None:
+        """Inverse kinematics: the no-slip wheel speeds [rad/s] for a platform twist (unmasked)."""
+        k, inv_r = self._k, self._inv_r
+        for i, (c, s, u3, q3, _) in enumerate(self._units):
+            u, q = c * vx + s * vy + u3 * wz, c * vy - s * vx + q3 * wz
+            out[2 * i] = (u - k * q) * inv_r
+            out[2 * i + 1] = (u + k * q) * inv_r
 
-    def distribute(self, wrench: ArrayLike, tau_max: float, out: F64) -> float:
+    def pivot_rates_into(self, vx: float, vy: float, wz: float, out: list[float]) -> None:
+        """The pivot rates delta_dot = q_i/s - wz the twist forces on the trailing casters."""
+        inv_s = self._inv_s
+        for i, (c, s, _, q3, _) in enumerate(self._units):
+            out[i] = (c * vy - s * vx + q3 * wz) * inv_s - wz
+
+    def wrench_of(self, torques: Sequence[float]) -> tuple[float, float, float]:
+        """Statics: the platform wrench [Fx, Fy, Mz] at the origin of R from the wheel torques, G^T tau."""
+        k, inv_r = self._k, self._inv_r
+        fx = fy = mz = 0.0
+        for i, (c, s, u3, q3, _) in enumerate(self._units):
+            t1, t2 = torques[2 * i], torques[2 * i + 1]
+            a, b = t1 + t2, k * (t2 - t1)
+            fx += a * c - b * s
+            fy += a * s + b * c
+            mz += a * u3 + b * q3
+        return fx * inv_r, fy * inv_r, mz * inv_r
+
+    def distribute_into(self, fx: float, fy: float, mz: float, tau_max: float, out: list[float]) -> float:
         """Variant A (§5.2): minimum-norm torques pinv(G^T M) w, scaled as a whole to |tau| <= tau_max.
 
         Returns the scale (1 when the wrench is feasible). Disabled units get zero torque.
         """
-        np.matmul(self.N_inv, wrench, out=self._v3)
-        np.matmul(self._Gm, self._v3, out=out)
-        peak = float(np.abs(out, out=self._abs8).max())
+        i00, i01, i02, i11, i12, i22 = self._n_inv
+        x0, x1, x2 = i00 * fx + i01 * fy + i02 * mz, i01 * fx + i11 * fy + i12 * mz, i02 * fx + i12 * fy + i22 * mz
+        k, inv_r = self._k, self._inv_r
+        peak = 0.0
+        for i, (c, s, u3, q3, m) in enumerate(self._units):
+            u, q = c * x0 + s * x1 + u3 * x2, c * x1 - s * x0 + q3 * x2
+            t1, t2 = (u - k * q) * inv_r * m, (u + k * q) * inv_r * m
+            out[2 * i], out[2 * i + 1] = t1, t2
+            if abs(t1) > peak:
+                peak = abs(t1)
+            if abs(t2) > peak:
+                peak = abs(t2)
         if peak > tau_max:
             scale = tau_max / peak
-            out *= scale
+            for j in range(len(out)):
+                out[j] *= scale
             return scale
         return 1.0
 
-    def flip_compensate(self, torques: F64, kmax: float, force_threshold: float = 10.0) -> F64:
+    def flip_compensate_list(self, torques: list[float], kmax: float, force_threshold: float = 10.0) -> None:
         """§5.4: amplify each unit's differential torque by 1 + (kmax-1)|sin(angle of its pivot force)|
         when its lateral force exceeds the threshold; a no-op for kmax == 1 (normal mode)."""
         if kmax == 1.0:
-            return torques
-        t2 = torques.reshape(-1, 2)
-        long_, lat, gain = self._u4, self._w4, self._x4
-        np.add(t2[:, 0], t2[:, 1], out=long_)
-        long_ *= self._inv_r  # f1 + f2
-        np.subtract(t2[:, 1], t2[:, 0], out=lat)
-        lat *= self.geometry.k * self._inv_r  # lambda = k (f2 - f1)
-        np.hypot(long_, lat, out=gain)
-        np.maximum(gain, 1e-300, out=gain)
-        np.divide(np.abs(lat, out=long_), gain, out=gain)  # |sin(angle)|
-        gain *= kmax - 1.0
-        gain += 1.0
-        np.less_equal(long_, force_threshold, out=self._b4)  # long_ now holds |lambda|
-        np.copyto(gain, 1.0, where=self._b4)
-        np.subtract(t2[:, 1], t2[:, 0], out=lat)  # 2 * differential torque
-        lat *= 0.5
-        np.add(t2[:, 0], t2[:, 1], out=long_)
-        long_ *= 0.5  # common torque
-        lat *= gain
-        np.subtract(long_, lat, out=t2[:, 0])
-        np.add(long_, lat, out=t2[:, 1])
+            return
+        inv_r, k = self._inv_r, self._k
+        for j in range(0, len(torques), 2):
+            t1, t2 = torques[j], torques[j + 1]
+            long_, lat = (t1 + t2) * inv_r, (t2 - t1) * (k * inv_r)  # f1 + f2, lambda = k (f2 - f1)
+            gain = 1.0
+            if not abs(lat) <= force_threshold:
+                gain = abs(lat) / max(hypot(long_, lat), 1e-300) * (kmax - 1.0) + 1.0
+            common, diff = (t1 + t2) * 0.5, (t2 - t1) * 0.5 * gain
+            torques[j], torques[j + 1] = common - diff, common + diff
+
+    @staticmethod
+    def clip_per_unit_list(torques: list[float], tau_max: float) -> None:
+        """§5.4: scale each unit's torque pair so that neither exceeds tau_max (keeps the pair's ratio)."""
+        for j in range(0, len(torques), 2):
+            scale = tau_max / max(abs(torques[j]), abs(torques[j + 1]), tau_max)
+            torques[j] *= scale
+            torques[j + 1] *= scale
+
+    # --- the same on arrays (tests, set-up; allocates) ------------------------------------------
+    def update(self, delta: ArrayLike, enable: ArrayLike | None = None) -> None:
+        """Evaluate G(delta) and the masked normal inverse; `enable` is 0/1 per unit (default all)."""
+        self.evaluate(self._per_unit(delta, "delta"), None if enable is None else self._per_unit(enable, "enable"))
+
+    def update_jacobian(self, delta: ArrayLike) -> None:
+        """Evaluate U, Q and G(delta) (with every unit enabled)."""
+        self.evaluate(self._per_unit(delta, "delta"))
+
+    def _per_unit(self, values: ArrayLike, what: str) -> list[float]:
+        array = np.asarray(values, np.float64)
+        if array.shape != (self.units,):
+            raise ValueError(f"{what} needs one value per unit ({self.units}), got shape {array.shape}")
+        return array.tolist()
+
+    @property
+    def cos(self) -> F64:
+        return np.array([unit[0] for unit in self._units])
+
+    @property
+    def sin(self) -> F64:
+        return np.array([unit[1] for unit in self._units])
+
+    @property
+    def U(self) -> F64:
+        """Along-unit rows of the pivot velocities, (units, 3)."""
+        return np.array([(c, s, u3) for c, s, u3, _, _ in self._units])
+
+    @property
+    def Q(self) -> F64:
+        """Across-unit rows of the pivot velocities, (units, 3)."""
+        return np.array([(-s, c, q3) for c, s, _, q3, _ in self._units])
+
+    @property
+    def G(self) -> F64:
+        """The (wheels, 3) Jacobian: wheel speeds = G twist; unit i's rows are (U_i -+ k Q_i) / r."""
+        u, q = self.U, self.Q
+        return np.stack([u - self._k * q, u + self._k * q], axis=1).reshape(-1, 3) * self._inv_r
+
+    @property
+    def mask(self) -> F64:
+        """0/1 per wheel."""
+        return np.repeat(self.unit_mask, 2)
+
+    @property
+    def N(self) -> F64:
+        return _sym3(self._n)
+
+    @property
+    def N_inv(self) -> F64:
+        return _sym3(self._n_inv)
+
+    def wheel_speeds(self, twist: ArrayLike, out: F64) -> F64:
+        """Inverse kinematics: the no-slip wheel speeds [rad/s] for a platform twist (unmasked)."""
+        speeds = [0.0] * self.wheels
+        self.wheel_speeds_into(*np.asarray(twist, np.float64).tolist(), speeds)
+        out[:] = speeds
+        return out
+
+    def pivot_rates(self, twist: ArrayLike, out: F64) -> F64:
+        """The pivot rates delta_dot = q_i/s - wz the twist forces on the trailing casters."""
+        rates = [0.0] * self.units
+        self.pivot_rates_into(*np.asarray(twist, np.float64).tolist(), rates)
+        out[:] = rates
+        return out
+
+    def twist(self, wheel_speeds: ArrayLike, out: F64) -> F64:
+        """Forward kinematics: least-squares twist over the enabled units, pinv(M G) M phidot."""
+        out[:] = self.twist_of(np.asarray(wheel_speeds, np.float64).tolist())
+        return out
+
+    def wrench(self, torques: ArrayLike, out: F64) -> F64:
+        """Statics: the platform wrench [Fx, Fy, Mz] at the origin of R from the wheel torques."""
+        out[:] = self.wrench_of(np.asarray(torques, np.float64).tolist())
+        return out
+
+    def distribute(self, wrench: ArrayLike, tau_max: float, out: F64) -> float:
+        """`distribute_into` on arrays."""
+        tau = [0.0] * self.wheels
+        scale = self.distribute_into(*np.asarray(wrench, np.float64).tolist(), tau_max, tau)
+        out[:] = tau
+        return scale
+
+    def flip_compensate(self, torques: F64, kmax: float, force_threshold: float = 10.0) -> F64:
+        """`flip_compensate_list` on an array, in place."""
+        values = torques.tolist()
+        self.flip_compensate_list(values, kmax, force_threshold)
+        torques[:] = values
         return torques
 
     def clip_per_unit(self, torques: F64, tau_max: float) -> F64:
-        """§5.4: scale each unit's torque pair so that neither exceeds tau_max (keeps the pair's ratio)."""
-        t2 = torques.reshape(-1, 2)
-        peak = self._u4
-        np.maximum(np.abs(t2[:, 0], out=self._w4), np.abs(t2[:, 1], out=self._x4), out=peak)
-        np.maximum(peak, tau_max, out=peak)
-        np.divide(tau_max, peak, out=peak)
-        t2 *= peak[:, None]
+        """`clip_per_unit_list` on an array, in place."""
+        values = torques.tolist()
+        self.clip_per_unit_list(values, tau_max)
+        torques[:] = values
         return torques
+
+
+def _sym3(n: tuple[float, ...]) -> F64:
+    n00, n01, n02, n11, n12, n22 = n
+    return np.array([[n00, n01, n02], [n01, n11, n12], [n02, n12, n22]])
 
 
 def jacobian(delta: ArrayLike, geometry: Geometry = Geometry()) -> F64:

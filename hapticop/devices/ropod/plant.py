@@ -17,6 +17,10 @@ image exactly as a smart wheel would, including the hardware sign of wheel 2, th
 encoder offsets and wrapping, and the status bits. By default the sensors are sampled at
 the start of each step, i.e. one sample old when the controller uses them (EtherCAT).
 Deterministic: noise, if enabled, comes from the generator passed in.
+
+The state is a few dozen numbers, so one step works on Python floats (numpy's per-call overhead
+would cost more than the arithmetic) and publishes `state` once at its end; the images are
+read and written with precompiled structs (`record_struct`).
 """
 
 from __future__ import annotations
@@ -27,21 +31,32 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.ropod.kinematics import Geometry, Inverse3, SmartWheelKinematics
-from hapticop.devices.ropod.pdo import Com1, Stat1, rxpdo_view, txpdo_view
+from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, inverse_sym3
+from hapticop.devices.ropod.pdo import (
+    RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, Com1, Stat1, record_struct, rxpdo_view, txpdo_view,
+)
 
 __all__ = ["PlantParams", "RopodPlant"]
 
 F64 = NDArray[np.float64]
 
 _THESIS_OFFSETS = (4.691878, 3.224157, 0.028178, 5.856820)
-_MODE_MASK = np.uint16(Com1.MODE_MASK)
-_MODE_TORQUE = np.uint16(Com1.MODE_TORQUE)
-_MODE_VELOCITY = np.uint16(Com1.MODE_VELOCITY)
-_ENABLE_BITS = tuple((np.uint16(en | em), np.uint16(en)) for en, em in
-                     ((Com1.ENABLE1, Com1.EMERGENCY1), (Com1.ENABLE2, Com1.EMERGENCY2)))
-_ENABLED_BITS = (np.uint16(Stat1.ENABLED1), np.uint16(Stat1.ENABLED2))
-_ENCODERS_OK = np.uint16(Stat1.ENCODERS_OK)
+_MODE_MASK = int(Com1.MODE_MASK)
+_MODE_TORQUE = int(Com1.MODE_TORQUE)
+_MODE_VELOCITY = int(Com1.MODE_VELOCITY)
+_ENABLE1, _ENABLE1_BITS = int(Com1.ENABLE1), int(Com1.ENABLE1 | Com1.EMERGENCY1)
+_ENABLE2, _ENABLE2_BITS = int(Com1.ENABLE2), int(Com1.ENABLE2 | Com1.EMERGENCY2)
+_ENABLED1, _ENABLED2 = int(Stat1.ENABLED1), int(Stat1.ENABLED2)
+_ENCODERS_OK = int(Stat1.ENCODERS_OK)
+_TWO_PI = 2.0 * math.pi
+
+# A wheel's whole command record, and the sensor fields the model has, in offset order; the
+# unmodelled ones (d/u/v/w currents, motor voltages, accel_x/y, gyro_x/y) are written as zero.
+_COMMANDS = record_struct(RXPDO_DTYPE, RXPDO_DTYPE.names)
+_SENSORS = record_struct(TXPDO_DTYPE, (
+    "status1", "status2", "sensor_ts", "setpoint_ts", "encoder_1", "velocity_1", "current_1_q", "temperature_1",
+    "encoder_2", "velocity_2", "current_2_q", "temperature_2", "encoder_pivot", "velocity_pivot", "voltage_bus",
+    "imu_ts", "accel_z", "gyro_z", "temperature_imu", "pressure"))
 
 
 @dataclass(frozen=True)
@@ -73,9 +88,10 @@ class PlantParams:
 class RopodPlant:
     """`step(rx_image, dt, tx_image_out)`: apply the commands for dt seconds, report the sensors.
 
-    `pose` (x, y, theta in the world), `twist` (vx, vy, wz in the robot frame) and
-    `pivot_angles` are views of the state; `wheel_speeds`, `wheel_torques` and
-    `currents_hw` hold the last step's values.
+    `pose` (x, y, theta in the world), `twist` (vx, vy, wz in the robot frame), `pivot_angles`
+    and `wheel_angles` are views of `state`, published at the end of each step (change the state
+    through `reset_state`); `wheel_speeds`, `pivot_rates`, `wheel_torques` and `currents_hw`
+    are the last step's values (arrays made on access).
     """
 
     def __init__(self, params: PlantParams = PlantParams(), rng: np.random.Generator | None = None):
@@ -89,56 +105,39 @@ class RopodPlant:
         self.units, self.wheels = units, wheels
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.kinematics = SmartWheelKinematics(g)
-        self._inverse3 = Inverse3()
-        self._offsets = np.array(p.pivot_offsets_rad, np.float64)
+        self._rows = self.kinematics.unit_rows
+        self._offsets = tuple(float(o) for o in p.pivot_offsets_rad)
+        self._inv_r, self._k = 1.0 / g.wheel_radius_m, g.k
+        self._k_inv_r = g.k * self._inv_r
         self._inv_s = 1.0 / g.caster_offset_m
         self._ic_s2 = p.unit_yaw_inertia_kgm2 / g.caster_offset_m**2
-        self._diag = np.array([p.mass_kg, p.mass_kg, p.yaw_inertia_kgm2])
-        self._inv_diag = 1.0 / self._diag
-        self._ilim, self._neg_ilim = np.float64(p.drive_current_limit_a), np.float64(-p.drive_current_limit_a)
+        self._diag = (float(p.mass_kg), float(p.mass_kg), float(p.yaw_inertia_kgm2))
+        self._inv_diag = tuple(1.0 / d for d in self._diag)
+        self._ilim = float(p.drive_current_limit_a)
         # State: pose (3), twist (3), pivot angles (units), wheel angles (wheels), model convention.
-        self.state = np.zeros(6 + units + wheels)
+        # `_y` is the working copy, `state` the published one.
+        size = 6 + units + wheels
+        self.state = np.zeros(size)
         self.pose = self.state[0:3]
         self.twist = self.state[3:6]
         self.pivot_angles = self.state[6:6 + units]
         self.wheel_angles = self.state[6 + units:]
+        self._y = [0.0] * size
         self.time_ns = 0
         self._setpoint_ns = 0
-        # RK4 scratch.
-        self._k = np.zeros((4, self.state.size))
-        self._y = np.zeros(self.state.size)
-        self._m3 = np.zeros((3, 3))
-        self._m3_diag = self._m3.reshape(9)[::4]
-        self._m3_inv = np.zeros((3, 3))
-        self._rhs = np.zeros(3)
-        self._t3 = np.zeros(3)
-        self._u = np.zeros(units)
-        self._q = np.zeros(units)
-        # Outputs of the drive model and the measurement.
-        self.currents_hw = np.zeros(wheels)  # as the drive reports them (wheel 2 negated)
-        self.wheel_torques = np.zeros(wheels)  # model convention
-        self.wheel_speeds = np.zeros(wheels)  # model convention
-        self.pivot_rates = np.zeros(units)
-        self._hw_speed = np.zeros(wheels)
-        self._hw_sign = np.tile([1.0, -1.0], units)
+        # RK4 stages and the stage state.
+        self._k1, self._k2, self._k3, self._k4, self._yt = ([0.0] * size for _ in range(5))
+        # Drive model outputs (hardware convention for currents, model convention for torques) and
+        # the measurement (model convention), per wheel / per unit.
+        self._currents_hw = [0.0] * wheels
+        self._torques = [0.0] * wheels
+        self._torque_sum = [0.0] * units  # (t1 + t2) / r per unit: the wrench is sum A U_i + B Q_i
+        self._torque_diff = [0.0] * units  # k (t2 - t1) / r
+        self._speeds = [0.0] * wheels
+        self._rates = [0.0] * units
+        self._status = [_ENCODERS_OK] * units  # healthy, drives not yet enabled
         self._noise_w = np.zeros(wheels)
         self._noise_p = np.zeros(units)
-        self._enc = np.zeros(units)
-        # Drive decoding scratch (per unit and per wheel).
-        self._cmd = np.zeros(units, np.uint16)
-        self._tmp16 = np.zeros(units, np.uint16)
-        self._en = np.zeros(wheels, bool)
-        self._en2 = self._en.reshape(-1, 2)
-        self._torque_mode = np.zeros(units, bool)
-        self._velocity_mode = np.zeros(units, bool)
-        self._b = np.zeros(units, bool)
-        self._sp = np.zeros(wheels)
-        self._lim_p = np.zeros(wheels)
-        self._lim_n = np.zeros(wheels)
-        self._vel_i = np.zeros(wheels)
-        self._status = np.full(units, _ENCODERS_OK, np.uint16)  # healthy, drives not yet enabled
-        self._i2 = self.currents_hw.reshape(-1, 2)
-        self._vi2 = self._vel_i.reshape(-1, 2)
         self._rx_src: np.ndarray | None = None
         self._tx_src: np.ndarray | None = None
         self.reset_state(p.initial_pose, p.initial_twist, p.initial_pivot_angles_rad)
@@ -150,7 +149,26 @@ class RopodPlant:
         self.twist[:] = twist
         if pivot_angles is not None:
             self.pivot_angles[:] = pivot_angles
+        self._y[:] = self.state.tolist()
         self._measure()
+
+    # --- read-outs of the last step -------------------------------------------------------
+    @property
+    def wheel_speeds(self) -> F64:
+        return np.array(self._speeds)
+
+    @property
+    def pivot_rates(self) -> F64:
+        return np.array(self._rates)
+
+    @property
+    def wheel_torques(self) -> F64:
+        return np.array(self._torques)
+
+    @property
+    def currents_hw(self) -> F64:
+        """As the drive reports them (wheel 2 negated)."""
+        return np.array(self._currents_hw)
 
     # --- the step ------------------------------------------------------------------------
     def step(self, rx_image: NDArray[np.uint8], dt: float, tx_image_out: NDArray[np.uint8]) -> None:
@@ -161,14 +179,17 @@ class RopodPlant:
             self._bind_tx(tx_image_out)
         self._setpoint_ns = self.time_ns
         self._drives()
-        if self.params.measurement_delay:
+        delayed = self.params.measurement_delay
+        if delayed:
             self._write_sensors()
-        h = dt / self.params.substeps
-        for _ in range(self.params.substeps):
+        substeps = self.params.substeps
+        h = dt / substeps
+        for _ in range(substeps):
             self._rk4(h)
+        self.state[:] = self._y
         self.time_ns += int(round(dt * 1e9))
         self._measure()
-        if not self.params.measurement_delay:
+        if not delayed:
             self._write_sensors()
 
     def write_sensors(self, tx_image_out: NDArray[np.uint8]) -> None:
@@ -178,179 +199,175 @@ class RopodPlant:
         self._write_sensors()
 
     # --- dynamics -----------------------------------------------------------------------
-    def _derivative(self, y: F64, dy: F64) -> None:
-        """dy = f(y) for the held wheel torques (Level 1 equations, ropod-controller.md §8)."""
-        kin, units = self.kinematics, self.units
-        v = y[3:6]
-        wz = v[2]
-        kin.update_jacobian(y[6:6 + units])
-        theta = float(y[2])
+    def _derivative(self, y: list[float], dy: list[float]) -> None:
+        """dy = f(y) for the held wheel torques (Level 1 equations, ropod-controller.md §8).
+
+        Per unit, with U_i and Q_i of its pivot angle: the yaw rate Omega_i = Q_i v / s, the pivot
+        rate Omega_i - wz, the wheel speeds (U_i v -+ k Q_i v) / r, and its share of the wrench
+        G^T tau = sum (t1 + t2)/r U_i + k (t2 - t1)/r Q_i. The casters' steering inertia and their
+        bearings' friction both act through Q_i: rhs += sum Q_i delta_dot_i (I_c/s^2 U_i v - b_p/s),
+        plus b_p sum delta_dot_i on the yaw; the mass matrix is M + I_c/s^2 sum Q_i^T Q_i.
+        """
+        p, units = self.params, self.units
+        theta, vx, vy, wz = y[2], y[3], y[4], y[5]
         c, s = math.cos(theta), math.sin(theta)
-        vx, vy = float(v[0]), float(v[1])
         dy[0] = c * vx - s * vy
         dy[1] = s * vx + c * vy
         dy[2] = wz
-        ddelta = dy[6:6 + units]
-        np.matmul(kin.Q, v, out=self._q)
-        self._q *= self._inv_s  # unit yaw rate Omega_i = q_i / s
-        np.subtract(self._q, wz, out=ddelta)
-        np.matmul(kin.G, v, out=dy[6 + units:])
-        p, rhs, t3 = self.params, self._rhs, self._t3
-        kin.wrench(self.wheel_torques, out=rhs)
-        m, wzf = p.mass_kg, float(wz)
-        rhs[0] += m * wzf * vy - p.linear_damping_ns_per_m * vx
-        rhs[1] += -m * wzf * vx - p.linear_damping_ns_per_m * vy
-        rhs[2] -= p.yaw_damping_nms * wzf
-        if p.pivot_damping_nms:
-            rhs[2] += p.pivot_damping_nms * float(np.sum(ddelta))
-            np.matmul(kin.Q.T, ddelta, out=t3)
-            t3 *= p.pivot_damping_nms * self._inv_s
-            rhs -= t3
-        acc = dy[3:6]
-        if self._ic_s2:
-            np.matmul(kin.U, v, out=self._u)
-            self._u *= ddelta  # u_i * delta_dot_i: the caster's steering "centripetal" term
-            np.matmul(kin.Q.T, self._u, out=t3)
-            t3 *= self._ic_s2
-            rhs += t3
-            m3 = self._m3
-            np.matmul(kin.Q.T, kin.Q, out=m3)
-            m3 *= self._ic_s2
-            self._m3_diag += self._diag
-            self._inverse3(m3, self._m3_inv)
-            np.matmul(self._m3_inv, rhs, out=acc)
+        inv_s, inv_r, k, ic = self._inv_s, self._inv_r, self._k, self._ic_s2
+        friction = p.pivot_damping_nms * inv_s
+        fx = fy = mz = 0.0  # wrench
+        sdd = w0 = w1 = w2 = 0.0  # sum of pivot rates, sum Q_i delta_dot_i (I_c/s^2 u_i - b_p/s)
+        m00 = m01 = m02 = m11 = m12 = m22 = 0.0  # sum Q_i^T Q_i
+        for i, ((ua, ub, qa, qb), a, b) in enumerate(zip(self._rows, self._torque_sum, self._torque_diff)):
+            ci, si = math.cos(y[6 + i]), math.sin(y[6 + i])
+            u3, q3 = ci * ua + si * ub, ci * qa + si * qb
+            q = ci * vy - si * vx + q3 * wz
+            u = ci * vx + si * vy + u3 * wz
+            dd = q * inv_s - wz
+            dy[6 + i] = dd
+            j = 6 + units + 2 * i
+            dy[j] = (u - k * q) * inv_r
+            dy[j + 1] = (u + k * q) * inv_r
+            fx += a * ci - b * si
+            fy += a * si + b * ci
+            mz += a * u3 + b * q3
+            sdd += dd
+            w = dd * (ic * u - friction)
+            w0 -= si * w
+            w1 += ci * w
+            w2 += q3 * w
+            m00 += si * si
+            m01 -= si * ci
+            m02 -= si * q3
+            m11 += ci * ci
+            m12 += ci * q3
+            m22 += q3 * q3
+        m = p.mass_kg
+        r0 = fx + (m * wz * vy - p.linear_damping_ns_per_m * vx) + w0
+        r1 = fy + (-m * wz * vx - p.linear_damping_ns_per_m * vy) + w1
+        r2 = mz - p.yaw_damping_nms * wz + p.pivot_damping_nms * sdd + w2
+        if ic:
+            d0, d1, d2 = self._diag
+            _, i00, i01, i02, i11, i12, i22 = inverse_sym3(m00 * ic + d0, m01 * ic, m02 * ic, m11 * ic + d1, m12 * ic,
+                                                          m22 * ic + d2)
+            dy[3] = i00 * r0 + i01 * r1 + i02 * r2
+            dy[4] = i01 * r0 + i11 * r1 + i12 * r2
+            dy[5] = i02 * r0 + i12 * r1 + i22 * r2
         else:
-            np.multiply(rhs, self._inv_diag, out=acc)
+            e0, e1, e2 = self._inv_diag
+            dy[3], dy[4], dy[5] = r0 * e0, r1 * e1, r2 * e2
 
     def _rk4(self, h: float) -> None:
-        y, k, yt = self.state, self._k, self._y
-        self._derivative(y, k[0])
-        np.multiply(k[0], 0.5 * h, out=yt)
-        yt += y
-        self._derivative(yt, k[1])
-        np.multiply(k[1], 0.5 * h, out=yt)
-        yt += y
-        self._derivative(yt, k[2])
-        np.multiply(k[2], h, out=yt)
-        yt += y
-        self._derivative(yt, k[3])
-        k[1] += k[2]
-        k[1] *= 2.0
-        k[0] += k[1]
-        k[0] += k[3]
-        k[0] *= h / 6.0
-        y += k[0]
+        """One classical Runge-Kutta step of the state; pose and wheel angles feed nothing back,
+        so the stage states only carry heading, twist and pivot angles."""
+        y, yt, k1, k2, k3, k4 = self._y, self._yt, self._k1, self._k2, self._k3, self._k4
+        coupled = range(2, 6 + self.units)
+        hh = 0.5 * h
+        self._derivative(y, k1)
+        for j in coupled:
+            yt[j] = k1[j] * hh + y[j]
+        self._derivative(yt, k2)
+        for j in coupled:
+            yt[j] = k2[j] * hh + y[j]
+        self._derivative(yt, k3)
+        for j in coupled:
+            yt[j] = k3[j] * h + y[j]
+        self._derivative(yt, k4)
+        h6 = h / 6.0
+        for j, (a, b, c, d) in enumerate(zip(k1, k2, k3, k4)):
+            y[j] += (a + (b + c) * 2.0 + d) * h6
 
     def _measure(self) -> None:
-        kin = self.kinematics
-        kin.update_jacobian(self.pivot_angles)
-        kin.wheel_speeds(self.twist, out=self.wheel_speeds)
-        kin.pivot_rates(self.twist, out=self.pivot_rates)
+        """Wheel speeds and pivot rates of the current state (what the sensors will report)."""
+        y, speeds, rates, units = self._y, self._speeds, self._rates, self.units
+        vx, vy, wz = y[3], y[4], y[5]
+        inv_s, inv_r, k = self._inv_s, self._inv_r, self._k
+        for i, (ua, ub, qa, qb) in enumerate(self._rows):
+            ci, si = math.cos(y[6 + i]), math.sin(y[6 + i])
+            q = -si * vx + ci * vy + (ci * qa + si * qb) * wz
+            u = ci * vx + si * vy + (ci * ua + si * ub) * wz
+            rates[i] = q * inv_s - wz
+            speeds[2 * i] = (u - k * q) * inv_r
+            speeds[2 * i + 1] = (u + k * q) * inv_r
 
     # --- drives -------------------------------------------------------------------------
     def _drives(self) -> None:
         """Currents from the command image: the SWMC's modes, enables, emergency bits and limits."""
-        cmd1, sp1, sp2, l1p, l1n, l2p, l2n = self._rx
-        cmd, t16, supported, en = self._cmd, self._tmp16, self._b, self._en2
-        np.copyto(cmd, cmd1)
-        np.bitwise_and(cmd, _MODE_MASK, out=t16)
-        np.equal(t16, _MODE_TORQUE, out=self._torque_mode)
-        np.equal(t16, _MODE_VELOCITY, out=self._velocity_mode)
-        np.logical_or(self._torque_mode, self._velocity_mode, out=supported)
-        for j, (bits, enable) in enumerate(_ENABLE_BITS):
-            np.bitwise_and(cmd, bits, out=t16)
-            np.equal(t16, enable, out=en[:, j])  # enabled and no emergency stop
-            en[:, j] &= supported
-        i, sp = self.currents_hw, self._sp
-        np.copyto(sp[0::2], sp1)
-        np.copyto(sp[1::2], sp2)
-        np.minimum(sp, self._ilim, out=i)  # TORQUE: the setpoints are the currents
-        np.maximum(i, self._neg_ilim, out=i)
-        if self._velocity_mode.any():
-            self._velocity_loop()
-        np.multiply(i, self._en, out=i)
-        np.multiply(i, self.params.torque_constant_nm_per_a, out=self.wheel_torques)
-        self.wheel_torques *= self._hw_sign  # the drive's motor 2 turns the other way
-        st = self._status
-        st.fill(_ENCODERS_OK)
-        for j, bit in enumerate(_ENABLED_BITS):
-            np.copyto(t16, en[:, j])
-            t16 *= bit
-            st |= t16
-
-    def _velocity_loop(self) -> None:
-        """VELOCITY mode: a proportional speed loop inside the limit fields (current bounds in this mode)."""
-        cmd1, sp1, sp2, l1p, l1n, l2p, l2n = self._rx
-        np.copyto(self._lim_p[0::2], l1p)
-        np.copyto(self._lim_p[1::2], l2p)
-        np.copyto(self._lim_n[0::2], l1n)
-        np.copyto(self._lim_n[1::2], l2n)
-        for bound in (self._lim_p, self._lim_n):
-            np.minimum(bound, self._ilim, out=bound)
-            np.maximum(bound, self._neg_ilim, out=bound)
-        vi = self._vel_i
-        np.subtract(self._sp, self._hw_speed_now(), out=vi)
-        vi *= self.params.drive_velocity_gain_a_per_rad_s
-        np.minimum(vi, self._lim_p, out=vi)
-        np.maximum(vi, self._lim_n, out=vi)
-        for j in range(2):
-            np.copyto(self._i2[:, j], self._vi2[:, j], where=self._velocity_mode)
-
-    def _hw_speed_now(self) -> F64:
-        return np.multiply(self.wheel_speeds, self._hw_sign, out=self._hw_speed)
+        p = self.params
+        ilim, kt, inv_r, k_inv_r = self._ilim, p.torque_constant_nm_per_a, self._inv_r, self._k_inv_r
+        gain, speeds = p.drive_velocity_gain_a_per_rad_s, self._speeds
+        currents, torques, status = self._currents_hw, self._torques, self._status
+        for i, (cmd1, _, sp1, sp2, l1p, l1n, l2p, l2n, _) in enumerate(_COMMANDS.iter_unpack(self._rx_src)):
+            mode = cmd1 & _MODE_MASK
+            supported = mode == _MODE_TORQUE or mode == _MODE_VELOCITY
+            en1 = supported and cmd1 & _ENABLE1_BITS == _ENABLE1
+            en2 = supported and cmd1 & _ENABLE2_BITS == _ENABLE2
+            if mode == _MODE_VELOCITY:  # a P speed loop inside the limit fields (current bounds in this mode)
+                i1 = _velocity_loop(sp1, speeds[2 * i], gain, _clip(l1p, ilim), _clip(l1n, ilim))
+                i2 = _velocity_loop(sp2, -speeds[2 * i + 1], gain, _clip(l2p, ilim), _clip(l2n, ilim))
+            else:  # TORQUE: the setpoints are the currents
+                i1, i2 = _clip(sp1, ilim), _clip(sp2, ilim)
+            if not en1:
+                i1 *= 0.0
+            if not en2:
+                i2 *= 0.0
+            currents[2 * i], currents[2 * i + 1] = i1, i2
+            t1, t2 = i1 * kt, i2 * kt * -1.0  # the drive's motor 2 turns the other way
+            torques[2 * i], torques[2 * i + 1] = t1, t2
+            self._torque_sum[i] = (t1 + t2) * inv_r
+            self._torque_diff[i] = (t2 - t1) * k_inv_r
+            status[i] = _ENCODERS_OK | (_ENABLED1 if en1 else 0) | (_ENABLED2 if en2 else 0)
 
     # --- sensors ------------------------------------------------------------------------
     def _write_sensors(self) -> None:
-        p, f = self.params, self._tx
-        speeds = self._hw_speed_now()
-        if p.wheel_velocity_noise_rad_s:
+        p, y, image, units = self.params, self._y, self._tx_src, self.units
+        speeds, rates, currents = self._speeds, self._rates, self._currents_hw
+        noisy_wheels, noisy_pivots = p.wheel_velocity_noise_rad_s, p.pivot_noise_rad
+        if noisy_wheels:
             self.rng.standard_normal(out=self._noise_w)
-            self._noise_w *= p.wheel_velocity_noise_rad_s
-            speeds += self._noise_w
-        f["status1"][:] = self._status
-        f["status2"].fill(0)
-        f["sensor_ts"].fill(self.time_ns)
-        f["setpoint_ts"].fill(self._setpoint_ns)
-        f["imu_ts"].fill(self.time_ns)
-        np.copyto(f["velocity_1"], speeds[0::2])
-        np.copyto(f["velocity_2"], speeds[1::2])
-        np.copyto(f["encoder_1"], self.wheel_angles[0::2])
-        np.negative(self.wheel_angles[1::2], out=self._enc)
-        np.copyto(f["encoder_2"], self._enc)
-        np.copyto(f["current_1_q"], self.currents_hw[0::2])
-        np.copyto(f["current_2_q"], self.currents_hw[1::2])
-        # Pivot encoder: delta + offset, wrapped to [-pi, pi).
-        enc = self._enc
-        np.add(self.pivot_angles, self._offsets, out=enc)
-        if p.pivot_noise_rad:
+        if noisy_pivots:
             self.rng.standard_normal(out=self._noise_p)
-            self._noise_p *= p.pivot_noise_rad
-            enc += self._noise_p
-        enc += math.pi
-        np.mod(enc, 2.0 * math.pi, out=enc)
-        enc -= math.pi
-        np.copyto(f["encoder_pivot"], enc)
-        np.copyto(f["velocity_pivot"], self.pivot_rates)
-        np.add(self.pivot_rates, self.twist[2], out=enc)
-        np.copyto(f["gyro_z"], enc)  # the unit's IMU turns with the unit
-        f["voltage_bus"].fill(p.bus_voltage_v)
-        f["temperature_1"].fill(p.motor_temperature_k)
-        f["temperature_2"].fill(p.motor_temperature_k)
-        f["accel_z"].fill(9.81)
-        f["temperature_imu"].fill(p.motor_temperature_k)
-        f["pressure"].fill(101325.0)
+        now, setpoint_ns, wz = self.time_ns, self._setpoint_ns, y[5]
+        volts, temp, pack = p.bus_voltage_v, p.motor_temperature_k, _SENSORS.pack_into
+        for i in range(units):
+            v1, v2 = speeds[2 * i], -speeds[2 * i + 1]  # hardware convention: wheel 2 negated
+            if noisy_wheels:
+                v1 += float(self._noise_w[2 * i]) * noisy_wheels
+                v2 += float(self._noise_w[2 * i + 1]) * noisy_wheels
+            # Pivot encoder: delta + offset, wrapped to [-pi, pi).
+            enc = y[6 + i] + self._offsets[i]
+            if noisy_pivots:
+                enc += float(self._noise_p[i]) * noisy_pivots
+            enc = (enc + math.pi) % _TWO_PI - math.pi
+            phi1, phi2 = y[6 + units + 2 * i], y[7 + units + 2 * i]
+            pack(image, i * TXPDO_BYTES, self._status[i], 0, now, setpoint_ns,
+                 phi1, v1, currents[2 * i], temp, -phi2, v2, currents[2 * i + 1], temp,
+                 enc, rates[i], volts, now, 9.81, rates[i] + wz, temp, 101325.0)  # the unit's IMU turns with it
 
     def _bind_rx(self, image: NDArray[np.uint8]) -> None:
         rec = rxpdo_view(image)
         if rec.shape[0] != self.units:
             raise ValueError(f"command image has {rec.shape[0]} wheels, plant has {self.units}")
         self._rx_src = image
-        self._rx = tuple(rec[n] for n in ("command1", "setpoint1", "setpoint2",
-                                          "limit1_p", "limit1_n", "limit2_p", "limit2_n"))
 
     def _bind_tx(self, image: NDArray[np.uint8]) -> None:
         rec = txpdo_view(image)
         if rec.shape[0] != self.units:
             raise ValueError(f"sensor image has {rec.shape[0]} wheels, plant has {self.units}")
         self._tx_src = image
-        self._tx = {name: rec[name] for name in rec.dtype.names}
+
+
+def _clip(value: float, limit: float) -> float:
+    """value within +-limit (NaN stays NaN, as np.clip leaves it)."""
+    return limit if value > limit else -limit if value < -limit else value
+
+
+def _velocity_loop(setpoint: float, speed: float, gain: float, upper: float, lower: float) -> float:
+    """The drive's VELOCITY mode: gain * (setpoint - speed), bounded by the (clipped) limit fields."""
+    current = (setpoint - speed) * gain
+    if current > upper:
+        current = upper
+    if current < lower:
+        current = lower
+    return current
