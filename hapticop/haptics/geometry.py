@@ -77,13 +77,8 @@ class BeamGeometry:
         self._m1 = np.empty(n, dtype=bool)
         self._m2 = np.empty(n, dtype=bool)
         self._dy_shift = math.nan
-        # The side points, left ones first, packed by ``select_sides`` so that ``side_clearances``
-        # works on them alone; the views of them are remade when a scan packs another number.
-        self._side_px = np.empty(n + 1)  # the last slot takes every point not selected
-        self._side_py = np.empty(n + 1)
-        self._index = np.empty(n, dtype=np.intp)
-        self._m3 = np.empty(n, dtype=bool)
-        self._select_sides_views(0, 0)
+        self._left_penalty = np.full(n, math.inf)
+        self._right_penalty = np.full(n, math.inf)
 
     def load(self, ranges: NDArray[np.floating]) -> None:
         """Scan points in the robot frame into ``px``, ``py``."""
@@ -119,8 +114,8 @@ class BeamGeometry:
         """Choose the side points for ``side_clearances``: beside or diagonal to the body now.
 
         Left: ``p_y > W/2``, right: ``p_y < −W/2``, both inside the window
-        ``−L/2 − rear ≤ p_x ≤ L/2 + ahead`` (notes §9.1). They are packed, left then right, into
-        work arrays of their own, so the per-cycle clearances touch only them.
+        ``−L/2 − rear ≤ p_x ≤ L/2 + ahead`` (notes §9.1). Stored as additive penalties
+        (0 selected, inf not), so the per-cycle selection is one addition.
         """
         win, side, px, py = self._m1, self._m2, self.px, self.py
         np.greater_equal(px, -self.half_length - rear_m, out=win)
@@ -129,40 +124,12 @@ class BeamGeometry:
         win &= self._valid
         np.greater(py, self.half_width, out=side)
         side &= win
-        n_left = self._pack(side, 0)
+        self._left_penalty.fill(math.inf)
+        np.copyto(self._left_penalty, 0.0, where=side)
         np.less(py, -self.half_width, out=side)
         side &= win
-        n_right = self._pack(side, n_left)
-        self._select_sides_views(n_left, n_right)
-
-    def _pack(self, mask: NDArray[np.bool_], start: int) -> int:
-        """Copy the points under ``mask``, in beam order, into the side arrays from ``start`` on.
-
-        Allocation-free packing (``np.compress`` allocates): each selected point's destination is
-        a running count; the others all go to the spare last slot. Returns how many were packed.
-        """
-        index = self._index
-        np.copyto(index, mask)
-        np.add.accumulate(index, out=index)
-        count = int(index[-1])
-        index += start - 1
-        np.logical_not(mask, out=self._m3)
-        np.copyto(index, self.n, where=self._m3)
-        np.put(self._side_px, index, self.px)
-        np.put(self._side_py, index, self.py)
-        return count
-
-    def _select_sides_views(self, n_left: int, n_right: int) -> None:
-        self._dy_shift = math.nan  # other points: the cached lateral term is stale
-        if (n_left, n_right) == getattr(self, "_sel_counts", None):
-            return  # the views of the last scan fit
-        self._sel_counts = (n_left, n_right)
-        n = n_left + n_right
-        self._n_left, self._n_right = n_left, n_right
-        self._sel_px, self._sel_py = self._side_px[:n], self._side_py[:n]
-        self._sel_dx, self._sel_dy = self._dx[:n], self._dy[:n]
-        self._sel_left, self._sel_right = self._work[:n_left], self._work[n_left:n]
-        self._sel_work = self._work[:n]
+        self._right_penalty.fill(math.inf)
+        np.copyto(self._right_penalty, 0.0, where=side)
 
     def side_clearances(self, shift_x_m: float, shift_y_m: float, k: int) -> tuple[float, float]:
         """Robust footprint clearance on the left and the right after the robot translates by a shift.
@@ -173,20 +140,21 @@ class BeamGeometry:
         parallel wall it stays constant, where a linearisation would not). Returns
         ``(c_left, c_right)``, ``inf`` where fewer than k points are selected.
         """
-        dx, dy, work = self._sel_dx, self._sel_dy, self._sel_work
-        np.subtract(self._sel_px, shift_x_m, out=dx)
+        dx, dy, work = self._dx, self._dy, self._work
+        np.subtract(self.px, shift_x_m, out=dx)
         np.abs(dx, out=dx)
         dx -= self.half_length
         np.maximum(dx, 0.0, out=dx)
         dx *= dx
-        if shift_y_m != self._dy_shift:  # the car map never moves sideways: often cached
-            np.subtract(self._sel_py, shift_y_m, out=dy)
+        if shift_y_m != self._dy_shift:  # the car map never moves sideways: usually cached
+            np.subtract(self.py, shift_y_m, out=dy)
             np.abs(dy, out=dy)
             dy -= self.half_width
             np.maximum(dy, 0.0, out=dy)
             dy *= dy
             self._dy_shift = shift_y_m
-        np.add(dx, dy, out=work)  # squared clearance; the square root is taken of the k-th smallest only
-        left = kth_smallest(self._sel_left, k) if self._n_left >= k else math.inf
-        right = kth_smallest(self._sel_right, k) if self._n_right >= k else math.inf
-        return math.sqrt(left), math.sqrt(right)
+        dx += dy  # squared clearance; the square root is taken of the k-th smallest only
+        np.add(dx, self._left_penalty, out=work)
+        left = kth_smallest(work, k)
+        np.add(dx, self._right_penalty, out=work)
+        return math.sqrt(left), math.sqrt(kth_smallest(work, k))
