@@ -140,17 +140,17 @@ class BeamGeometry:
         parallel wall it stays constant, where a linearisation would not). Returns
         ``(c_left, c_right)``, ``inf`` where fewer than k points are selected.
         """
-        dx, dy, work = self._dx, self._dy, self._work
-        np.subtract(self.px, shift_x_m, out=dx)
-        np.abs(dx, out=dx)
-        dx -= self.half_length
-        np.maximum(dx, 0.0, out=dx)
+        dx, dy, work, hl, hw = self._dx, self._dy, self._work, self.half_length, self.half_width
+        # How far each point lies beyond the moved body along x: p − clip(p, s − h, s + h), which is
+        # max(|p − s| − h, 0) with its sign, in three passes instead of four.
+        np.maximum(self.px, shift_x_m - hl, out=dx)
+        np.minimum(dx, shift_x_m + hl, out=dx)
+        np.subtract(self.px, dx, out=dx)
         dx *= dx
-        if shift_y_m != self._dy_shift:  # the car map never moves sideways: usually cached
-            np.subtract(self.py, shift_y_m, out=dy)
-            np.abs(dy, out=dy)
-            dy -= self.half_width
-            np.maximum(dy, 0.0, out=dy)
+        if shift_y_m != self._dy_shift:  # the car map never moves sideways: the governor's is cached
+            np.maximum(self.py, shift_y_m - hw, out=dy)
+            np.minimum(dy, shift_y_m + hw, out=dy)
+            np.subtract(self.py, dy, out=dy)
             dy *= dy
             self._dy_shift = shift_y_m
         dx += dy  # squared clearance; the square root is taken of the k-th smallest only
