@@ -15,7 +15,7 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.force_models import BrakingFieldParams
-from hapticop.haptics.governor import GovernorParams, govern_cycle, govern_scan, limit_blind
+from hapticop.haptics.governor import GovernorParams, govern_cycle, govern_scan, limit_blind, stop_gap
 from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage
 
@@ -149,7 +149,9 @@ class HapticController(Block):
         self.scan_seq = int(ranges.meta[0])
         filtered = self.filter.apply(ranges.value)  # NaN beams are free space
         self.model.update_scan(filtered)
-        if self.governor is not None:
+        if self.beams_shared:
+            self.stop_gap_m = stop_gap(self.beams, self.governor)  # type: ignore[arg-type]
+        elif self.governor is not None:
             self.stop_gap_m = govern_scan(filtered, self.beams, self.governor)
 
     def _blind_policy(self, blind: bool, twist) -> None:
@@ -186,10 +188,18 @@ class HapticController(Block):
             p.braking_field if p.force_model == "braking_field" else None)
         self.model = make_force_model(p.force_model, angles, model_params)
         self.governor: GovernorParams | None = None
+        self.beams_shared = False
         if p.governor:
             from hapticop.haptics.geometry import BeamGeometry, Footprint
 
-            self.beams, self.governor = BeamGeometry(angles, Footprint()), GovernorParams()
+            self.governor = governor = GovernorParams()
+            # The braking field's scan points serve the governor too when both see the same body and
+            # side window: the scan is then loaded and its side points selected once, not twice.
+            field = getattr(self.model, "beams", None)
+            self.beams_shared = field is not None and field.footprint == Footprint() and (
+                (self.model.params.window_rear_m, self.model.params.window_ahead_m)  # type: ignore[attr-defined]
+                == (governor.window_rear_m, governor.window_ahead_m))
+            self.beams = field if self.beams_shared else BeamGeometry(angles, Footprint())
         self.scan_seq = 0  # no scan taken: the next compute takes the one in hand
         self.stop_gap_m = 0.0
 

@@ -54,10 +54,15 @@ class GovernorParams:
 def govern_scan(ranges: NDArray[np.floating], beams: BeamGeometry, params: GovernorParams = GovernorParams()) -> float:
     """S1's work on a new scan (15 Hz): load it into ``beams``, select the side points, and return
     the stop gap ``g`` (front-of-footprint gap to the corridor's obstacles − dist2) for ``govern_cycle``."""
-    p = params
     beams.load(ranges)
-    beams.select_sides(p.window_rear_m, p.window_ahead_m)
-    return beams.corridor_gap(p.corridor_margin_m, p.robust_k) - p.stop_distance_m
+    beams.select_sides(params.window_rear_m, params.window_ahead_m)
+    return stop_gap(beams, params)
+
+
+def stop_gap(beams: BeamGeometry, params: GovernorParams = GovernorParams()) -> float:
+    """The stop gap ``g`` of the scan already in ``beams`` (for beams another user loaded and selected
+    with this footprint and side window, such as the braking field's)."""
+    return beams.corridor_gap(params.corridor_margin_m, params.robust_k) - params.stop_distance_m
 
 
 def govern_cycle(
