@@ -105,7 +105,7 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
     clock = time.perf_counter_ns
 
     def haptic(self: HapticController, compute=HapticController.compute) -> None:
-        new_scan = self.inputs.ranges.meta[0] != getattr(self, "scan_seq", -1)
+        new_scan = self.inputs.ranges.fresh
         started = clock()
         compute(self)
         samples["haptic block, new scan" if new_scan else "haptic block, no new scan"].append(clock() - started)
