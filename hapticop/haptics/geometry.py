@@ -77,6 +77,7 @@ class BeamGeometry:
         self._m1 = np.empty(n, dtype=bool)
         self._m2 = np.empty(n, dtype=bool)
         self._dy_shift = math.nan
+        self._corridor = (math.nan, 0, math.inf)
         self._left_penalty = np.full(n, math.inf)
         self._right_penalty = np.full(n, math.inf)
 
@@ -88,17 +89,24 @@ class BeamGeometry:
         np.logical_not(valid, out=self._m1)
         np.copyto(r, self.FAR_M, where=self._m1)
         np.multiply(r, self.cos, out=self.px)
-        self.px += fp.lidar_x_m
+        if fp.lidar_x_m:
+            self.px += fp.lidar_x_m
         np.multiply(r, self.sin, out=self.py)
-        self.py += fp.lidar_y_m
+        if fp.lidar_y_m:  # usually on the centre line: nothing to add
+            self.py += fp.lidar_y_m
         self._dy_shift = math.nan  # new points: the cached lateral term is stale
+        self._corridor = (math.nan, 0, math.inf)  # (margin, k, gap) of the last corridor_gap: none yet
 
     def corridor_gap(self, margin_m: float, k: int) -> float:
         """Robust distance from the footprint's front to the obstacles in the driving corridor.
 
         Corridor (notes §9.1): ``|p_y| ≤ W/2 + margin`` and ``p_x > L/2``; the gap is the k-th
-        smallest ``p_x − L/2`` there, ``inf`` if fewer than k beams hit it.
+        smallest ``p_x − L/2`` there, ``inf`` if fewer than k beams hit it. Kept per scan: the
+        braking field and the governor usually ask for the same corridor.
         """
+        last_margin, last_k, last_gap = self._corridor
+        if margin_m == last_margin and k == last_k:
+            return last_gap
         inside, ahead, work = self._m1, self._m2, self._work
         np.abs(self.py, out=self._dx)
         np.less_equal(self._dx, self.half_width + margin_m, out=inside)
@@ -108,7 +116,9 @@ class BeamGeometry:
         np.logical_not(inside, out=inside)
         np.subtract(self.px, self.half_length, out=work)
         np.copyto(work, math.inf, where=inside)
-        return kth_smallest(work, k)
+        gap = kth_smallest(work, k)
+        self._corridor = (margin_m, k, gap)
+        return gap
 
     def select_sides(self, rear_m: float, ahead_m: float) -> None:
         """Choose the side points for ``side_clearances``: beside or diagonal to the body now.
