@@ -15,6 +15,10 @@ v·T_p (``BeamGeometry.side_clearances``), c_L − v·ω·T_p²/2 ≥ dist3 give
 ω ≤ 2(c_L − dist3)/(v·T_p²) and symmetrically ω ≥ −2(c_R − dist3)/(v·T_p²).
 Sideways speed (the ropod is holonomic) gets the braking law on the current side clearance.
 
+The scan changes at 15 Hz and the command at 1 kHz, so the work is split as in the force models:
+``govern_scan`` once per scan (load, side points, stop gap), ``govern_cycle`` every cycle;
+``govern_twist`` does both for a caller that does not track scan arrival.
+
 Limits: the LIDAR's 270° cannot see behind, so reversing is not limited; turning on the spot
 (v ≤ 0) is not limited (the swept corners are not modelled).
 """
