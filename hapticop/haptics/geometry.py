@@ -80,6 +80,20 @@ class BeamGeometry:
         self._corridor = (math.nan, 0, math.inf)
         self._left_penalty = np.full(n, math.inf)
         self._right_penalty = np.full(n, math.inf)
+        # With the scanner on the body (|lidar_y| < W/2), a point left of the body (p_y > W/2) lies on
+        # a beam with sin > 0 and one right of it on a beam with sin < 0: each side's k-th smallest
+        # need only search the span of beams that can hold its points (half a scan, ascending angles).
+        left, right = self._span(self.sin > 0.0), self._span(self.sin < 0.0)
+        if not abs(footprint.lidar_y_m) < self.half_width:
+            left = right = slice(0, n)
+        self._side_views = tuple((self._dx[span], penalty[span], self._work[span])
+                                 for span, penalty in ((left, self._left_penalty), (right, self._right_penalty)))
+
+    @staticmethod
+    def _span(beams: NDArray[np.bool_]) -> slice:
+        """The smallest slice holding every True beam (empty if none)."""
+        where = np.flatnonzero(beams)
+        return slice(int(where[0]), int(where[-1]) + 1) if where.size else slice(0, 0)
 
     def load(self, ranges: NDArray[np.floating]) -> None:
         """Scan points in the robot frame into ``px``, ``py``."""
@@ -150,7 +164,7 @@ class BeamGeometry:
         parallel wall it stays constant, where a linearisation would not). Returns
         ``(c_left, c_right)``, ``inf`` where fewer than k points are selected.
         """
-        dx, dy, work, hl, hw = self._dx, self._dy, self._work, self.half_length, self.half_width
+        dx, dy, hl, hw = self._dx, self._dy, self.half_length, self.half_width
         # How far each point lies beyond the moved body along x: p − clip(p, s − h, s + h), which is
         # max(|p − s| − h, 0) with its sign, in three passes instead of four.
         np.maximum(self.px, shift_x_m - hl, out=dx)
@@ -164,7 +178,9 @@ class BeamGeometry:
             dy *= dy
             self._dy_shift = shift_y_m
         dx += dy  # squared clearance; the square root is taken of the k-th smallest only
-        np.add(dx, self._left_penalty, out=work)
-        left = kth_smallest(work, k)
-        np.add(dx, self._right_penalty, out=work)
-        return math.sqrt(left), math.sqrt(kth_smallest(work, k))
+        (left_dx, left_penalty, left_work), (right_dx, right_penalty, right_work) = self._side_views
+        np.add(left_dx, left_penalty, out=left_work)
+        left = kth_smallest(left_work, k) if left_work.shape[0] else math.inf
+        np.add(right_dx, right_penalty, out=right_work)
+        right = kth_smallest(right_work, k) if right_work.shape[0] else math.inf
+        return math.sqrt(left), math.sqrt(right)
