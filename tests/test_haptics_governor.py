@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hapticop.haptics.geometry import BeamGeometry
-from hapticop.haptics.governor import GovernorParams, govern_twist
+from hapticop.haptics.governor import GovernorParams, govern_cycle, govern_scan, govern_twist, stop_gap
 from hapticop.haptics.synthetic import hallway, robot_scan, tim561_angles
 
 from .test_haptics_handle import assert_no_allocation
@@ -101,3 +101,39 @@ def test_blind_limit_keeps_direction_and_clips_turning():
     slow = np.array([0.05, 0.0, 0.1])
     assert np.array_equal(limit_blind(slow.copy(), 0.1, 0.2), slow)  # within the limits: untouched
     assert np.array_equal(limit_blind(np.array([0.5, -0.2, 0.7]), 0.0, 0.0), [0.0, -0.0, 0.0])
+
+
+def test_scan_work_once_then_every_cycle_matches_the_full_evaluation():
+    """govern_scan once per scan and govern_cycle per command give what govern_twist gives each time."""
+    rng = np.random.default_rng(3)
+    once, every = BeamGeometry(ANGLES), BeamGeometry(ANGLES)
+    out_once, out_every = np.zeros(3), np.zeros(3)
+    for _ in range(20):
+        ranges = robot_scan(ANGLES, hallway(rng.uniform(1.2, 3.0), 8.0), (rng.uniform(0, 5), rng.uniform(-0.2, 0.2),
+                                                                           rng.uniform(-0.3, 0.3)))
+        gap = govern_scan(ranges, once)
+        for _ in range(30):
+            cmd = rng.uniform([-0.5, -0.3, -1.0], [1.5, 0.3, 1.0])
+            govern_cycle(cmd, once, gap, out_once)
+            np.testing.assert_array_equal(out_once, govern_twist(cmd, ranges, every, out_every))
+
+
+def test_the_braking_fields_beams_serve_the_governor_as_its_own_would():
+    """What the haptic controller does when the field and the governor share one BeamGeometry."""
+    from hapticop.haptics.force_models import BrakingField
+
+    rng = np.random.default_rng(9)
+    field, own = BrakingField(), BeamGeometry(ANGLES)
+    field.configure(ANGLES)
+    shared_out, own_out, force = np.zeros(3), np.zeros(3), np.zeros(3)
+    for _ in range(10):
+        ranges = robot_scan(ANGLES, hallway(rng.uniform(1.2, 3.0), 8.0), (rng.uniform(0, 5), rng.uniform(-0.2, 0.2),
+                                                                           rng.uniform(-0.3, 0.3)))
+        field.update_scan(ranges)
+        shared_gap, own_gap = stop_gap(field.beams), govern_scan(ranges, own)
+        assert shared_gap == own_gap
+        for _ in range(20):
+            cmd = rng.uniform([-0.5, -0.3, -1.0], [1.5, 0.3, 1.0])
+            field.render(np.array([0.0, 0.0, -0.01]), cmd + [0.0, 1e-9, 0.0], force, 0.02)  # its own shift first
+            govern_cycle(cmd, field.beams, shared_gap, shared_out)
+            np.testing.assert_array_equal(shared_out, govern_cycle(cmd, own, own_gap, own_out))

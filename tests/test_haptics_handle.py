@@ -143,3 +143,23 @@ def assert_no_allocation(fn, calls: int = 1000, peak_limit: int = 2048) -> None:
     grown, peak = allocation_stats(fn, calls)
     assert grown < 512, f"grew by {grown} bytes over {calls} calls"
     assert peak < peak_limit, f"a call allocated {peak} bytes at peak"
+
+
+def test_pd_in_scalar_maths_is_the_saturated_sum_on_random_inputs():
+    """The PD's scalar path against a direct numpy evaluation of eq. 5.1/5.2 (seeded)."""
+    rng = np.random.default_rng(5)
+    params = CentringParams(kp_n_per_m=55.0, kd_ns_per_m=0.2, force_limit_n=4.0)
+    origin = np.array([0.001, -0.002, 0.003])
+    pd, out = CentringPD(params, origin), np.zeros(3)
+    for _ in range(500):
+        p, v, env = rng.normal(0, 0.05, 3), rng.normal(0, 0.5, 3), rng.normal(0, 3.0, 3)
+        expected = np.clip((origin - p) * params.kp_n_per_m - v * params.kd_ns_per_m + env, -4.0, 4.0)
+        np.testing.assert_array_equal(pd.compute(p, out, v, env), expected)
+    previous = np.zeros(3)
+    pd.reset()
+    for i in range(100):  # no velocity given: the backward difference of positions
+        p = rng.normal(0, 0.01, 3)
+        v = (p - previous) / params.period_s if i else np.zeros(3)
+        expected = np.clip((origin - p) * params.kp_n_per_m - v * params.kd_ns_per_m, -4.0, 4.0)
+        np.testing.assert_allclose(pd.compute(p, out), expected, rtol=1e-12, atol=1e-12)
+        previous = p

@@ -209,3 +209,16 @@ def test_range_noise_is_seeded_and_shaped_like_the_notes_say():
     edge = np.array([0.051, 9.999, np.nan])
     RangeNoise(3, np.random.default_rng(0), sigma_m=0.5).apply(edge)
     assert np.isnan(edge[2]) and all(np.isnan(v) or 0.05 <= v <= 10.0 for v in edge)
+
+
+def test_clearance_of_one_pose_agrees_with_the_vectorised_trajectory_form():
+    """`clearance` (scalar, per cycle) and `clearances` (vectorised) are the same equation."""
+    rng = np.random.default_rng(11)
+    worlds = [(World.from_geometry(HallwayGeometry.named(n)), HallwayGeometry.named(n).footprint) for n in ("H1", "H4")]
+    worlds.append((World(rng.uniform(-2.0, 2.0, (8, 2, 2))), Footprint(0.5, 0.3)))
+    for world, fp in worlds:
+        lo, hi = world.segments.reshape(-1, 2).min(axis=0) - 0.5, world.segments.reshape(-1, 2).max(axis=0) + 0.5
+        poses = np.column_stack([rng.uniform(lo, hi, (2000, 2)), rng.uniform(-4.0, 4.0, 2000)])
+        single = np.array([world.clearance(p, fp)[0] for p in poses])
+        np.testing.assert_allclose(single, world.clearances(poses, fp), rtol=1e-12, atol=1e-12)
+        assert (single == 0.0).any() and (single > 0.0).any()

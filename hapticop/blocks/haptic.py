@@ -15,7 +15,7 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.force_models import BrakingFieldParams
-from hapticop.haptics.governor import govern_twist, limit_blind
+from hapticop.haptics.governor import GovernorParams, govern_cycle, govern_scan, limit_blind, stop_gap
 from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage
 
@@ -112,22 +112,24 @@ class HapticController(Block):
                 port.value[:] = 0.0
                 port.publish()
             return
-        if p_in.ranges.fresh:
-            self.model.update_scan(self.filter.apply(p_in.ranges.value))  # NaN beams are free space
-        if p_in.ranges.valid:
+        ranges = p_in.ranges
+        if ranges.meta[0] != self.scan_seq:  # a scan not taken yet (it may have come while configuring)
+            self._take_scan()
+        scan_ok = ranges.valid
+        if scan_ok:
             self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
-                              scan_age_s=p_in.ranges.age_ns() / 1e9)
+                              scan_age_s=ranges.age_ns() / 1e9)
         else:
             out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
+        setpoint = out.velocity_setpoint.value
         self.pd.compute(p_in.handle_position.value, out.force.value, p_in.handle_velocity.value,
                         out.environment_force.value)
-        handle_to_twist(p_in.handle_position.value, out.velocity_setpoint.value, self.driving)
+        handle_to_twist(p_in.handle_position.value, setpoint, self.driving)
         if self.flags["robot_held"]:
-            out.velocity_setpoint.value[:] = 0.0
-        if self.params.governor and p_in.ranges.valid:
-            govern_twist(out.velocity_setpoint.value, self.filter.out, self.beams, out.velocity_setpoint.value,
-                         self.governor)
-        self._blind_policy(not p_in.ranges.valid, out.velocity_setpoint.value)
+            setpoint[:] = 0.0
+        if self.governor is not None and scan_ok:
+            govern_cycle(setpoint, self.beams, self.stop_gap_m, setpoint, self.governor)
+        self._blind_policy(not scan_ok, setpoint)
         out.force.publish()
         out.environment_force.publish()
         out.velocity_setpoint.publish()
@@ -141,6 +143,17 @@ class HapticController(Block):
             getattr(self.outputs, port).publish()
 
     # -- helpers ------------------------------------------------------------------------------
+    def _take_scan(self) -> None:
+        """What depends on the scan alone, once per scan (15 Hz), not per cycle: filter, field, governor."""
+        ranges = self.inputs.ranges
+        self.scan_seq = int(ranges.meta[0])
+        filtered = self.filter.apply(ranges.value)  # NaN beams are free space
+        self.model.update_scan(filtered)
+        if self.beams_shared:
+            self.stop_gap_m = stop_gap(self.beams, self.governor)  # type: ignore[arg-type]
+        elif self.governor is not None:
+            self.stop_gap_m = govern_scan(filtered, self.beams, self.governor)
+
     def _blind_policy(self, blind: bool, twist) -> None:
         """Without a fresh scan nothing can be felt nor governed: stop, or creep (the policy says)."""
         if blind != self.blind:
@@ -174,11 +187,21 @@ class HapticController(Block):
         model_params = params(k3_n_per_m=p.k3_n_per_m, k4_n_per_m=p.k4_n_per_m, d_max_m=p.d_max_m) if params else (
             p.braking_field if p.force_model == "braking_field" else None)
         self.model = make_force_model(p.force_model, angles, model_params)
+        self.governor: GovernorParams | None = None
+        self.beams_shared = False
         if p.governor:
             from hapticop.haptics.geometry import BeamGeometry, Footprint
-            from hapticop.haptics.governor import GovernorParams
 
-            self.beams, self.governor = BeamGeometry(angles, Footprint()), GovernorParams()
+            self.governor = governor = GovernorParams()
+            # The braking field's scan points serve the governor too when both see the same body and
+            # side window: the scan is then loaded and its side points selected once, not twice.
+            field = getattr(self.model, "beams", None)
+            self.beams_shared = field is not None and field.footprint == Footprint() and (
+                (self.model.params.window_rear_m, self.model.params.window_ahead_m)  # type: ignore[attr-defined]
+                == (governor.window_rear_m, governor.window_ahead_m))
+            self.beams = field if self.beams_shared else BeamGeometry(angles, Footprint())
+        self.scan_seq = 0  # no scan taken: the next compute takes the one in hand
+        self.stop_gap_m = 0.0
 
     def _centre_only(self) -> None:
         """The PD alone: no obstacle force and no motion while not running."""

@@ -84,7 +84,8 @@ class HallwayWorld(Block):
         np.copyto(scene.environment_force, force.value if force.valid else 0.0)
         clearance, crashed = scene.world.clearance(scene.pose, self.geometry.footprint)
         if not self.ended:
-            self.velocity[0], self.velocity[1] = scene.twist[0], scene.twist[2]
+            vx, vy, wz = scene.twist.tolist()  # floats: numpy scalars are slow to compare
+            self.velocity[0], self.velocity[1] = vx, wz
             setpoint = self.inputs.velocity_setpoint.value
             self.command[0], self.command[1] = setpoint[0], setpoint[2]
             self.recorder.append(t, scene.pose, robot_velocity=self.velocity, cmd=self.command,
@@ -92,7 +93,7 @@ class HallwayWorld(Block):
                                  force_env=scene.environment_force, force_hand=scene.hand_force,
                                  force_device=scene.device_force, clearance=clearance)
             g = self.geometry
-            moving = abs(scene.twist[0]) >= g.still_speed_mps or abs(scene.twist[1]) >= g.still_speed_mps
+            moving = abs(vx) >= g.still_speed_mps or abs(vy) >= g.still_speed_mps
             self.still_since = None if moving else (t if self.still_since is None else self.still_since)
             still = self.still_since is not None and t - self.still_since >= g.still_time_s
             if crashed:

@@ -9,7 +9,8 @@ Modules:
   ``geometry``      robot footprint and precomputed beam geometry (points, corridor gap, side clearance)
   ``force_models``  the ``ForceModel`` interface and the ``none``/``thesis``/``thesis_corrected``/
                     ``braking_field`` (M1) models
-  ``governor``      robot-side speed governor S1
+  ``governor``      robot-side speed governor S1 (its scan work once per scan, the limit per cycle)
   ``synthetic``     ray-cast scans of wall segments, for tests and benchmarks
-  ``bench``         hand micro-benchmark: ``python -m hapticop.haptics.bench``
+
+Hand micro-benchmark of all of them: ``python bench/micro_haptics.py``.
 """

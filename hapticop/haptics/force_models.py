@@ -353,24 +353,28 @@ class BrakingField(ForceModel):
         self.c_left_m, self.c_right_m = c_left, c_right
         start = p.side_distance_m + p.side_margin_m
         band = start - p.bumper_m
-        self._limit(0, rho_z)
-        self._limit(1, _sat01((start - c_left) / band))
-        self._limit(2, _sat01((start - c_right) / band))
+        # The risk state, each part moved towards its target by at most the rate limit's step.
+        step = p.risk_rate_per_s * p.period_s
         risk = self.risk
+        r_z, r_left, r_right = risk.tolist()
+        r_z += _step_towards(r_z, rho_z, step)
+        r_left += _step_towards(r_left, _sat01((start - c_left) / band), step)
+        r_right += _step_towards(r_right, _sat01((start - c_right) / band), step)
+        risk[0], risk[1], risk[2] = r_z, r_left, r_right
         z = float(handle_pos[HANDLE_Z])
-        fz = BACKWARD_FORCE_Z * p.fz_max_n * float(risk[0]) * _sat01(-z / p.z_ramp_m) if z < 0.0 else 0.0
+        fz = BACKWARD_FORCE_Z * p.fz_max_n * r_z * _sat01(-z / p.z_ramp_m) if z < 0.0 else 0.0
         speed_scale = _sat01(abs(vx) / p.lateral_speed_ref_mps)
         # Push towards the side with less risk: the right (+x) when the left wall is nearer.
-        fx = RIGHTWARD_FORCE_X * p.fx_max_n * (float(risk[1]) - float(risk[2])) * speed_scale
+        fx = RIGHTWARD_FORCE_X * p.fx_max_n * (r_left - r_right) * speed_scale
         out_force[HANDLE_X] = fx
         out_force[HANDLE_Y] = 0.0
         out_force[HANDLE_Z] = fz
         return out_force
 
-    def _limit(self, i: int, target: float) -> None:
-        step = self.params.risk_rate_per_s * self.params.period_s
-        now = float(self.risk[i])
-        self.risk[i] = now + max(-step, min(step, target - now))
+
+def _step_towards(now: float, target: float, step: float) -> float:
+    """The change that moves ``now`` towards ``target`` by at most ``step`` (the risk's rate limit)."""
+    return max(-step, min(step, target - now))
 
 
 FORCE_MODELS: dict[str, type[ForceModel]] = {

@@ -15,6 +15,10 @@ v·T_p (``BeamGeometry.side_clearances``), c_L − v·ω·T_p²/2 ≥ dist3 give
 ω ≤ 2(c_L − dist3)/(v·T_p²) and symmetrically ω ≥ −2(c_R − dist3)/(v·T_p²).
 Sideways speed (the ropod is holonomic) gets the braking law on the current side clearance.
 
+The scan changes at 15 Hz and the command at 1 kHz, so the work is split as in the force models:
+``govern_scan`` once per scan (load, side points, stop gap), ``govern_cycle`` every cycle;
+``govern_twist`` does both for a caller that does not track scan arrival.
+
 Limits: the LIDAR's 270° cannot see behind, so reversing is not limited; turning on the spot
 (v ≤ 0) is not limited (the swept corners are not modelled).
 """
@@ -51,31 +55,41 @@ class GovernorParams:
     """k-th smallest clearance: ignores up to k − 1 spurious beams."""
 
 
-def govern_twist(
+def govern_scan(ranges: NDArray[np.floating], beams: BeamGeometry, params: GovernorParams = GovernorParams()) -> float:
+    """S1's work on a new scan (15 Hz): load it into ``beams``, select the side points, and return
+    the stop gap ``g`` (front-of-footprint gap to the corridor's obstacles − dist2) for ``govern_cycle``."""
+    beams.load(ranges)
+    beams.select_sides(params.window_rear_m, params.window_ahead_m)
+    return stop_gap(beams, params)
+
+
+def stop_gap(beams: BeamGeometry, params: GovernorParams = GovernorParams()) -> float:
+    """The stop gap ``g`` of the scan already in ``beams`` (for beams another user loaded and selected
+    with this footprint and side window, such as the braking field's)."""
+    return beams.corridor_gap(params.corridor_margin_m, params.robust_k) - params.stop_distance_m
+
+
+def govern_cycle(
     twist_cmd: NDArray[np.float64],
-    ranges: NDArray[np.floating],
     beams: BeamGeometry,
+    gap_m: float,
     out: NDArray[np.float64],
     params: GovernorParams = GovernorParams(),
 ) -> NDArray[np.float64]:
-    """Write the executed twist ``[vx, vy, wz]`` for a commanded one into ``out``; allocation-free.
+    """Write the executed twist ``[vx, vy, wz]`` for a commanded one into ``out`` (1 kHz); allocation-free.
 
-    ``beams`` is a ``BeamGeometry`` for the scan's angles (robot frame) and footprint, built once.
+    ``beams`` and ``gap_m`` are what ``govern_scan`` made of the latest scan.
     Each output component has the command's sign and at most its magnitude.
     """
     p = params
     a2 = 2.0 * p.brake_decel_mps2
-    beams.load(ranges)
     vx = float(twist_cmd[TWIST_VX])
     vy = float(twist_cmd[TWIST_VY])
     wz = float(twist_cmd[TWIST_WZ])
 
     if vx > 0.0:
-        gap = beams.corridor_gap(p.corridor_margin_m, p.robust_k) - p.stop_distance_m
-        vx = min(vx, math.sqrt(a2 * gap) if gap > 0.0 else 0.0)
+        vx = min(vx, math.sqrt(a2 * gap_m) if gap_m > 0.0 else 0.0)
 
-    if vy != 0.0 or (vx > 0.0 and wz != 0.0):
-        beams.select_sides(p.window_rear_m, p.window_ahead_m)
     if vy != 0.0:
         c_left, c_right = beams.side_clearances(0.0, 0.0, p.robust_k)
         room = (c_left if vy > 0.0 else c_right) - p.bumper_m
@@ -95,6 +109,20 @@ def govern_twist(
     out[TWIST_VY] = vy
     out[TWIST_WZ] = wz
     return out
+
+
+def govern_twist(
+    twist_cmd: NDArray[np.float64],
+    ranges: NDArray[np.floating],
+    beams: BeamGeometry,
+    out: NDArray[np.float64],
+    params: GovernorParams = GovernorParams(),
+) -> NDArray[np.float64]:
+    """``govern_scan`` then ``govern_cycle``: one full evaluation, for a caller that does not track scan arrival.
+
+    ``beams`` is a ``BeamGeometry`` for the scan's angles (robot frame) and footprint, built once.
+    """
+    return govern_cycle(twist_cmd, beams, govern_scan(ranges, beams, params), out, params)
 
 
 def limit_blind(twist: NDArray[np.float64], speed_mps: float, turn_rad_s: float) -> NDArray[np.float64]:

@@ -75,10 +75,9 @@ class CentringPD:
 
     def __init__(self, params: CentringParams = CentringParams(), origin: ArrayLike = (0.0, 0.0, 0.0)) -> None:
         self.params = params
-        self._origin = np.array(origin, dtype=np.float64).reshape(3)
-        self._prev = np.zeros(3)
-        self._vel = np.zeros(3)
-        self._damp = np.zeros(3)
+        ox, oy, oz = np.asarray(origin, dtype=np.float64).reshape(3).tolist()
+        self._origin = (ox, oy, oz)
+        self._prev = (0.0, 0.0, 0.0)
         self._primed = False
 
     def reset(self) -> None:
@@ -92,33 +91,47 @@ class CentringPD:
         velocity: NDArray[np.float64] | None = None,
         env_force: NDArray[np.float64] | None = None,
     ) -> NDArray[np.float64]:
-        """Write the saturated handle force for ``position`` (m, device frame) into ``out`` (N)."""
+        """Write the saturated handle force for ``position`` (m, device frame) into ``out`` (N).
+
+        Scalar maths on the three axes: for 3-vectors, Python floats beat numpy's per-call cost.
+        """
         p = self.params
-        vel = velocity
-        if vel is None:
-            vel = self._vel
-            if self._primed:
-                np.subtract(position, self._prev, out=vel)
-                vel *= 1.0 / p.period_s
-            else:
-                vel.fill(0.0)
-            np.copyto(self._prev, position)
+        px, py, pz = float(position[0]), float(position[1]), float(position[2])
+        if velocity is not None:
+            vx, vy, vz = float(velocity[0]), float(velocity[1]), float(velocity[2])
+        elif self._primed:
+            qx, qy, qz = self._prev
+            rate = 1.0 / p.period_s
+            vx, vy, vz = (px - qx) * rate, (py - qy) * rate, (pz - qz) * rate
+        else:
+            vx = vy = vz = 0.0
+        if velocity is None:
+            self._prev = (px, py, pz)
             self._primed = True
-        # out = Kp·(origin − p) − Kd·ṗ (+ F_env), in place.
-        np.subtract(self._origin, position, out=out)
-        out *= p.kp_n_per_m
-        if p.kd_ns_per_m:
-            np.multiply(vel, p.kd_ns_per_m, out=self._damp)
-            out -= self._damp
+        # Kp·(origin − p) − Kd·ṗ (+ F_env), saturated per axis.
+        kp, kd, limit = p.kp_n_per_m, p.kd_ns_per_m, p.force_limit_n
+        ox, oy, oz = self._origin
+        fx, fy, fz = (ox - px) * kp, (oy - py) * kp, (oz - pz) * kp
+        if kd:
+            fx, fy, fz = fx - vx * kd, fy - vy * kd, fz - vz * kd
         if env_force is not None:
-            out += env_force
-        return saturate(out, p.force_limit_n)
+            fx, fy, fz = fx + float(env_force[0]), fy + float(env_force[1]), fz + float(env_force[2])
+        out[0] = _clip(fx, limit)
+        out[1] = _clip(fy, limit)
+        out[2] = _clip(fz, limit)
+        return out
 
 
 def saturate(force: NDArray[np.float64], limit_n: float) -> NDArray[np.float64]:
     """Clip each axis to ±limit in place: the Falcon's limit is per translational axis, not a norm."""
     np.minimum(force, limit_n, out=force)  # two ufuncs: np.clip's wrapper costs more than both
     return np.maximum(force, -limit_n, out=force)
+
+
+def _clip(f: float, limit: float) -> float:
+    """``saturate`` for one float (the PD's scalar path); NaN stays NaN, as numpy's minimum and maximum leave it."""
+    f = limit if f > limit else f
+    return -limit if f < -limit else f
 
 
 def dead_zone(u: float, width: float, subtractive: bool = True) -> float:

@@ -66,23 +66,24 @@ class MovingAverage:
         self._isnan = np.empty(n, dtype=bool)
         self._count = np.empty(m)
         self._empty = np.empty(m, dtype=bool)
+        # The windows' j-th members as views, made once: slicing per scan costs more than adding.
+        self._shifted = [(self._values[j : j + m], self._valid[j : j + m]) for j in range(w)]
         return self.angles
 
     def apply(self, ranges: NDArray[np.floating]) -> NDArray[np.float64]:
         """Filter one scan; returns ``self.out`` (overwritten by the next call)."""
-        w, m = self.window, self.out.shape[0]
         vals, valid, isnan, out, count = self._values, self._valid, self._isnan, self.out, self._count
         np.copyto(vals, ranges)
         np.isnan(vals, out=isnan)
-        np.logical_not(isnan, out=isnan)  # now: valid
-        np.copyto(valid, isnan)
-        np.logical_not(isnan, out=isnan)  # back to: invalid
+        np.copyto(valid, isnan)  # 1.0 where invalid ...
+        np.subtract(1.0, valid, out=valid)  # ... and now where valid
         np.copyto(vals, 0.0, where=isnan)
-        np.copyto(out, vals[:m])
-        np.copyto(count, valid[:m])
-        for j in range(1, w):
-            out += vals[j : j + m]
-            count += valid[j : j + m]
+        (first_vals, first_valid), *rest = self._shifted
+        np.copyto(out, first_vals)
+        np.copyto(count, first_valid)
+        for shifted_vals, shifted_valid in rest:
+            out += shifted_vals
+            count += shifted_valid
         np.less(count, self.min_valid - 0.5, out=self._empty)
         np.maximum(count, 1.0, out=count)
         out /= count

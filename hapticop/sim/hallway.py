@@ -177,6 +177,10 @@ class World:
         self._ay = self.segments[:, 0, 1].copy()
         self._ex = self.segments[:, 1, 0] - self._ax
         self._ey = self.segments[:, 1, 1] - self._ay
+        self._walls = tuple(
+            (float(ax), float(ay), float(bx), float(by), min(ax, bx), max(ax, bx), min(ay, by), max(ay, by))
+            for (ax, ay), (bx, by) in self.segments.tolist()
+        )
         self._wx = np.empty(m)
         self._wy = np.empty(m)
         self._tnum = np.empty((1, m))
@@ -254,9 +258,13 @@ class World:
     def clearance(self, pose: ArrayLike, footprint: Footprint, margin: float = 0.0) -> tuple[float, bool]:
         """Smallest distance from the footprint to any wall, and whether it is <= margin (0: touching a wall).
 
+        The judge asks every cycle, so this is scalar maths on the walls' precomputed end points; it agrees
+        with `clearances` (the vectorised form for whole trajectories) to rounding.
         Counting virtual-bumper collisions (dist3, with hysteresis) is the metrics' job, not this one's.
         """
-        d = float(self.clearances(np.asarray(pose, dtype=np.float64)[None, :], footprint)[0])
+        x, y, th = float(pose[0]), float(pose[1]), float(pose[2])  # type: ignore[index]
+        d = _footprint_clearance(x, y, math.cos(th), math.sin(th),
+                                 0.5 * footprint.length_m, 0.5 * footprint.width_m, self._walls)
         return d, d <= margin
 
     def clearances(
@@ -307,6 +315,57 @@ def _footprint_distance(poses: F64, footprint: Footprint, segs: F64) -> F64:
         & (np.abs(ex * ay - ey * ax)[..., 0] <= (hl * np.abs(ey) + hw * np.abs(ex))[..., 0])
     )
     return np.where(overlap, 0.0, np.minimum(ends, corners)).min(axis=1)
+
+
+def _footprint_clearance(
+    x: float, y: float, c: float, s: float, hl: float, hw: float,
+    walls: tuple[tuple[float, float, float, float, float, float, float, float], ...],
+) -> float:
+    """`_footprint_distance` for one pose (centre x, y; heading cos c, sin s) in scalar maths.
+
+    Each wall is (ax, ay, bx, by, x_min, x_max, y_min, y_max). A wall whose bounding box is farther from
+    the centre than the footprint reaches cannot be the nearest one and is skipped; an overlap is 0 at once.
+    Distances are compared squared, with one square root at the end.
+    """
+    reach = math.sqrt(hl * hl + hw * hw)  # the footprint lies inside this circle about its centre
+    best = math.inf  # squared distance
+    for ax, ay, bx, by, x0, x1, y0, y1 in walls:
+        gx = x0 - x if x < x0 else (x - x1 if x > x1 else 0.0)
+        gy = y0 - y if y < y0 else (y - y1 if y > y1 else 0.0)
+        bound = math.sqrt(gx * gx + gy * gy) - reach - 1e-9  # a lower bound of this wall's distance
+        if bound > 0.0 and bound * bound > best:
+            continue
+        rx, ry = ax - x, ay - y
+        lx0, ly0 = c * rx + s * ry, -s * rx + c * ry
+        rx, ry = bx - x, by - y
+        lx1, ly1 = c * rx + s * ry, -s * rx + c * ry
+        ex, ey = lx1 - lx0, ly1 - ly0
+        if ((lx0 if lx0 < lx1 else lx1) <= hl and (lx0 if lx0 > lx1 else lx1) >= -hl
+                and (ly0 if ly0 < ly1 else ly1) <= hw and (ly0 if ly0 > ly1 else ly1) >= -hw
+                and abs(ex * ly0 - ey * lx0) <= hl * abs(ey) + hw * abs(ex)):
+            return 0.0  # separating-axis test: they overlap
+        # the segment's end points to the box
+        dx, dy = abs(lx0) - hl, abs(ly0) - hw
+        dx, dy = (dx if dx > 0.0 else 0.0), (dy if dy > 0.0 else 0.0)
+        d = dx * dx + dy * dy
+        dx, dy = abs(lx1) - hl, abs(ly1) - hw
+        dx, dy = (dx if dx > 0.0 else 0.0), (dy if dy > 0.0 else 0.0)
+        d1 = dx * dx + dy * dy
+        if d1 < d:
+            d = d1
+        # the box's corners to the segment
+        ll = ex * ex + ey * ey
+        den = ll if ll > 0.0 else 1.0
+        for kx, ky in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw)):
+            u = ((kx - lx0) * ex + (ky - ly0) * ey) / den
+            u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
+            dx, dy = kx - (lx0 + u * ex), ky - (ly0 + u * ey)
+            d1 = dx * dx + dy * dy
+            if d1 < d:
+                d = d1
+        if d < best:
+            best = d
+    return math.sqrt(best)
 
 
 class RangeNoise:

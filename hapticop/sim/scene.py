@@ -9,6 +9,7 @@ holds the handle in it. The blocks themselves still know nothing of each other.
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass, field
 
@@ -65,8 +66,8 @@ def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray)
     """The robot's pose in the hallway: its start pose composed with how far it has moved
     (`moved` = [x, y, theta] from where it started, in the start frame), into `out`."""
     sx, sy, st = start
-    rx, ry, rt = moved
-    c, s = np.cos(st), np.sin(st)
+    rx, ry, rt = float(moved[0]), float(moved[1]), float(moved[2])
+    c, s = math.cos(st), math.sin(st)
     out[0] = sx + c * rx - s * ry
     out[1] = sy + s * rx + c * ry
     out[2] = st + rt
