@@ -11,6 +11,7 @@ raises leaves the owner in its state with a failure code until the mediator deci
 
 from __future__ import annotations
 
+import gc
 import traceback
 from dataclasses import dataclass
 from typing import Callable
@@ -69,6 +70,11 @@ class Lifecycle:
         self.states[self.index] = new
         if new is State.CAPABILITY_CONFIGURATION:
             self.capabilities_ready = False
+        elif new is State.RUNNING:
+            # What is alive once an owner runs is the system's furniture: frozen, the garbage
+            # collector never walks it again (a full collection of a process with numpy and
+            # pydantic loaded stalls every thread for about 100 ms here).
+            gc.freeze()
         self.log.info("lcsm %s -> %s", old.flag_name, new.flag_name)
 
     def _requested(self, name: str) -> bool:

@@ -55,8 +55,15 @@ def prepare_process(threads: list[Thread], log: Logger) -> None:
 
 
 def apply(spec: Thread, log: Logger) -> None:
-    """Apply the thread's declared priority and affinity to the calling thread."""
-    if spec.priority is not None:
+    """Apply the thread's declared priority and affinity to the calling thread.
+
+    A thread without a priority gets normal scheduling explicitly: a thread inherits its
+    creator's policy, and threads are started by the main thread, which may be real-time.
+    """
+    if spec.priority is None:
+        if os.sched_getscheduler(0) != os.SCHED_OTHER:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    else:
         lock_memory(log)  # already done by prepare_process; a no-op then
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(spec.priority))
