@@ -164,3 +164,20 @@ def test_a_data_woken_thread_cycles_when_its_device_sends(tmp_path, wake, least,
     round_trips = int((tmp_path / "run-c" / "pingpong.round_trips").read_text())
     assert round_trips >= least
     assert most is None or round_trips <= most  # one per cycle: the reply waits for the deadline
+
+
+def test_the_hallway_in_real_time_scans_through_a_scanner_process_and_leaves_nothing_behind(tmp_path):
+    """The LIDAR thread in its own process, its simulated scanner a program of its own that
+    sees the robot through the world's shared memory; all of it gone after the run."""
+    import os
+    from pathlib import Path
+
+    text = (ROOT / "systems" / "hallway.yaml").read_text()
+    result = compose(tmp_path, text, clock="realtime", duration="2s", name="hallway")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert result.timing["activities"]["lidar"]["steps"] > 5
+    assert "LIDAR streaming" in (tmp_path / "run-hallway" / "lidar.log").read_text()
+    assert result.timing["activities"]["haptic"]["steps"] > 500
+    assert not list(Path("/dev/shm").glob(f"hapticop-scene-{os.getpid()}-*"))
+    scanners = subprocess.run(["pgrep", "-f", "hapticop.sim.scanner_process"], capture_output=True, text=True)
+    assert scanners.stdout.strip() == ""

@@ -20,7 +20,7 @@ def test_hallway_is_the_thesis_layout():
     assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 1_000_000, 1_000_000]
     assert threads["fieldbus"].priority == 39 and threads["watchdog"].priority == 40
     # the thesis's thread 0, plus the simulated world that stands in for the real one
-    assert threads["main"].schedules == {0: ["mediator"], 1: ["mediator", "falcon", "haptic", "world"]}
+    assert threads["main"].schedules == {0: ["mediator"], 1: ["mediator", "world", "falcon", "haptic"]}
     assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
     assert set(composition.activities) == thesis | {"world"}

@@ -66,12 +66,16 @@ class Lidar(Block):
 
         p = self.params
         host, port = p.host, p.port
-        self.simulator = None
         if p.driver == "sim":
-            self.simulator = self._simulator()
-            if self.simulator is None:
-                return False  # the world activity has not opened the simulated world yet
-            host, port = "127.0.0.1", self.simulator.port
+            if getattr(self, "scanner", None) is None:
+                self.scanner = self._simulator()
+                if self.scanner is None:
+                    return False  # the world activity has not opened the simulated world yet
+            if not self.clock.virtual and not self.scanner.ready():
+                return False  # its process is starting
+            host, port = "127.0.0.1", self.scanner.port
+        else:
+            self.scanner = None
         from hapticop.devices.sick.cola import OutputRange, startup_sequence
 
         # The SICK frame counts from the sensor's right side: robot-frame -135 deg is SICK -45 deg.
@@ -88,38 +92,36 @@ class Lidar(Block):
         return True
 
     def _simulator(self):
-        from hapticop.devices.sick.simulator import ANGLES_RAD, TiMSimulator
-        from hapticop.sim.scene import find_scene
+        """The simulated scanner: stepped here under the virtual clock, a process of its own in
+        real time (hapticop.sim.scanner_process says why); None until the world is open."""
+        from hapticop.sim.scanner_process import ScannerProcess, scan_of
+        from hapticop.sim.scene import find_scene, find_shared_scene
+
+        if not self.clock.virtual:  # this thread may run in a child process of the world's
+            scene = find_shared_scene(self.params.scene)
+            if scene is None:
+                return None
+            seed = int(self.rng.integers(1 << 31))
+            return ScannerProcess(scene.shared_pose.name, self.params.scan_rate_hz, seed)
+        from hapticop.devices.sick.simulator import TiMSimulator
 
         scene = find_scene(self.params.scene)
         if scene is None:
             return None
-        lidar = scene.geometry.lidar
-        world, mount = scene.world, np.asarray(lidar.mount, dtype=float)
-        angles = np.asarray(ANGLES_RAD, dtype=float)
-        cast = np.zeros(len(angles))
-
-        def ranges_m(_now_ns: int) -> np.ndarray:
-            world.raycast(scene.pose, mount, angles, cast, max_range=lidar.max_range_m, min_range=lidar.min_range_m)
-            np.nan_to_num(cast, copy=False, nan=0.0)  # no echo: the TiM reports 0
-            return cast
-
-        simulator = TiMSimulator("127.0.0.1", 0, ranges_m=ranges_m, noise_std_m=lidar.noise_sigma_m, rng=self.rng,
-                                 clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
-        if not self.clock.virtual:
-            simulator.start()  # its own thread; under the virtual clock compute() steps it
-        return simulator
+        return TiMSimulator("127.0.0.1", 0, ranges_m=scan_of(scene.world, scene.geometry, scene.pose),
+                            noise_std_m=scene.geometry.lidar.noise_sigma_m, rng=self.rng,
+                            clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
 
     def compute(self) -> None:
         now = self.clock.now_ns()
-        if self.simulator is not None:
+        if self.scanner is not None:
             if self.params.sim_fault != self.fault:
                 self._inject(self.params.sim_fault)
-            if self.fault == "garbage":
-                self.simulator.inject_garbage()
             if self.clock.virtual:
+                if self.fault == "garbage":
+                    self.scanner.inject_garbage()
                 with self.context.simulation:
-                    self.simulator.step(now)
+                    self.scanner.step(now)
         if self.client.poll(now) and self.client.latest_scan(self.ranges, self.angles):
             out = self.outputs
             np.copyto(out.ranges.value, self.ranges)
@@ -142,12 +144,15 @@ class Lidar(Block):
 
     def _inject(self, fault: str) -> None:
         """Switch the simulated scanner's fault (a patch changed `sim_fault`)."""
-        simulator = self.simulator
-        simulator.unplug(fault == "unplugged")
-        if fault == "stall":
-            simulator.stall()
+        scanner = self.scanner
+        if not self.clock.virtual:
+            scanner.fault(fault)  # the process keeps it up (garbage: between its telegrams)
         else:
-            simulator.resume()
+            scanner.unplug(fault == "unplugged")
+            if fault == "stall":
+                scanner.stall()
+            else:
+                scanner.resume()
         if fault == "none":
             self.log.info("simulated scanner fault cleared")
         else:
@@ -157,7 +162,9 @@ class Lidar(Block):
     def clean(self) -> None:
         if getattr(self, "client", None) is not None:
             self.client.close()
-        if getattr(self, "simulator", None) is not None:
-            if not self.clock.virtual:
-                self.simulator.stop()
-            self.simulator.close()
+        if getattr(self, "scanner", None) is not None:
+            if self.clock.virtual:
+                self.scanner.close()
+            else:
+                self.scanner.stop()
+            self.scanner = None
