@@ -105,6 +105,7 @@ class System:
         self.main_name = next(t for t, spec in self.composition.threads.items() if spec.deploy == "main")
         self.main: CyclicThread = self.built.threads[self.main_name]
         self.processes: dict[str, _ProcessThread] = {}
+        self._next_watch_ns = 0
         self.os_threads: dict[str, threading.Thread] = {}
         self.virtual_queue: list[tuple[int, int, str]] = []
         self.started = False
@@ -362,7 +363,15 @@ class System:
         handle = self.processes.get(thread)
         return handle is not None and handle.reported
 
+    WATCH_PROCESSES_NS = 10_000_000  # a lost process is noticed within 10 ms (the streams' ages tell sooner)
+
     def _watch_processes(self) -> None:
+        """Children that ended unasked; looked at every 10 ms, not every cycle: each look costs
+        two system calls per child."""
+        now = self.clock.now_ns()
+        if now < self._next_watch_ns:
+            return
+        self._next_watch_ns = now + self.WATCH_PROCESSES_NS
         for handle in {id(h): h for h in self.processes.values()}.values():
             if handle.reported or handle.process.is_alive():
                 continue
