@@ -21,9 +21,13 @@ from hapticop.runtime.timing import record
 
 
 class OriginRelay:
-    """One activity's share: merge its inputs' origins into its outputs, time its sinks."""
+    """One activity's share: merge its inputs' origins into its outputs, time its sinks.
 
-    __slots__ = ("inputs", "outputs", "sinks", "region", "now_ns", "newest", "seen")
+    The ports' origin stamps are rows of two arrays the relay owns, so the merge is one
+    reduction and one broadcast copy per step, however many ports the activity has.
+    """
+
+    __slots__ = ("inputs", "outputs", "sinks", "region", "now_ns", "newest", "seen", "_in", "_out")
 
     def __init__(self, inputs: list[InputPort], outputs: list[OutputPort], sinks: list[tuple[InputPort, int]],
                  region: Region, now_ns: Callable[[], int]):
@@ -31,16 +35,18 @@ class OriginRelay:
         self.outputs = [port for port in outputs if port.origins is not None]
         self.sinks = sinks
         self.region, self.now_ns = region, now_ns
+        self._in = np.zeros((max(1, len(self.inputs)), ORIGINS), dtype=np.int64)
+        self._out = np.zeros((len(self.outputs), ORIGINS), dtype=np.int64)
+        for rows, ports in ((self._in, self.inputs), (self._out, self.outputs)):
+            for row, port in zip(rows, ports):
+                row[:] = port.origins
+                port.origins = row  # the port reads and publishes through its row from now on
         self.newest = np.zeros(ORIGINS, dtype=np.int64)
         self.seen = np.zeros(ORIGINS, dtype=np.int64)
 
     def before_step(self) -> None:
-        newest = self.newest
-        newest.fill(0)
-        for port in self.inputs:
-            np.maximum(newest, port.origins, out=newest)
-        for port in self.outputs:
-            np.copyto(port.origins, newest)
+        np.max(self._in, axis=0, out=self.newest)
+        self._out[...] = self.newest
 
     def after_step(self) -> None:
         if not self.sinks:
