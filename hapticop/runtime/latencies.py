@@ -45,7 +45,7 @@ class OriginRelay:
         self.seen = np.zeros(ORIGINS, dtype=np.int64)
 
     def before_step(self) -> None:
-        np.max(self._in, axis=0, out=self.newest)
+        np.maximum.reduce(self._in, axis=0, out=self.newest)
         self._out[...] = self.newest
 
     def after_step(self) -> None:
