@@ -1,10 +1,12 @@
-"""The simulated world the device simulators of one process share.
+"""The simulated world the device simulators share.
 
 Real devices share the real world: the LIDAR sees the hallway where the robot actually is,
 and the operator feels what the Falcon renders. The simulators share a `Scene` instead,
 found by name: the world activity opens it, the simulated ropod writes the robot's pose
 into it, the simulated LIDAR ray-casts from that pose, and the simulated Falcon's operator
-holds the handle in it. The blocks themselves still know nothing of each other.
+holds the handle in it. The blocks themselves still know nothing of each other. The pose
+and the hallway's geometry are also in shared memory, for simulated devices in other
+processes (the LIDAR's thread runs in one of its own, its scanner in another).
 """
 
 from __future__ import annotations
