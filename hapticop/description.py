@@ -63,9 +63,9 @@ class Thread(Strict):
     )
     phase: Offset | Literal["auto"] = Field(
         0,
-        description="offset of the deadlines within the period; 'auto' staggers the threads of equal period "
-        "evenly, highest priority first. Default 0: loops of equal period wake together and run side by side "
-        "on separate cores, which measured better for the hallway on 2 cores (README, real-time bench)",
+        description="offset of the deadlines within the period, e.g. '500us' to run after another loop's "
+        "output is ready; 'auto' staggers the threads of equal period evenly, highest priority first. "
+        "Default 0: loops of equal period wake together (README, real-time bench)",
     )
     busy_wait: Offset = Field(
         0, description="spin this long before each deadline instead of sleeping through it: "
