@@ -91,6 +91,8 @@ def main() -> None:
     parser.add_argument("scan_rate_hz", type=float)
     parser.add_argument("seed", type=int)
     args = parser.parse_args()
+    if os.sched_getscheduler(0) != os.SCHED_OTHER:  # started by a real-time thread: the device is not one
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     try:
         scene = attach_scene(args.scene_memory)
         # Only attached: the world's process unlinks it, not this process's resource tracker.
