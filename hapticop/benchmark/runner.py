@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import platform
+import shutil
 import subprocess
 import sys
 import time
@@ -51,6 +52,8 @@ def machine() -> dict:
 
 
 def compose(file: str, seconds: float, run_dir: Path) -> tuple[dict, int]:
+    if run_dir.exists():  # the bench's own directory from an earlier run: its logs would append to it
+        shutil.rmtree(run_dir)
     command = [sys.executable, "-m", "hapticop.cli", "compose", file, "--duration", f"{seconds:g}s",
                "--run-dir", str(run_dir)]
     done = subprocess.run(command, capture_output=True, text=True)
