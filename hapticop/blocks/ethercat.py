@@ -150,10 +150,13 @@ class EthercatMaster(Block):
 
     def _exchange_pysoem(self) -> None:
         """Send and receive at once (bring-up, or a cycle with no frame in flight)."""
+        self._send_pysoem()
+        self._receive_pysoem()
+
+    def _send_pysoem(self) -> None:
         self._write_outputs()
         self.master.send()
         self.in_flight = True
-        self._receive_pysoem()
 
     def _receive_pysoem(self) -> None:
         m, out = self.master, self.outputs
@@ -192,9 +195,7 @@ class EthercatMaster(Block):
         """Write: the wheel commands this cycle computed, sent now (the simulated robot moves
         under them for one step)."""
         if self.params.driver == "pysoem":
-            self._write_outputs()
-            self.master.send()
-            self.in_flight = True
+            self._send_pysoem()
             return
         now = self.clock.now_ns()
         dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9  # a late cycle is not a leap in time

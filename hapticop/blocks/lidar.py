@@ -148,11 +148,7 @@ class Lidar(Block):
         if not self.clock.virtual:
             scanner.fault(fault)  # the process keeps it up (garbage: between its telegrams)
         else:
-            scanner.unplug(fault == "unplugged")
-            if fault == "stall":
-                scanner.stall()
-            else:
-                scanner.resume()
+            scanner.set_fault(fault)
         if fault == "none":
             self.log.info("simulated scanner fault cleared")
         else:

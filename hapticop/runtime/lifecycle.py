@@ -166,12 +166,8 @@ class Lifecycle:
             if self._requested("request_pausing"):
                 self._enter(State.PAUSING)
                 return
-            try:
-                if self.hooks.compute() is True:
-                    self._raise("running_complete")
-            except Exception as error:  # noqa: BLE001
-                self._fail(RUNNING_FAILED, None, error)
-                self._enter(State.PAUSING)
+            if self._run(self.hooks.compute) is True:
+                self._raise("running_complete")
         else:  # pausing
             if self._requested("request_running"):
                 self.failed[self.index] = OK
@@ -183,15 +179,18 @@ class Lifecycle:
                 self._fail(RUNNING_FAILED, None, error)
 
     def flush(self, hook: Callable[[], object]) -> None:
-        """A running owner's write phase, after its thread's schedule computed; a failure
-        is one of running, as in compute."""
-        if self.states[self.index] != State.RUNNING:
-            return
+        """A running owner's write phase, after its thread's schedule computed."""
+        if self.states[self.index] == State.RUNNING:
+            self._run(hook)
+
+    def _run(self, hook: Callable[[], object]) -> object:
+        """A running hook (compute, flush): one that raises fails the owner into pausing."""
         try:
-            hook()
+            return hook()
         except Exception as error:  # noqa: BLE001
             self._fail(RUNNING_FAILED, None, error)
             self._enter(State.PAUSING)
+            return None
 
     def _configure_capabilities(self) -> None:
         if self.failed[self.index] == CAPABILITY_FAILED:

@@ -54,6 +54,12 @@ def prepare_process(threads: list[Thread], log: Logger) -> None:
         lock_memory(log)
 
 
+def normal_scheduling() -> None:
+    """The calling thread back to SCHED_OTHER, whatever it inherited from its creator."""
+    if os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
 def apply(spec: Thread, log: Logger) -> None:
     """Apply the thread's declared priority and affinity to the calling thread.
 
@@ -61,8 +67,7 @@ def apply(spec: Thread, log: Logger) -> None:
     creator's policy, and threads are started by the main thread, which may be real-time.
     """
     if spec.priority is None:
-        if os.sched_getscheduler(0) != os.SCHED_OTHER:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        normal_scheduling()
     else:
         lock_memory(log)  # already done by prepare_process; a no-op then
         try:

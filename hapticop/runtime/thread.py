@@ -55,16 +55,12 @@ class ActivityRunner:
         relay = self.relay
         if relay is not None:
             relay.before_step()
-        if self.simulator:  # its CPU time counts as simulation (the report subtracts it)
-            cpu = time.thread_time_ns()
-            started = time.perf_counter_ns()
-            self.lifecycle.step()
-            self.took = time.perf_counter_ns() - started
+        cpu = time.thread_time_ns() if self.simulator else 0  # a simulator's CPU counts as simulation
+        started = time.perf_counter_ns()
+        self.lifecycle.step()
+        self.took = time.perf_counter_ns() - started
+        if self.simulator:
             self.region.sim_ns[self.index] += time.thread_time_ns() - cpu
-        else:
-            started = time.perf_counter_ns()
-            self.lifecycle.step()
-            self.took = time.perf_counter_ns() - started
         if not self.flushes:
             self._finish()
 

@@ -84,6 +84,7 @@ def main() -> None:
     from multiprocessing import resource_tracker
 
     from hapticop.devices.sick.simulator import TiMSimulator
+    from hapticop.runtime.realtime import normal_scheduling
     from hapticop.sim.scene import attach_scene
 
     parser = argparse.ArgumentParser(description="a simulated TiM561 on loopback, in the world of a running scene")
@@ -91,8 +92,7 @@ def main() -> None:
     parser.add_argument("scan_rate_hz", type=float)
     parser.add_argument("seed", type=int)
     args = parser.parse_args()
-    if os.sched_getscheduler(0) != os.SCHED_OTHER:  # started by a real-time thread: the device is not one
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    normal_scheduling()  # started by a real-time thread, but the device is not part of the system
     try:
         scene = attach_scene(args.scene_memory)
         # Only attached: the world's process unlinks it, not this process's resource tracker.
@@ -117,11 +117,7 @@ def main() -> None:
             if not line:
                 break  # stdin closed: the block is done with us
             fault = line.strip()
-            simulator.unplug(fault == "unplugged")
-            if fault == "stall":
-                simulator.stall()
-            else:
-                simulator.resume()
+            simulator.set_fault(fault)
     finally:
         simulator.close()
         os._exit(0)  # the scene's views are still mapped; nothing more to tidy

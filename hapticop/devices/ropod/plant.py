@@ -153,22 +153,10 @@ class RopodPlant:
         self._measure()
 
     # --- read-outs of the last step -------------------------------------------------------
-    @property
-    def wheel_speeds(self) -> F64:
-        return np.array(self._speeds)
-
-    @property
-    def pivot_rates(self) -> F64:
-        return np.array(self._rates)
-
-    @property
-    def wheel_torques(self) -> F64:
-        return np.array(self._torques)
-
-    @property
-    def currents_hw(self) -> F64:
-        """As the drive reports them (wheel 2 negated)."""
-        return np.array(self._currents_hw)
+    wheel_speeds = property(lambda self: np.array(self._speeds), doc="wheel speeds [rad/s]")
+    pivot_rates = property(lambda self: np.array(self._rates), doc="pivot rates [rad/s]")
+    wheel_torques = property(lambda self: np.array(self._torques), doc="wheel torques [Nm]")
+    currents_hw = property(lambda self: np.array(self._currents_hw), doc="as the drive reports them (wheel 2 negated)")
 
     # --- the step ------------------------------------------------------------------------
     def step(self, rx_image: NDArray[np.uint8], dt: float, tx_image_out: NDArray[np.uint8]) -> None:

@@ -455,6 +455,15 @@ class TiMSimulator:
             if on:
                 self._disconnect()
 
+    def set_fault(self, fault: str) -> None:
+        """A lasting fault by name: 'unplugged', 'stall', or 'none' to clear them ('garbage' is
+        noise the caller injects as long as it lasts, so it only clears the others here)."""
+        self.unplug(fault == "unplugged")
+        if fault == "stall":
+            self.stall()
+        else:
+            self.resume()
+
     def mute(self, on: bool = True) -> None:
         """Ignore commands (no reply at all), so the client's reply timeout fires."""
         with self._lock:
