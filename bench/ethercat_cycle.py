@@ -1,6 +1,6 @@
 """Benchmark: the pysoem master at 1 kHz against the emulated ropod segment, and wheel-loss recovery.
 
-In a private network namespace (the sandbox of hapticop.devices.ethercat), the master
+In a private network namespace (the sandbox of hapticop.devices.ethercat.emulator), the master
 brings up the seven emulated slaves and runs the ropod's cycle: write the wheel commands,
 send/receive the process data, read the sensors, step the platform velocity controller
 (0.2 m/s forward). The EtherCAT watchdog runs SOEM's slave check in its own thread, as in
@@ -29,8 +29,8 @@ import numpy as np
 
 from hapticop.devices.ethercat.master import ExpectedSlave, SoemMaster
 from hapticop.devices.ethercat.recovery import SlaveCheck
-from hapticop.devices.ethercat.ropod import EK1100, EK1122, SWMC
-from hapticop.devices.ethercat.sandbox import Sandbox, namespace_problem
+from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC
+from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
 from hapticop.devices.ropod import PlatformVelocityController
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, new_rx_image, new_tx_image
 from hapticop.runtime.clock import RealtimeClock

@@ -33,7 +33,7 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     from hapticop.runtime.patching import apply_patch
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.validation import validate_source
-    from hapticop.yamlsource import Source, read_file
+    from hapticop.composition.yamlsource import Source, read_file
 
     source = read_file(ROOT / "systems" / "hallway.yaml")
     force_model, _, robot_side = model.partition("+")

@@ -22,7 +22,7 @@ import numpy as np
 
 from hapticop.devices.falcon import FalconKinematics, Flag, FrameCodec, SimulatedFalcon, Status, new_frame
 from hapticop.devices.falcon.codec import Command
-from hapticop.measure import allocation_stats, time_per_call
+from hapticop.testing import allocation_stats, time_per_call
 
 CENTRE = np.array([0.0, 0.0, 0.125])
 

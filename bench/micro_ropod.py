@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hapticop.devices.ropod.controller import PlatformVelocityController
+from hapticop.devices.ropod.velocity_controller import PlatformVelocityController
 from hapticop.devices.ropod.pdo import new_rx_image, new_tx_image
 from hapticop.devices.ropod.plant import RopodPlant
-from hapticop.measure import time_per_call
+from hapticop.testing import time_per_call
 
 HALLWAY = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
 FIELDBUS_BLOCKS = ("ethercat", "ropod", "ethercat_watchdog")

@@ -19,7 +19,7 @@ import numpy as np
 from hapticop.devices.sick import cola
 from hapticop.devices.sick.client import ColaClient
 from hapticop.devices.sick.simulator import TiMSimulator
-from hapticop.measure import time_per_call
+from hapticop.testing import time_per_call
 
 
 def _parse(name: str, telegram: bytes) -> None:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from hapticop.runtime.system import RunOptions, run_system
-from hapticop.units import parse_duration_ns
+from hapticop.composition.units import parse_duration_ns
 from hapticop.validation import validate_path
 
 

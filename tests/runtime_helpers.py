@@ -5,7 +5,7 @@ from __future__ import annotations
 import textwrap
 
 from hapticop.runtime.system import RunOptions, RunResult, run_system
-from hapticop.units import parse_duration_ns
+from hapticop.composition.units import parse_duration_ns
 from hapticop.validation import validate_path
 
 

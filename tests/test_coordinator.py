@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from hapticop.description import Coordination
-from hapticop.petri import Livelock
-from hapticop.runtime.coordinator import Coordinator
+from hapticop.composition.description import Coordination
+from hapticop.coordination.petri import Livelock
+from hapticop.coordination.coordinator import Coordinator
 
 FLAGS = ["a.event", "a.level", "b.request", "b.ready"]
 

@@ -12,9 +12,9 @@ import struct
 import numpy as np
 import pytest
 
-from hapticop.devices.ethercat.esc import AL_CODE_INVALID_OUTPUT_CONFIG, AL_CODE_INVALID_STATE_CHANGE
-from hapticop.devices.ethercat.ropod import EK1100, EK1122, SWMC, RopodSegment
-from hapticop.devices.ethercat.truth import TruthReader, TruthWriter
+from hapticop.devices.ethercat.emulator.esc import AL_CODE_INVALID_OUTPUT_CONFIG, AL_CODE_INVALID_STATE_CHANGE
+from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC, RopodSegment
+from hapticop.devices.ethercat.emulator.truth import TruthReader, TruthWriter
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, rxpdo_view
 
 from .conftest import FIXTURES, SHARED_TESTDATA

@@ -21,7 +21,7 @@ from hapticop.devices.falcon.codec import (
     is_valid_frame,
     new_frame,
 )
-from hapticop.measure import grown_bytes
+from hapticop.testing import grown_bytes
 
 from .conftest import FIXTURES, SHARED_TESTDATA
 

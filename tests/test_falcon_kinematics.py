@@ -16,7 +16,7 @@ from hapticop.devices.falcon.kinematics import (
     FalconKinematics,
     Geometry,
 )
-from hapticop.measure import grown_bytes
+from hapticop.testing import grown_bytes
 
 from .conftest import FIXTURES, SHARED_TESTDATA
 

@@ -15,7 +15,7 @@ from hapticop.devices.falcon import (
     Status,
     new_frame,
 )
-from hapticop.measure import grown_bytes
+from hapticop.testing import grown_bytes
 
 DT = 0.001
 CENTRE = np.array([0.0, 0.0, 0.125])

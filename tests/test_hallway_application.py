@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from hapticop.cli import app
-from hapticop.lcsm import State
+from hapticop.composition.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import CORPUS, SYSTEMS

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.measure import allocation_stats
+from hapticop.testing import allocation_stats
 from hapticop.haptics.handle import (
     HANDLE_Z,
     TWIST_VX,

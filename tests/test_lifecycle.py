@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hapticop import lcsm
-from hapticop.lcsm import State
+from hapticop.composition import lcsm
+from hapticop.composition.lcsm import State
 from hapticop.runtime.lifecycle import CAPABILITY_FAILED, CREATION_FAILED, OK, RESOURCE_FAILED, RUNNING_FAILED, Hooks, Lifecycle
 from hapticop.runtime.logs import Level, Logger
 

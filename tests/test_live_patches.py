@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from hapticop.lcsm import State
+from hapticop.composition.lcsm import State
 from hapticop.runtime.control import request
 from hapticop.runtime.system import ExitStatus
 from hapticop.validation import validate_text

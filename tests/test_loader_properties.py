@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from ruamel.yaml import YAML
 
-from hapticop.diagnostics import Report
+from hapticop.composition.diagnostics import Report
 from hapticop.validation import validate_text
 
 FIELDS = ["version", "threads", "activities", "streams", "coordination", "period", "priority", "deploy",

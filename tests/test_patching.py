@@ -18,7 +18,7 @@ from hapticop.runtime.patching import (
     validate_patched,
 )
 from hapticop.validation import validate_source
-from hapticop.yamlsource import read_file
+from hapticop.composition.yamlsource import read_file
 
 HALLWAY = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
 

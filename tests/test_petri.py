@@ -2,8 +2,8 @@
 
 import pytest
 
-from hapticop.description import PetriNet
-from hapticop.petri import CompiledNet, Livelock
+from hapticop.composition.description import PetriNet
+from hapticop.coordination.petri import CompiledNet, Livelock
 from hapticop.validation.reachability import Environment, explore
 
 

@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.controller import (
+from hapticop.devices.ropod.velocity_controller import (
     THESIS_PIVOT_OFFSETS_RAD,
     PlatformControllerParams,
     PlatformVelocityController,
 )
-from hapticop.devices.ropod.controllers import LinearControllerParams
+from hapticop.devices.ropod.linear_bank import LinearControllerParams
 from hapticop.devices.ropod.pdo import (
     Com1,
     Stat1,
@@ -21,7 +21,7 @@ from hapticop.devices.ropod.pdo import (
     rxpdo_view,
     txpdo_view,
 )
-from hapticop.measure import allocation_stats
+from hapticop.testing import allocation_stats
 
 from .test_ropod_data import load
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.controllers import (
+from hapticop.devices.ropod.linear_bank import (
     ROPOD2019_PLATFORM_THETA,
     ROPOD2019_PLATFORM_XY,
     THESIS_PLATFORM_THETA,
@@ -14,7 +14,7 @@ from hapticop.devices.ropod.controllers import (
     ControllerBank,
     LinearControllerParams,
 )
-from hapticop.measure import allocation_stats
+from hapticop.testing import allocation_stats
 
 from .test_ropod_data import load
 

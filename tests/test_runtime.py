@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hapticop.lcsm import State
+from hapticop.composition.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .runtime_helpers import COUNTER, IGNORES_SHUTDOWN, compose, pipeline

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticop.lcsm import State
+from hapticop.composition.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import ROOT

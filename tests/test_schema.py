@@ -6,9 +6,9 @@ import jsonschema
 import pytest
 from ruamel.yaml import YAML
 
-from hapticop.layers import resolve
-from hapticop.schema import SCHEMA_FILE, composition_schema, schema_text
-from hapticop.yamlsource import plain, read_file
+from hapticop.composition.layers import resolve
+from hapticop.composition.schema import SCHEMA_FILE, composition_schema, schema_text
+from hapticop.composition.yamlsource import plain, read_file
 
 from .conftest import CORPUS, SYSTEMS
 

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticop.measure import grown_bytes
+from hapticop.testing import grown_bytes
 from hapticop.sim.hallway import (
     Footprint,
     HallwayGeometry,

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.measure import grown_bytes
+from hapticop.testing import grown_bytes
 from hapticop.sim.hallway import HallwayGeometry
 from hapticop.sim.metrics import (
     CHANNELS,

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from hapticop.blocks.interface import Port
-from hapticop.measure import allocation_stats
+from hapticop.testing import allocation_stats
 from hapticop.runtime.streams import (
     MAX_RETRIES,
     SAMPLE_ALIGN,

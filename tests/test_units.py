@@ -1,7 +1,7 @@
 import pytest
 from pydantic import BaseModel, ValidationError
 
-from hapticop.units import Duration, format_duration, parse_duration_ns
+from hapticop.composition.units import Duration, format_duration, parse_duration_ns
 
 
 @pytest.mark.parametrize(
@@ -58,7 +58,7 @@ def test_serialises_back_to_text():
 def test_offsets_may_be_zero_but_periods_may_not():
     from pydantic import TypeAdapter, ValidationError
 
-    from hapticop.units import Duration, Offset
+    from hapticop.composition.units import Duration, Offset
 
     offset = TypeAdapter(Offset)
     assert offset.validate_python("0ms") == 0 and offset.validate_python(0) == 0

@@ -5,7 +5,7 @@ packed little endian) every cycle; what the bytes mean is the business of the bl
 reads them. Driver `sim` exchanges them with a simulated ropod and publishes where that
 robot truly is, for the simulated world. Driver `pysoem` is the real master (SOEM): it
 brings the segment up to OP against the expected slaves and exchanges real frames, with
-the ropod or with the emulated segment (hapticop.devices.ethercat). The watchdog watches
+the ropod or with the emulated segment (hapticop.devices.ethercat.emulator). The watchdog watches
 slave states and working counters, raises flags, and with pysoem runs SOEM's recovery of
 slaves that left OP on the master of its own process.
 """

@@ -3,7 +3,7 @@
 With the pysoem driver the simulated robot is behind the smart wheels of the EtherCAT
 emulator, in the emulator's own process; the master only sees wheel sensors, as on the
 real robot. The simulated world still needs the true pose to judge the run and to place
-the simulated LIDAR, so the emulator publishes it (hapticop.devices.ethercat.truth) and
+the simulated LIDAR, so the emulator publishes it (hapticop.devices.ethercat.emulator.truth) and
 this block reads it: ground truth of a simulation, never an input to a controller.
 """
 
@@ -34,7 +34,7 @@ class RopodTruth(Block):
         )
 
     def configure_resources(self) -> None:
-        from hapticop.devices.ethercat.truth import TruthReader, truth_path
+        from hapticop.devices.ethercat.emulator.truth import TruthReader, truth_path
 
         path = Path(self.params.path) if self.params.path else truth_path(self.params.interface)
         if not path.exists():

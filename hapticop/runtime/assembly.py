@@ -13,8 +13,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hapticop.description import Composition
-from hapticop.loader import Loaded, ResolvedActivity
+from hapticop.composition.description import Composition
+from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.logs import Level, LogWriter
@@ -24,7 +24,7 @@ from hapticop.runtime.thread import ActivityRunner, CyclicThread
 
 
 def flag_names(loaded: Loaded) -> list[str]:
-    from hapticop.graph import CompositionGraph  # networkx: not needed by a process that is handed the flags
+    from hapticop.composition.graph import CompositionGraph  # networkx: not needed by a process that is handed the flags
 
     return [node[1] for node, _ in CompositionGraph(loaded).nodes_of("flag")]
 

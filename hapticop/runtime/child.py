@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from hapticop.loader import load_tree
+from hapticop.composition.loader import load_tree
 from hapticop.runtime.assembly import build, layout_of
 from hapticop.runtime.clock import RealtimeClock
 from hapticop.runtime import realtime

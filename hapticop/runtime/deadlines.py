@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 
-from hapticop.description import Composition
+from hapticop.composition.description import Composition
 
 START_MARGIN_NS = 2_000_000
 """The first deadline is at least this far ahead: time to finish setting up."""

@@ -18,8 +18,8 @@ from typing import Callable
 
 import numpy as np
 
-from hapticop import lcsm
-from hapticop.lcsm import State
+from hapticop.composition import lcsm
+from hapticop.composition.lcsm import State
 from hapticop.runtime.logs import Logger
 
 # Failure codes in region.failed

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 from threading import Event
 from typing import TYPE_CHECKING
 
-from hapticop import flags as flagdefs
-from hapticop.description import Composition
-from hapticop.diagnostics import Diagnostic
-from hapticop.loader import ResolvedActivity
+from hapticop.composition import flags as flagdefs
+from hapticop.composition.description import Composition
+from hapticop.composition.diagnostics import Diagnostic
+from hapticop.composition.loader import ResolvedActivity
 from hapticop.runtime.assembly import make_runner, make_transports, thread_of
 from hapticop.runtime.patching import ChangePlan, PatchError
 

@@ -28,12 +28,12 @@ from jsonpointer import JsonPointer, JsonPointerException
 from pydantic import BaseModel
 from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
-from hapticop.description import Composition
-from hapticop.diagnostics import Diagnostic, Path, Severity
-from hapticop.loader import load_tree
+from hapticop.composition.description import Composition
+from hapticop.composition.diagnostics import Diagnostic, Path, Severity
+from hapticop.composition.loader import load_tree
 from hapticop.validation import Validated, validate_source
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
-from hapticop.yamlsource import Source, SourceError, _reject_aliases_of_containers, _yaml, parse_text
+from hapticop.composition.yamlsource import Source, SourceError, _reject_aliases_of_containers, _yaml, parse_text
 
 OPERATIONS = ("add", "remove", "replace", "move", "copy", "test")
 PATCH_EXPECTED = (
@@ -620,7 +620,7 @@ def _schedule(activities: list[str] | None, missing: str) -> str:
 
 
 def _duration(ns: int | None) -> str:
-    from hapticop.units import format_duration
+    from hapticop.composition.units import format_duration
 
     return "none" if ns is None else format_duration(ns)
 

@@ -11,7 +11,7 @@ import ctypes.util
 import os
 import threading
 
-from hapticop.description import Thread
+from hapticop.composition.description import Thread
 from hapticop.runtime.logs import Logger
 
 MCL_CURRENT, MCL_FUTURE = 1, 2

@@ -13,9 +13,9 @@ from multiprocessing import shared_memory
 
 import numpy as np
 
-from hapticop import lcsm
-from hapticop.description import Composition
-from hapticop.loader import ResolvedActivity
+from hapticop.composition import lcsm
+from hapticop.composition.description import Composition
+from hapticop.composition.loader import ResolvedActivity
 from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
 

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from hapticop.runtime.region import Region
 from hapticop.runtime.timing import Summary
-from hapticop.units import format_duration
+from hapticop.composition.units import format_duration
 
 
 def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:

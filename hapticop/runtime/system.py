@@ -26,11 +26,11 @@ from enum import IntEnum
 from pathlib import Path
 from typing import Callable
 
-from hapticop.lcsm import State
-from hapticop.loader import Loaded
+from hapticop.composition.lcsm import State
+from hapticop.composition.loader import Loaded
 from hapticop.runtime.assembly import Built, build, layout_of, thread_of
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
-from hapticop.runtime.coordinator import Coordinator
+from hapticop.coordination.coordinator import Coordinator
 from hapticop.runtime.lifecycle import OK
 from hapticop.runtime.logs import Level, LogWriter, default_run_dir
 from hapticop.runtime import live, realtime
@@ -38,9 +38,9 @@ from hapticop.runtime.control import ControlError, ControlServer, socket_path
 from hapticop.runtime.patching import PatchError, load_patch, prepare
 from hapticop.runtime.deadlines import first_deadline, phases
 from hapticop.runtime.region import Region
-from hapticop.yamlsource import parse_text, plain
+from hapticop.composition.yamlsource import parse_text, plain
 from hapticop.runtime.thread import CyclicThread
-from hapticop.units import format_duration
+from hapticop.composition.units import format_duration
 
 SECOND = 1_000_000_000
 

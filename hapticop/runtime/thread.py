@@ -15,8 +15,8 @@ import time
 from typing import Callable
 
 from hapticop.blocks.base import Block
-from hapticop.description import Thread
-from hapticop.lcsm import State
+from hapticop.composition.description import Thread
+from hapticop.composition.lcsm import State
 from hapticop.runtime import realtime
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle

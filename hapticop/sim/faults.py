@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hapticop.description import Composition
+from hapticop.composition.description import Composition
 
 STILL_MPS = 0.01
 """Below this the robot is at rest."""

@@ -9,14 +9,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from hapticop.description import Composition
-from hapticop.diagnostics import Diagnostic, Report
-from hapticop.graph import CompositionGraph
-from hapticop.loader import Loaded, load_tree
+from hapticop.composition.description import Composition
+from hapticop.composition.diagnostics import Diagnostic, Report
+from hapticop.composition.graph import CompositionGraph
+from hapticop.composition.loader import Loaded, load_tree
 from hapticop.validation import coordination, structure
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
-from hapticop.yamlsource import Source, SourceError, parse_text, read_file
-from hapticop.layers import resolve
+from hapticop.composition.yamlsource import Source, SourceError, parse_text, read_file
+from hapticop.composition.layers import resolve
 
 
 @dataclass

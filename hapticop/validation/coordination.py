@@ -11,9 +11,9 @@ import difflib
 from collections import defaultdict
 from typing import Iterator
 
-from hapticop import graph as G
-from hapticop.diagnostics import Diagnostic, Severity
-from hapticop.petri import CompiledNet
+from hapticop.composition import graph as G
+from hapticop.composition.diagnostics import Diagnostic, Severity
+from hapticop.coordination.petri import CompiledNet
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT, Environment, explore
 
 Check = Iterator[Diagnostic]

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
-from hapticop.petri import CompiledNet
+from hapticop.coordination.petri import CompiledNet
 
 DEFAULT_STATE_LIMIT = 20_000
 

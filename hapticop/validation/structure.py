@@ -12,10 +12,10 @@ from typing import Iterator
 
 import networkx as nx
 
-from hapticop import graph as G
-from hapticop.description import RESERVED_NAMES
-from hapticop.diagnostics import Diagnostic, Severity
-from hapticop.units import format_duration
+from hapticop.composition import graph as G
+from hapticop.composition.description import RESERVED_NAMES
+from hapticop.composition.diagnostics import Diagnostic, Severity
+from hapticop.composition.units import format_duration
 
 Check = Iterator[Diagnostic]
 

@@ -1,2 +1,2 @@
-"""An emulated EtherCAT segment (generic ESC, SII, AL states, FMMUs, SMs, watchdog) and the
-ropod's slaves on it, served on a network interface for a real master to talk to."""
+"""EtherCAT for the ropod: the master side (pysoem bring-up, exchange, SOEM's slave recovery)
+and, in `emulator/`, an emulated segment of the ropod's slaves for the master to talk to."""

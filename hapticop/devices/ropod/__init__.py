@@ -4,10 +4,10 @@ Pure numpy libraries with no hapticop runtime dependency; the ropod controller a
 blocks build on them. Sources and conventions: ../shared/reference/ropod-controller.md.
 """
 
-from hapticop.devices.ropod.controller import (
+from hapticop.devices.ropod.velocity_controller import (
     THESIS_PIVOT_OFFSETS_RAD, PlatformControllerParams, PlatformVelocityController,
 )
-from hapticop.devices.ropod.controllers import (
+from hapticop.devices.ropod.linear_bank import (
     THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL, ControllerBank, LinearControllerParams,
 )
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp, jacobian

@@ -13,8 +13,8 @@ from typing import Any, Iterator
 
 import networkx as nx
 
-from hapticop import flags as flagdefs
-from hapticop.loader import Loaded
+from hapticop.composition import flags as flagdefs
+from hapticop.composition.loader import Loaded
 
 Node = tuple
 

@@ -12,9 +12,9 @@ from pathlib import Path
 from pydantic.json_schema import models_json_schema
 
 from hapticop.blocks.registry import BUILTIN, resolve
-from hapticop.description import Composition
+from hapticop.composition.description import Composition
 
-SCHEMA_FILE = Path(__file__).resolve().parent.parent / "schemas" / "composition.schema.json"
+SCHEMA_FILE = Path(__file__).resolve().parents[2] / "schemas" / "composition.schema.json"
 SCHEMA_ID = "https://hapticop.invalid/schemas/composition.schema.json"
 
 

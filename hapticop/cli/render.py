@@ -13,8 +13,8 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from hapticop.graph import CompositionGraph
-from hapticop.units import format_duration
+from hapticop.composition.graph import CompositionGraph
+from hapticop.composition.units import format_duration
 
 
 class RenderError(RuntimeError):

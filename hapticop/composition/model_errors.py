@@ -15,7 +15,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from hapticop.diagnostics import Diagnostic, Path
+from hapticop.composition.diagnostics import Diagnostic, Path
 
 
 def diagnostics_from(error: ValidationError, model: type[BaseModel], prefix: Path = ()) -> list[Diagnostic]:

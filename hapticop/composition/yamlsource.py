@@ -17,7 +17,7 @@ from ruamel.yaml.comments import CommentedMap, CommentedSeq
 from ruamel.yaml.constructor import DuplicateKeyError
 from ruamel.yaml.error import MarkedYAMLError, YAMLError
 
-from hapticop.diagnostics import Diagnostic, Path
+from hapticop.composition.diagnostics import Diagnostic, Path
 
 # Composition files are written by people; anything this large is a mistake (or a
 # generated file that should be split), and parsing it would stall an editor.

@@ -11,7 +11,7 @@ from typing import Optional
 
 import typer
 
-from hapticop.diagnostics import Report, reports_to_json
+from hapticop.composition.diagnostics import Report, reports_to_json
 from hapticop.validation import validate_path
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 
@@ -24,10 +24,10 @@ app = typer.Typer(
 
 SYSTEMS_DIR = Path("systems")
 
-from hapticop.cli_devices import devices as _devices  # noqa: E402
-from hapticop.cli_devices import falcon as _falcon  # noqa: E402
-from hapticop.cli_devices import lidar as _lidar  # noqa: E402
-from hapticop.cli_ethercat import ethercat as _ethercat  # noqa: E402
+from hapticop.cli.devices import devices as _devices  # noqa: E402
+from hapticop.cli.devices import falcon as _falcon  # noqa: E402
+from hapticop.cli.devices import lidar as _lidar  # noqa: E402
+from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
@@ -83,7 +83,7 @@ class ClockKind(str, Enum):
 def _duration(text: Optional[str], option: str) -> Optional[int]:
     if text is None:
         return None
-    from hapticop.units import parse_duration_ns
+    from hapticop.composition.units import parse_duration_ns
 
     try:
         return parse_duration_ns(text)
@@ -167,7 +167,7 @@ def patch(
         raise typer.Exit(2) from None
     reply = _ask(system, {"op": "patch", "text": text, "file": str(file), "dry_run": dry_run})
     if not reply.get("ok"):
-        from hapticop.diagnostics import Diagnostic, Severity
+        from hapticop.composition.diagnostics import Diagnostic, Severity
 
         for item in reply.get("diagnostics", []):
             item = {**item, "severity": Severity(item["severity"]), "path": tuple(item["path"])}
@@ -217,7 +217,7 @@ def graph(
     format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
     """Draw a composition: threads with their activities, streams, nets and flag maps."""
-    from hapticop.render import RenderError, render, to_dot
+    from hapticop.cli.render import RenderError, render, to_dot
 
     validated = validate_path(file)
     if validated.graph is None or validated.graph.loaded.composition is None:
@@ -279,7 +279,7 @@ def schema(
     write: bool = typer.Option(False, help="regenerate schemas/composition.schema.json"),
 ) -> None:
     """Print (or check, or write) the JSON Schema of composition files."""
-    from hapticop.schema import SCHEMA_FILE, schema_text
+    from hapticop.composition.schema import SCHEMA_FILE, schema_text
 
     text = schema_text()
     if check:
@@ -314,6 +314,3 @@ def main() -> None:
               "  set HAPTICOP_DEBUG=1 to see where, and please report it", file=sys.stderr)
         sys.exit(3)
 
-
-if __name__ == "__main__":
-    main()

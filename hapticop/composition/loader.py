@@ -15,9 +15,9 @@ from pydantic import ValidationError
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params
 from hapticop.blocks.registry import UnknownBlock, resolve
-from hapticop.description import COLLECTIONS, VERSION, Activity, Composition
-from hapticop.diagnostics import Diagnostic, Path
-from hapticop.model_errors import diagnostics_from
+from hapticop.composition.description import COLLECTIONS, VERSION, Activity, Composition
+from hapticop.composition.diagnostics import Diagnostic, Path
+from hapticop.composition.model_errors import diagnostics_from
 
 
 @dataclass

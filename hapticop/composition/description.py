@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
-from hapticop.units import Duration, Offset
+from hapticop.composition.units import Duration, Offset
 
 VERSION = 1
 

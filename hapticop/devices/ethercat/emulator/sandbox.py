@@ -20,7 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-from hapticop.devices.ethercat.truth import truth_path
+from hapticop.devices.ethercat.emulator.truth import truth_path
 
 __all__ = ["Sandbox", "namespace_problem", "MASTER_INTERFACE", "EMULATOR_INTERFACE"]
 
@@ -110,11 +110,11 @@ class Sandbox:
                 ip.link("set", index=ip.link_lookup(ifname=name)[0], state="up")
 
     def _emulator(self) -> None:
-        command = [sys.executable, "-m", "hapticop.devices.ethercat", self.peer, "--control", str(self.control),
+        command = [sys.executable, "-m", "hapticop.devices.ethercat.emulator", self.peer, "--control", str(self.control),
                    "--truth", str(self.truth), "--seed", str(self.seed), "--priority", str(self.priority)]
         with open(self.log, "wb") as log:
             self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
-        from hapticop.devices.ethercat.server import control
+        from hapticop.devices.ethercat.emulator.server import control
 
         deadline = time.monotonic() + 20.0
         while time.monotonic() < deadline:
@@ -131,7 +131,7 @@ class Sandbox:
 
     def fault(self, op: str, **args) -> dict:
         """Send a fault or status request to the emulator; raises if it refuses."""
-        from hapticop.devices.ethercat.server import control
+        from hapticop.devices.ethercat.emulator.server import control
 
         answer = control(self.control, {"op": op, **args})
         if not answer.get("ok"):

@@ -22,7 +22,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.ropod.controllers import (
+from hapticop.devices.ropod.linear_bank import (
     THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL, ControllerBank, LinearControllerParams,
 )
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hapticop.description import PetriNet
+from hapticop.composition.description import PetriNet
 
 
 class Livelock(RuntimeError):

@@ -1,4 +1,4 @@
-"""`python -m hapticop.devices.ethercat IFACE`: run the emulated ropod segment on an interface."""
+"""`python -m hapticop.devices.ethercat.emulator IFACE`: run the emulated ropod segment on an interface."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m hapticop.devices.ethercat",
+    parser = argparse.ArgumentParser(prog="python -m hapticop.devices.ethercat.emulator",
                                      description="Emulated ropod EtherCAT segment on a network interface (root).")
     parser.add_argument("interface", help="the interface the master's frames arrive on (e.g. a veth peer)")
     parser.add_argument("--control", type=Path, help="Unix socket for faults and status (JSON lines)")
@@ -26,8 +26,8 @@ def main(argv: list[str] | None = None) -> int:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
         except OSError as error:
             print(f"note: runs without real-time priority ({error.strerror})", file=sys.stderr)
-    from hapticop.devices.ethercat.ropod import RopodSegment
-    from hapticop.devices.ethercat.server import FrameServer
+    from hapticop.devices.ethercat.emulator.ropod_segment import RopodSegment
+    from hapticop.devices.ethercat.emulator.server import FrameServer
 
     server = FrameServer(args.interface, RopodSegment(rng=np.random.default_rng(args.seed)), args.control, args.truth,
                          log=lambda message: print(message, file=sys.stderr, flush=True))

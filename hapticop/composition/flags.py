@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hapticop import lcsm
+from hapticop.composition import lcsm
 
 RUNTIME = "the runtime"
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import struct
 from typing import Sequence
 
-from hapticop.devices.ethercat.esc import Esc
+from hapticop.devices.ethercat.emulator.esc import Esc
 
 __all__ = ["Segment", "ETHERTYPE", "COMMANDS", "parse_datagrams"]
 

@@ -25,7 +25,7 @@ def sandbox(
     The namespace, the pair and the emulator exist only while COMMAND runs; the emulator's
     control socket is in $HAPTICOP_ECAT_CONTROL for `hapticop ethercat fault`.
     """
-    from hapticop.devices.ethercat.sandbox import Sandbox, namespace_problem
+    from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
 
     command = list(context.args)
     if not command:
@@ -82,7 +82,7 @@ def fault(
     control: Optional[Path] = typer.Option(None, envvar="HAPTICOP_ECAT_CONTROL", help="the emulator's control socket"),
 ) -> None:
     """Inject a fault into a running emulator (or print its status)."""
-    from hapticop.devices.ethercat.server import control as send
+    from hapticop.devices.ethercat.emulator.server import control as send
 
     if control is None:
         typer.echo("error: no control socket: pass --control or run inside `hapticop ethercat sandbox`", err=True)

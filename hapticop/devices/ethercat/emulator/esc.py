@@ -13,7 +13,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from hapticop.devices.ethercat.sii import SM_INPUTS, SM_OUTPUTS, SlaveIdentity, build_sii
+from hapticop.devices.ethercat.emulator.sii import SM_INPUTS, SM_OUTPUTS, SlaveIdentity, build_sii
 
 __all__ = ["Esc", "AlState", "AL_INIT", "AL_PREOP", "AL_BOOT", "AL_SAFEOP", "AL_OP", "AL_ERROR",
            "AL_CODE_INVALID_STATE_CHANGE", "AL_CODE_INVALID_OUTPUT_CONFIG", "AL_CODE_INVALID_INPUT_CONFIG",

@@ -25,9 +25,9 @@ import threading
 import time
 from pathlib import Path
 
-from hapticop.devices.ethercat.ropod import RopodSegment
-from hapticop.devices.ethercat.segment import ETHERTYPE
-from hapticop.devices.ethercat.truth import TruthWriter
+from hapticop.devices.ethercat.emulator.ropod_segment import RopodSegment
+from hapticop.devices.ethercat.emulator.segment import ETHERTYPE
+from hapticop.devices.ethercat.emulator.truth import TruthWriter
 
 __all__ = ["FrameServer", "control"]
 

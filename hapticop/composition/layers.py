@@ -15,8 +15,8 @@ from pathlib import Path as FilePath
 
 from ruamel.yaml.comments import CommentedMap
 
-from hapticop.diagnostics import Diagnostic, Path
-from hapticop.yamlsource import Source, SourceError, _find_key, _MISSING, locate, read_file
+from hapticop.composition.diagnostics import Diagnostic, Path
+from hapticop.composition.yamlsource import Source, SourceError, _find_key, _MISSING, locate, read_file
 
 MAX_DEPTH = 8
 

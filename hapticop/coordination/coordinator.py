@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapticop.description import Coordination
-from hapticop.petri import Livelock
+from hapticop.composition.description import Coordination
+from hapticop.coordination.petri import Livelock
 
 
 @dataclass

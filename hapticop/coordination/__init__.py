@@ -1,0 +1,1 @@
+"""Coordination: Petri nets compiled once, fired by the mediator and explored by validation."""
