@@ -24,9 +24,10 @@ what follows. `compute` is the time-critical step: it reads `self.inputs`, write
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING, ClassVar
 
-from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.blocks.interface import Interface, Need, Params, Port, RateRange
 
 if TYPE_CHECKING:
     from hapticop.runtime.context import ActivityContext
@@ -56,6 +57,11 @@ class Block:
     # Parameters the block reads every cycle (modes, limits): a live patch changes them between
     # two cycles without taking the activity out of running.
     running_params: ClassVar[frozenset[str]] = frozenset()
+    # Parameters that name another activity this one needs, with what that activity must provide
+    # (`{"simulator": "falcon_device"}`); a parameter left None needs nothing.
+    needs: ClassVar[dict[str, str]] = {}
+    # What this block offers to activities that need it ("falcon_device", "hallway").
+    provides: ClassVar[frozenset[str]] = frozenset()
 
     @classmethod
     def interface(cls, params: Params) -> Interface:
@@ -67,6 +73,23 @@ class Block:
             flags_read=dict(cls.flags_read),
             rate=cls.rate,
         )
+
+    @classmethod
+    def declare(cls, params: Params) -> Interface:
+        """Everything the block declares for these parameters: its `interface` (which a block may
+        override), completed with the activities it needs and what it provides."""
+        return dataclasses.replace(cls.interface(params), needs=cls.needs_of(params), provides=cls.provides)
+
+    @classmethod
+    def needs_of(cls, params: Params) -> tuple[Need, ...]:
+        """The activities these parameters name, from the `needs` declaration."""
+        found = []
+        for param, provides in cls.needs.items():
+            name = getattr(params, param, None)
+            if name is not None:
+                field_info = type(params).model_fields.get(param)
+                found.append(Need(param, name, provides, (field_info.description or "") if field_info else ""))
+        return tuple(found)
 
     def __init__(self, context: "ActivityContext"):
         self.context = context

@@ -60,6 +60,22 @@ class RateRange:
 
 
 @dataclass(frozen=True)
+class Need:
+    """Another activity this one works with outside the streams, named by one of its parameters.
+
+    A device block whose `driver` is a simulator needs the activity that simulates the device
+    (it talks to it over a link, in the device's own bytes); a simulated device needs the world
+    it lives in. Validation checks that the named activity is declared and that its block
+    `provides` what is needed, and `hapticop graph` draws the relation.
+    """
+
+    param: str  # the parameter that names the other activity (where a finding points)
+    activity: str  # its value: the other activity's name
+    provides: str  # what the other activity's block must provide, e.g. "falcon_device"
+    why: str = ""
+
+
+@dataclass(frozen=True)
 class Interface:
     """A block's declarations once its parameters are known (shapes may depend on them)."""
 
@@ -68,6 +84,8 @@ class Interface:
     flags_written: dict[str, str] = field(default_factory=dict)
     flags_read: dict[str, str] = field(default_factory=dict)
     rate: RateRange | None = None
+    needs: tuple[Need, ...] = ()
+    provides: frozenset[str] = frozenset()
 
 
 class Params(BaseModel):

@@ -1,7 +1,8 @@
 """`hapticop graph`: one picture of deployment, dataflow and coordination.
 
 Threads are boxes holding their activities (labelled with the schedule IDs that run
-them), streams are arrows between activities, each Petri net is a box of places (circles)
+them), streams are arrows between activities, dashed orange arrows join an activity to one it
+needs (a device block to its simulator), each Petri net is a box of places (circles)
 and transitions (bars), and flag-map bindings are dashed arrows between flags and places.
 The DOT text needs nothing installed; SVG and PNG use graphviz's `dot` when it is on the
 PATH, otherwise the pygraphviz wheel (`pip install hapticop[graph]`).
@@ -63,6 +64,9 @@ def to_dot(cg: CompositionGraph) -> str:
             policy = stream.policy.kind + (f"[{stream.policy.capacity}]" if stream.policy.kind == "queue" else "")
             lines.append(f"  {_id('activity', writer[0])} -> {_id('activity', reader_parts[0])} "
                          f"[label={_q(f'{sname}: {writer[1]}->{reader_parts[1]} ({policy})')}];")
+    for source, target, data in cg.edges_of("needs"):  # a device and its simulator, a simulator and its world
+        lines.append(f"  {_id('activity', source[1])} -> {_id('activity', target[1])} [style=dashed, "
+                     f"color=darkorange, label={_q('needs ' + data['need'].provides)}];")
     for nname, net in comp.coordination.nets.items():
         lines.append(f"  subgraph {_q('cluster_net_' + nname)} {{")
         lines.append(f"    label={_q('net ' + nname)}; style=dashed; color=gray40;")

@@ -1,7 +1,8 @@
 """The composition as one networkx graph: the single structure every check runs on.
 
 Nodes are threads, activities, ports, streams, nets, places, transitions, flags and the
-parties that own flags. Every reference written in the file becomes an edge that carries
+parties that own flags; an activity that needs another (a device block and its simulator)
+has a `needs` edge to it. Every reference written in the file becomes an edge that carries
 the YAML path where it was written, so a check that finds a bad edge can say where. A
 reference to something undeclared becomes a node with `declared=False` rather than an
 exception, and the checks report it.
@@ -118,6 +119,12 @@ class CompositionGraph:
             flag_set = flagdefs.activity_flags(name, iface.flags_written, iface.flags_read)
             for info in flag_set.values():
                 self._flag(info, activity(name))
+
+        for name, resolved in self.loaded.activities.items():
+            for need in resolved.interface.needs:
+                if self._reference(activity(need.activity), "activities", need.activity):
+                    self.g.add_edge(activity(name), activity(need.activity), kind="needs", need=need,
+                                    path=("activities", name, "params", need.param))
 
         for name, spec in comp.threads.items():
             for sid, members in spec.schedules.items():

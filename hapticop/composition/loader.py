@@ -116,4 +116,4 @@ def _resolve_activities(loaded: Loaded) -> None:
             loaded.diagnostics.extend(diagnostics_from(error, block.Params, prefix=path + ("params",)))
             loaded.broken.add(("activities", name))
             continue
-        loaded.activities[name] = ResolvedActivity(name, spec, block, params, block.interface(params))
+        loaded.activities[name] = ResolvedActivity(name, spec, block, params, block.declare(params))

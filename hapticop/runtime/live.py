@@ -52,7 +52,7 @@ def check(system: "System", plan: ChangePlan, new: Composition) -> dict[str, Res
         old = system.loaded.activities.get(name)
         block = old.block if old else system.resolve_block(spec.block)
         params = block.Params.model_validate(spec.params)
-        resolved[name] = ResolvedActivity(name, spec, block, params, block.interface(params))
+        resolved[name] = ResolvedActivity(name, spec, block, params, block.declare(params))
         if old and resolved[name].interface != old.interface:
             problems.append(_refuse(("activities", name, "params"), f"the new parameters change the ports of '{name}'"))
     for name in plan.added_activities:

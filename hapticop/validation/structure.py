@@ -40,6 +40,34 @@ def unknown_activities(cg: G.CompositionGraph) -> Check:
                                      hint=_suggest(node[1], declared) or "declare it under 'activities'")
 
 
+def needs(cg: G.CompositionGraph) -> Check:
+    """An activity that names another it needs (a device's simulator, a simulator's world) names
+    a declared activity whose block provides that: otherwise it would wait for it forever."""
+    for u, v, data in cg.edges_of("needs"):
+        need = data["need"]
+        providers = sorted(n[1] for n, d in cg.nodes_of("activity") if need.provides in d["resolved"].interface.provides)
+        why = f" ({need.why})" if need.why else ""
+        if not cg.g.nodes[v].get("declared", True):
+            hint = _suggest(need.activity, providers) or (
+                f"activities that provide it: {', '.join(providers)}" if providers else
+                f"declare an activity whose block provides '{need.provides}' ({_builtin_providers(need.provides)})")
+            yield Diagnostic("missing-need", f"'{u[1]}' needs an activity '{need.activity}' that provides "
+                             f"'{need.provides}'{why}, and none is declared", data["path"], hint=hint)
+        elif need.provides not in cg.g.nodes[v]["resolved"].interface.provides:
+            hint = f"activities that provide it: {', '.join(providers)}" if providers else (
+                f"declare an activity whose block provides '{need.provides}' ({_builtin_providers(need.provides)})")
+            yield Diagnostic("missing-need", f"'{u[1]}' needs '{need.activity}' to provide '{need.provides}'{why}, "
+                             f"but its block '{cg.g.nodes[v]['spec'].block}' does not", data["path"], hint=hint)
+
+
+def _builtin_providers(kind: str) -> str:
+    """The built-in blocks that provide `kind`, for a hint (imports the built-in blocks only)."""
+    from hapticop.blocks.registry import BUILTIN, resolve
+
+    names = [name for name in BUILTIN if kind in resolve(name).provides]
+    return "built-in: " + ", ".join(names) if names else "no built-in block does"
+
+
 def reserved_names(cg: G.CompositionGraph) -> Check:
     for node, data in cg.nodes_of("activity"):
         if node[1] in RESERVED_NAMES:
@@ -273,5 +301,5 @@ def busy_waits(cg: G.CompositionGraph) -> Check:
                              hint="a process of its own, or busy_wait: 0")
 
 
-CHECKS = (unknown_activities, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus, latencies,
+CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus, latencies,
           busy_waits)

@@ -1,0 +1,80 @@
+"""The device link: a device block's bytes reach the activity serving the device, and back,
+within one process and between two, without either end ever blocking."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from hapticop.devices.link import DatagramLink, link_name, publish_address, published_address, withdraw_address
+
+
+def test_frames_cross_in_order_within_one_process(tmp_path):
+    device = DatagramLink.device(tmp_path, "falcon_sim")
+    host = DatagramLink.host(tmp_path, "falcon_sim")
+    buffer = bytearray(64)
+    assert host.receive_into(buffer) == 0  # nothing yet: no wait
+    assert host.send(b"command-1") and host.send(b"command-2")
+    assert device.receive_into(buffer) == 9 and bytes(buffer[:9]) == b"command-1"
+    assert device.receive_into(buffer) == 9 and bytes(buffer[:9]) == b"command-2"
+    assert device.receive_into(buffer) == 0
+    assert device.send(b"status")
+    assert host.receive_into(buffer) == 6 and bytes(buffer[:6]) == b"status"
+    host.close()
+    device.close()
+
+
+def test_a_missing_device_drops_the_frame_and_counts_it(tmp_path):
+    host = DatagramLink.host(tmp_path, "nobody")
+    assert not host.send(b"frame")
+    assert host.dropped == 1
+    host.close()
+
+
+def test_a_device_that_does_not_keep_up_never_blocks_the_host(tmp_path):
+    device = DatagramLink.device(tmp_path, "slow")
+    host = DatagramLink.host(tmp_path, "slow")
+    sent = sum(host.send(bytes(168 * 4)) for _ in range(5000))
+    assert sent < 5000 and host.dropped == 5000 - sent  # the queue filled; the rest were dropped
+    host.close()
+    device.close()
+
+
+def test_links_of_two_runs_are_apart(tmp_path):
+    assert link_name(tmp_path / "a", "sim") != link_name(tmp_path / "b", "sim")
+
+
+def test_a_device_in_another_process_answers(tmp_path):
+    program = (
+        "import sys; from pathlib import Path; from hapticop.devices.link import DatagramLink\n"
+        "d = DatagramLink.device(Path(sys.argv[1]), 'echo'); print('ready', flush=True)\n"
+        "d.sock.setblocking(True); b = bytearray(64); n = d.receive_into(b); d.send(bytes(b[:n]).upper())\n"
+    )
+    child = subprocess.Popen([sys.executable, "-c", program, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        host = DatagramLink.host(tmp_path, "echo")
+        host.sock.setblocking(True)
+        host.sock.settimeout(10)
+        assert host.send(b"ping")
+        buffer = bytearray(64)
+        n = host.sock.recv_into(buffer)
+        assert bytes(buffer[:n]) == b"PING"
+        host.close()
+    finally:
+        child.wait(10)
+
+
+def test_a_tcp_address_is_published_whole_and_withdrawn(tmp_path):
+    assert published_address(tmp_path, "lidar_sim") is None
+    publish_address(tmp_path, "lidar_sim", "127.0.0.1", 40123)
+    assert published_address(tmp_path, "lidar_sim") == ("127.0.0.1", 40123)
+    withdraw_address(tmp_path, "lidar_sim")
+    assert published_address(tmp_path, "lidar_sim") is None
+
+
+def test_an_address_left_by_an_ended_process_is_no_answer(tmp_path):
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "lidar_sim.address").write_text(f"127.0.0.1 40123 {ended.stdout.strip()}\n")
+    assert published_address(tmp_path, "lidar_sim") is None
