@@ -1,16 +1,112 @@
-"""Measuring small calls: microseconds per call, and what they leave allocated.
+"""For block authors' tests and benchmarks: a block alone in a harness, and small calls measured.
 
-Shared by the benchmark scripts in bench/ (which report figures) and by tests (which
-check allocations, never times).
+`BlockHarness` runs one block without a composition, the way dora's mock node does: its ports
+are real ports fed and read by the test, its clock is virtual, its life-cycle hooks are called
+as its activity's state machine would call them. The measuring functions report microseconds
+per call and what a call leaves allocated (bench/ reports figures; tests check allocations only).
 """
 
 from __future__ import annotations
 
+import queue
 import time
 import tracemalloc
 from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
+
+from hapticop.blocks.base import Block
+from hapticop.blocks.registry import resolve
+from hapticop.runtime.clock import VirtualClock
+from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
+from hapticop.runtime.logs import Level, Logger
+from hapticop.runtime.streams import LatestSlot, latest_nbytes
+
+
+class HookDidNotComplete(AssertionError):
+    pass
+
+
+class BlockHarness:
+    """One block, its ports and flags, stepped by hand on a virtual clock.
+
+    >>> harness = BlockHarness("echo", {"dtype": "float64", "shape": [3]})
+    >>> harness.configure()
+    >>> harness.feed("input", [1.0, 2.0, 3.0]); harness.step()
+    >>> harness.outputs.output.value
+    """
+
+    def __init__(self, block: type[Block] | str, params: dict[str, Any] | None = None, *, name: str = "block",
+                 period_ns: int = 1_000_000, run_dir: Path | str = ".", seed: int = 0):
+        self.block_type = resolve(block) if isinstance(block, str) else block
+        self.params = self.block_type.Params.model_validate(params or {})
+        self.interface = self.block_type.declare(self.params)
+        self.clock = VirtualClock()
+        self.period_ns = period_ns
+        self._sources: dict[str, LatestSlot] = {}
+        inputs = {}
+        for port_name, spec in self.interface.inputs.items():
+            inputs[port_name] = InputPort(port_name, spec, self.clock.now_ns)
+            self._sources[port_name] = LatestSlot(bytearray(latest_nbytes(spec)), spec, synchronised=False)
+            inputs[port_name].connect(self._sources[port_name], queue=False, max_age_ns=0)
+        outputs = {port_name: OutputPort(port_name, spec, self.clock.now_ns)
+                   for port_name, spec in self.interface.outputs.items()}
+        flag_names = list(self.interface.flags_written) + list(self.interface.flags_read)
+        self.flag_values = np.zeros(max(len(flag_names), 1), dtype=np.uint8)
+        flags = FlagView(self.flag_values, {f"{name}.{flag}": i for i, flag in enumerate(flag_names)}, name, flag_names)
+        self._log_queue: queue.SimpleQueue = queue.SimpleQueue()
+        log = Logger(name, Level.DEBUG, self._log_queue, self.clock.now_ns)
+        self.context = ActivityContext(name, self.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
+                                       self.clock, log, np.random.default_rng(seed), Path(run_dir))
+        self.block = self.block_type(self.context)
+        self.inputs, self.outputs, self.flags = self.context.inputs, self.context.outputs, flags
+
+    def feed(self, port: str, value) -> None:
+        """Write a sample to input `port`, as the stream that feeds it would (seen at the next step)."""
+        self._sources[port].write(np.asarray(value), self.clock.now_ns())
+
+    def configure(self, max_cycles: int = 100_000) -> None:
+        """create, then each configuration hook until it completes, one period apart."""
+        for hook in (self.block.create, self.block.configure_resources, self.block.configure_capabilities):
+            for _ in range(max_cycles):
+                if hook() is not False:
+                    break
+                self.advance()
+            else:
+                raise HookDidNotComplete(f"{hook.__name__} did not complete in {max_cycles} cycles")
+
+    def step(self, cycles: int = 1) -> None:
+        """Cycles while running: inputs refreshed, compute, then flush (with inputs refreshed again)."""
+        flushes = self.block_type.implements_flush()
+        for _ in range(cycles):
+            self._refresh()
+            self.block.compute()
+            if flushes:
+                self._refresh()
+                self.block.flush()
+            self.advance()
+
+    def clean(self) -> None:
+        self.block.clean()
+
+    def advance(self, ns: int | None = None) -> None:
+        self.clock.advance_to(self.clock.now_ns() + (self.period_ns if ns is None else ns))
+
+    def log_lines(self) -> list[str]:
+        """What the block logged since the last call, formatted."""
+        lines = []
+        while not self._log_queue.empty():
+            _, _, level, message, args = self._log_queue.get()
+            lines.append(f"{Level(level).name.lower()}: {message % args if args else message}")
+        return lines
+
+    def _refresh(self) -> None:
+        for port in vars(self.inputs).values():
+            port.refresh()
+
 
 
 def allocation_stats(fn: Callable[[], object], calls: int = 1000, warmup: int = 10) -> tuple[int, int]:
