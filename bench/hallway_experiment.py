@@ -38,12 +38,15 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     source = read_file(ROOT / "systems" / "hallway.yaml")
     force_model, _, robot_side = model.partition("+")
     governor = robot_side == "governor"
-    haptic = {"force_model": force_model, "governor": governor,
-              "braking_field": braking_field or ({} if governor else None)}
+    tuned = force_model == "braking_field" and (governor or braking_field is not None)
+    tree = source.tree
+    if not tuned:  # the model's own defaults, not the hallway's tuning of M1
+        tree = apply_patch(tree, {"activities": {"haptic": {"params": {"force_model": None}}}})
+    haptic = {"force_model": {"kind": force_model, **(braking_field or {})}, "governor": {} if governor else None}
     patch = {"activities": {"haptic": {"params": haptic},
                             "world": {"params": {"hallway": hallway, "operator": profile, "variation": variation,
                                                  "plot": False, "time_limit_s": TIME_LIMIT_S}}}}
-    tree = apply_patch(source.tree, patch)
+    tree = apply_patch(tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
     from ruamel.yaml import YAML

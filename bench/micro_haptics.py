@@ -23,7 +23,6 @@ from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import govern_cycle, govern_scan, govern_twist
 from hapticop.haptics.handle import CentringPD, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
-from hapticop.haptics.synthetic import cast, hallway, tim561_angles
 from hapticop.testing import allocation_stats, time_per_call
 from hapticop.sim.hallway import HallwayGeometry, World
 from hapticop.sim.metrics import TrajectoryRecorder
@@ -32,13 +31,14 @@ from hapticop.sim.operator import BlindOperator
 
 def cases() -> dict[str, Callable[[], object]]:
     """The per-cycle calls to measure, each with its inputs already prepared."""
-    raw_angles = tim561_angles()
-    raw = cast(raw_angles, hallway(2.0, 10.0), origin=(0.75, 0.3), heading=np.radians(8.0)).astype(np.float32)
+    h2 = HallwayGeometry.named("H2")
+    raw_angles = h2.lidar.angles()
+    raw = World.from_geometry(h2).raycast(h2.start, h2.lidar.mount, raw_angles, np.empty(h2.lidar.beams, np.float32))
     average = MovingAverage()
     angles = average.configure(raw_angles)
     ranges = average.apply(raw).copy()
     median = MovingMedian()
-    median.configure(raw.shape[0])
+    median.configure(raw_angles)
     handle = np.array([0.01, 0.0, -0.02])
     twist = np.array([0.5, 0.0, 0.1])
     force = np.zeros(3)

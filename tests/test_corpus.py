@@ -21,6 +21,8 @@ VALID = CORPUS / "valid"
 # (file, rule, line, substring of the message, substring of the hint or None)
 CASES = [
     ("invalid-nested-param-key.yaml", "unknown-key", 18, "unknown key 'fz_maxx'", "did you mean 'fz_max_n'?"),
+    ("invalid-nested-param-value.yaml", "bad-value", 18, "'silent_ratio' must be less than 1.0 (got 1.5)", None),
+    ("invalid-force-model-kind.yaml", "bad-value", 18, "unknown kind 'braking'", None),
     # found while writing the corpus: each once gave a crash, a second error or a wrong line
     ("invalid-arc-undeclared-place.yaml", "unknown-place", 21, "arc to undeclared place 'EXTRA' of net 'boot'", None),
     ("invalid-mediator-off-main.yaml", "mediator", 12, "scheduled on thread 'sensors'", None),
@@ -129,6 +131,13 @@ def test_invalid_file_gives_its_one_error(name, rule, line, message, hint):
     if hint is not None:
         assert hint in error.hint
     assert error.file == str(path)
+
+
+def test_a_parameter_set_chosen_by_its_kind_is_no_key_of_the_path():
+    """pydantic locates an error inside a discriminated union under the member's tag; the YAML has no such key."""
+    error = validate_path(INVALID / "invalid-nested-param-value.yaml").report.errors[0]
+    assert error.path == ("activities", "haptic", "params", "force_model", "silent_ratio")
+    assert (error.line, error.column) == (18, 56)
 
 
 def test_every_invalid_file_is_pinned():

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from hapticop.haptics.force_models import BrakingField, BrakingFieldParams, CorrectedThesisForce
-from hapticop.haptics.synthetic import hallway, robot_scan, tim561_angles
 
+from .scans import hallway, robot_scan, tim561_angles
 from .test_haptics_handle import assert_no_allocation
 
 ANGLES = tim561_angles(809)
@@ -178,13 +178,15 @@ def test_compute_and_render_allocate_nothing():
 def test_side_clearances_are_the_kth_smallest_clearance_by_direct_evaluation():
     """BeamGeometry's per-cycle side clearances against the equation evaluated beam by beam (seeded),
     for sorted and shuffled beams and a scanner on and off the body's centre line."""
-    from hapticop.haptics.geometry import BeamGeometry, Footprint
+    from hapticop.devices.ropod.body import Body, SensorMount
+    from hapticop.haptics.geometry import BeamGeometry
 
     rng = np.random.default_rng(4)
     sorted_angles = np.sort(rng.uniform(-2.4, 2.4, 400))
     for angles in (sorted_angles, rng.permutation(sorted_angles)):
-        for fp in (Footprint(), Footprint(lidar_x_m=0.1, lidar_y_m=0.2), Footprint(lidar_y_m=0.5)):
-            beams, hl, hw = BeamGeometry(angles, fp), fp.length_m / 2, fp.width_m / 2
+        for body in (Body(), Body(lidar=SensorMount(0.1, 0.2)), Body(lidar=SensorMount(0.25, 0.5))):
+            fp, lidar = body.footprint, body.lidar
+            beams, hl, hw = BeamGeometry(angles, body), fp.length_m / 2, fp.width_m / 2
             for _ in range(20):
                 ranges = rng.uniform(0.05, 3.0, angles.size)
                 ranges[rng.random(angles.size) < 0.1] = np.nan
@@ -192,7 +194,7 @@ def test_side_clearances_are_the_kth_smallest_clearance_by_direct_evaluation():
                 beams.select_sides(0.5, 1.5)
                 sx, sy = rng.uniform(-0.5, 1.5), rng.choice([0.0, rng.uniform(-0.2, 0.2)])
                 got = beams.side_clearances(sx, sy, 3)
-                px, py = ranges * np.cos(angles) + fp.lidar_x_m, ranges * np.sin(angles) + fp.lidar_y_m
+                px, py = ranges * np.cos(angles) + lidar.x_m, ranges * np.sin(angles) + lidar.y_m
                 window = ~np.isnan(ranges) & (px >= -hl - 0.5) & (px <= hl + 1.5)
                 clearance = np.hypot(np.maximum(np.abs(px - sx) - hl, 0), np.maximum(np.abs(py - sy) - hw, 0))
                 for side, mask in enumerate((window & (py > hw), window & (py < -hw))):

@@ -7,8 +7,8 @@ import pytest
 
 from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import GovernorParams, govern_cycle, govern_scan, govern_twist, stop_gap
-from hapticop.haptics.synthetic import hallway, robot_scan, tim561_angles
 
+from .scans import hallway, robot_scan, tim561_angles
 from .test_haptics_handle import assert_no_allocation
 
 ANGLES = tim561_angles(811)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
-from hapticop.haptics.synthetic import tim561_angles
 
+from .scans import tim561_angles
 from .test_haptics_handle import assert_no_allocation
 
 RAW = tim561_angles(811)
@@ -87,7 +87,7 @@ def test_float32_scans_are_accepted():
 
 def test_median_rejects_single_beam_outliers_and_keeps_the_scan_length():
     m = MovingMedian(5)
-    m.configure(811)
+    m.configure(RAW)
     r = np.full(811, 4.0)
     r[300] = 0.4  # spurious return
     r[0] = 0.5  # end beams pass through
@@ -100,7 +100,7 @@ def test_median_rejects_single_beam_outliers_and_keeps_the_scan_length():
 
 def test_median_is_nan_only_where_most_of_the_window_is_invalid():
     m = MovingMedian(5)
-    m.configure(811)
+    m.configure(RAW)
     r = np.full(811, 4.0)
     r[200] = np.nan
     r[400:403] = np.nan
@@ -116,6 +116,6 @@ def test_the_filters_allocate_nothing_per_scan():
     scan[::7] = np.nan
     assert_no_allocation(lambda: f.apply(scan))
     m = MovingMedian()
-    m.configure(811)
+    m.configure(RAW)
     # numpy's partition allocates a ~3 kB temporary itself; no growth (runs once per scan).
     assert_no_allocation(lambda: m.apply(scan), peak_limit=4096)

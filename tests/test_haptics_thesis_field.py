@@ -13,8 +13,8 @@ from hapticop.haptics.force_models import (
     ThesisParams,
     make_force_model,
 )
-from hapticop.haptics.synthetic import tim561_angles
 
+from .scans import tim561_angles
 from .test_haptics_handle import assert_no_allocation
 
 K3 = K4 = 100.0
@@ -164,3 +164,15 @@ def test_compute_allocates_nothing(name):
     handle, twist, out = np.array([0.01, 0.0, -0.02]), np.array([0.5, 0.0, 0.0]), np.zeros(3)
     assert_no_allocation(lambda: model.compute(handle, ranges, twist, out))
     assert_no_allocation(lambda: model.render(handle, twist, out))
+
+
+def test_a_parameter_set_builds_the_model_its_kind_names():
+    from hapticop.haptics.force_models import BrakingField, BrakingFieldParams, NoForceParams
+
+    params = ThesisParams(80.0, 120.0, 2.5, kind="thesis_corrected")
+    model = make_force_model(params, tim561_angles(809))
+    assert type(model) is CorrectedThesisForce and model.params is params
+    assert type(make_force_model(ThesisParams())) is ThesisForce
+    assert type(make_force_model(NoForceParams())) is NoForce
+    assert type(make_force_model(BrakingFieldParams(silent_ratio=0.9))) is BrakingField
+    assert make_force_model("thesis_corrected").params.kind == "thesis_corrected"

@@ -43,10 +43,10 @@ def _refused(tree, text: str) -> PatchError:
 
 
 def test_load_json_patch_and_merge_patch():
-    ops = load_patch("- {op: replace, path: /activities/haptic/params/k1, value: 30.0}\n", "p.yaml")
+    ops = load_patch("- {op: replace, path: /activities/haptic/params/driving/k1_per_s, value: 30.0}\n", "p.yaml")
     assert isinstance(ops, list) and ops[0]["op"] == "replace"
-    merge = load_patch("activities:\n  haptic:\n    params: {k1: 30.0}\n", "p.yaml")
-    assert isinstance(merge, dict) and merge["activities"]["haptic"]["params"]["k1"] == 30.0
+    merge = load_patch("activities:\n  haptic:\n    params: {driving: {k1_per_s: 30.0}}\n", "p.yaml")
+    assert isinstance(merge, dict) and merge["activities"]["haptic"]["params"]["driving"]["k1_per_s"] == 30.0
 
 
 @pytest.mark.parametrize(
@@ -64,7 +64,7 @@ def test_load_json_patch_and_merge_patch():
         ("- {op: move, path: /a}\n", "patch-syntax", 1),
         ("- {op: remove, path: no-slash}\n", "patch-syntax", 1),
         ("- just a string\n", "patch-syntax", 1),
-        ("op: replace\npath: /activities/haptic/params/k1\nvalue: 1\n", "patch-syntax", 1),
+        ("op: replace\npath: /activities/haptic/params/driving/k1_per_s\nvalue: 1\n", "patch-syntax", 1),
     ],
 )
 def test_load_patch_errors_are_located(text, rule, line):
@@ -89,16 +89,17 @@ def test_load_patch_raises_only_patch_error():
 
 def test_json_patch_replaces_a_parameter(hallway):
     tree, _ = hallway
-    patch = load_patch("- {op: replace, path: /activities/haptic/params/k1, value: 30.0}\n", "p.yaml")
+    patch = load_patch("- {op: replace, path: /activities/haptic/params/driving/k1_per_s, value: 30.0}\n", "p.yaml")
     new_tree, composition, plan, diff = prepare(tree, patch)
-    assert composition.activities["haptic"].params["k1"] == 30.0
-    assert plan.params["haptic"]["k1"] == 30.0
-    assert plan.params["haptic"]["k2"] == 10.0  # the whole new parameter set
-    assert type(plan.params["haptic"]["k1"]) is float  # plain values, not ruamel's
-    assert "activity 'haptic': parameters k1 28.0 -> 30.0" in plan.describe()
+    assert composition.activities["haptic"].params["driving"]["k1_per_s"] == 30.0
+    assert plan.params["haptic"]["driving"]["k1_per_s"] == 30.0
+    assert plan.params["haptic"]["driving"]["k2_rad_per_s_m"] == 10.0  # the whole new parameter set
+    assert plan.params["haptic"]["centring"]["kp_n_per_m"] == 55.0
+    assert type(plan.params["haptic"]["driving"]["k1_per_s"]) is float  # plain values, not ruamel's
+    assert "activity 'haptic': parameters driving.k1_per_s 28.0 -> 30.0" in plan.describe()
     assert not plan.schedules and not plan.unsupported and not plan.empty
-    assert tree["activities"]["haptic"]["params"]["k1"] == 28.0
-    assert "-      k1: 28.0\n+      k1: 30.0\n" in diff
+    assert tree["activities"]["haptic"]["params"]["driving"]["k1_per_s"] == 28.0
+    assert "-      driving: {k1_per_s: 28.0, " in diff and "+      driving: {k1_per_s: 30.0, " in diff
 
 
 def test_json_patch_reaches_integer_schedule_ids(hallway):
@@ -114,13 +115,13 @@ def test_failing_test_op_refuses_the_patch(hallway):
     tree, _ = hallway
     error = _refused(
         tree,
-        "- {op: replace, path: /activities/haptic/params/k2, value: 11.0}\n"
-        "- {op: test, path: /activities/haptic/params/k1, value: 31.0}\n"
-        "- {op: replace, path: /activities/haptic/params/k1, value: 32.0}\n",
+        "- {op: replace, path: /activities/haptic/params/driving/k2_rad_per_s_m, value: 11.0}\n"
+        "- {op: test, path: /activities/haptic/params/driving/k1_per_s, value: 31.0}\n"
+        "- {op: replace, path: /activities/haptic/params/driving/k1_per_s, value: 32.0}\n",
     )
     (diagnostic,) = error.diagnostics
     assert diagnostic.rule == "patch-apply"
-    assert "operation 1" in diagnostic.message and "/activities/haptic/params/k1" in diagnostic.message
+    assert "operation 1" in diagnostic.message and "/activities/haptic/params/driving/k1_per_s" in diagnostic.message
     assert "28.0" in diagnostic.message
     assert (diagnostic.file, diagnostic.line) == ("p.yaml", 2)
 
@@ -128,7 +129,7 @@ def test_failing_test_op_refuses_the_patch(hallway):
 @pytest.mark.parametrize(
     "text",
     [
-        "- {op: replace, path: /activities/nothing/params/k1, value: 1}\n",
+        "- {op: replace, path: /activities/nothing/params/driving/k1_per_s, value: 1}\n",
         "- {op: remove, path: /activities/haptic/params/no_such_param}\n",
         "- {op: add, path: /threads/main/schedules/1/9, value: haptic}\n",
         "- {op: move, from: /streams/nothing, path: /streams/other}\n",
@@ -164,10 +165,13 @@ def test_merge_patch_changes_a_schedule(hallway):
 
 def test_merge_patch_null_deletes_and_keeps_the_rest(hallway):
     tree, _ = hallway
-    new_tree = apply_patch(tree, load_patch("activities:\n  haptic:\n    params:\n      k1: 30.0\n      k2: null\n", "p.yaml"))
+    patch = "activities:\n  haptic:\n    params:\n      driving: {k1_per_s: 30.0, k2_rad_per_s_m: null}\n"
+    new_tree = apply_patch(tree, load_patch(patch, "p.yaml"))
     params = new_tree["activities"]["haptic"]["params"]
-    assert params["k1"] == 30.0 and "k2" not in params and params["kp_n_per_m"] == 55.0
-    assert "k2" in tree["activities"]["haptic"]["params"]
+    driving = params["driving"]
+    assert driving["k1_per_s"] == 30.0 and "k2_rad_per_s_m" not in driving and driving["dead_zone_m"] == 0.005
+    assert params["centring"]["kp_n_per_m"] == 55.0
+    assert "k2_rad_per_s_m" in tree["activities"]["haptic"]["params"]["driving"]
 
 
 def test_json_keys_as_text_reach_integer_schedule_ids(hallway):
@@ -181,10 +185,10 @@ def test_json_keys_as_text_reach_integer_schedule_ids(hallway):
 
 def test_patch_making_a_parameter_invalid_is_refused_with_the_validators_diagnostic(hallway):
     tree, _ = hallway
-    error = _refused(tree, "- {op: replace, path: /activities/haptic/params/k1, value: fast}\n")
+    error = _refused(tree, "- {op: replace, path: /activities/haptic/params/driving/k1_per_s, value: fast}\n")
     assert [d.rule for d in error.diagnostics] == ["bad-value"]
     diagnostic = error.diagnostics[0]
-    assert diagnostic.path == ("activities", "haptic", "params", "k1")
+    assert diagnostic.path == ("activities", "haptic", "params", "driving", "k1_per_s")
     assert "fast" in diagnostic.message
     assert diagnostic.line > 0
 
@@ -200,8 +204,9 @@ def test_schedule_naming_an_unknown_activity_is_refused(hallway):
 
 def test_validate_patched_returns_the_validated_composition(hallway):
     tree, _ = hallway
-    validated = validate_patched(apply_patch(tree, {"activities": {"haptic": {"params": {"k2": 12.0}}}}))
-    assert validated.composition.activities["haptic"].params["k2"] == 12.0
+    patch = {"activities": {"haptic": {"params": {"driving": {"k2_rad_per_s_m": 12.0}}}}}
+    validated = validate_patched(apply_patch(tree, patch))
+    assert validated.composition.activities["haptic"].params["driving"]["k2_rad_per_s_m"] == 12.0
 
 
 # --- unsupported changes ------------------------------------------------------------------

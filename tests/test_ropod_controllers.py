@@ -111,7 +111,7 @@ def test_parameter_sets_are_the_references():
 def test_a_bank_steps_its_channels_independently():
     """All reference cases at once, one channel each, give each case's own outputs."""
     names = sorted(CASES)
-    params = LinearControllerParams.stack([LinearControllerParams.from_mapping(CASES[n]["params"]) for n in names])
+    params = [LinearControllerParams.from_mapping(CASES[n]["params"]) for n in names]
     bank = ControllerBank(params, TS)
     assert bank.n == len(names)
     inputs = [_inputs(n, CASES[n], 700) for n in names]
@@ -146,7 +146,7 @@ def test_invalid_parameters_are_refused():
 
 def test_step_allocates_nothing():
     """Nothing retained and no temporaries beyond numpy's own call overhead (a bare np.clip peaks at ~5 KiB)."""
-    bank = ControllerBank(LinearControllerParams.stack([THESIS_PLATFORM_XY] * 3 + [THESIS_WHEEL] * 8), TS)
+    bank = ControllerBank([THESIS_PLATFORM_XY] * 3 + [THESIS_WHEEL] * 8, TS)
     e, out, reset = np.linspace(-3, 3, 11), np.zeros(11), np.zeros(11, bool)
     retained, peak = allocation_stats(lambda: bank.step(e, out, reset), 2000)
     assert retained < 256 and peak < 1024

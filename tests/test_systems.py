@@ -25,8 +25,10 @@ def test_hallway_is_the_thesis_layout():
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
     assert set(composition.activities) == thesis | {"world"}
     haptic = composition.activities["haptic"].params
-    assert (haptic["kp_n_per_m"], haptic["kd_ns_per_m"], haptic["k1"], haptic["k2"]) == (55.0, 0.2, 28.0, 10.0)
-    assert (haptic["dead_zone_m"], haptic["force_limit_n"]) == (0.005, 10.0)
+    centring, driving = haptic["centring"], haptic["driving"]
+    assert (centring["kp_n_per_m"], centring["kd_ns_per_m"], driving["k1_per_s"], driving["k2_rad_per_s_m"]) == (
+        55.0, 0.2, 28.0, 10.0)
+    assert (driving["dead_zone_m"], centring["force_limit_n"]) == (0.005, 10.0)
     lidar = composition.activities["lidar"].params
     assert (lidar["points"], lidar["scan_rate_hz"]) == (811, 15.0)
     ropod = composition.activities["ropod"].params

@@ -1,49 +1,44 @@
 """The haptic controller: handle displacement to robot velocity, obstacles to force.
 
-It holds the handle at its origin with a PD (Kp 55 N/m, Kd 0.2 Ns/m), maps displacement to
-velocity setpoints with the car-driving metaphor (k1 28, k2 10, 0.5 cm dead zone) and adds
-the environmental force of the chosen model, everything limited to 10 N per axis.
+It holds the handle at its origin with a PD, maps displacement to velocity setpoints with the
+car-driving metaphor and adds the environmental force of the chosen model, everything limited
+per axis. Its parameters are the control laws' own (``hapticop.haptics``), nested one set per law:
+their defaults, units and descriptions are written there once.
 """
 
 from __future__ import annotations
-
-from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
-from hapticop.haptics.force_models import BrakingFieldParams
-from hapticop.haptics.governor import GovernorParams, govern_cycle, govern_scan, limit_blind, stop_gap
+from hapticop.haptics.force_models import BrakingFieldParams, ForceModelParams, make_force_model
+from hapticop.haptics.geometry import BeamGeometry
+from hapticop.haptics.governor import (
+    BlindPolicy, GovernorParams, govern_cycle, govern_scan, limit_blind_by, stop_gap,
+)
 from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
-from hapticop.haptics.scan_filter import MovingAverage
+from hapticop.haptics.scan_filter import MovingAverageParams, ScanFilterParams, make_scan_filter
 
 
 class HapticControllerParams(Params):
-    kp_n_per_m: float = Field(55.0, ge=0, description="handle-centring stiffness")
-    kd_ns_per_m: float = Field(0.2, ge=0, description="handle-centring damping")
-    force_limit_n: float = Field(10.0, gt=0, le=20.0, description="per-axis force saturation")
-    k1: float = Field(28.0, description="forward speed per handle displacement, (m/s)/m")
-    k2: float = Field(10.0, description="turn rate per handle displacement, (rad/s)/m")
-    dead_zone_m: float = Field(0.005, ge=0)
-    force_model: Literal["none", "thesis", "thesis_corrected", "braking_field"] = Field(
-        "braking_field", description="thesis: equations 5.5/5.6 literally; thesis_corrected: their z branch "
-        "centring; braking_field: footprint braking-distance risk with lateral clearance (hallway-experiment.md §9)")
-    braking_field: BrakingFieldParams = Field(
-        default_factory=BrakingFieldParams, description="parameters of the braking_field model (hallway-experiment.md §9.1)")
-    governor: bool = Field(False, description="limit the commanded twist to what can stop before obstacles")
+    """One parameter set per control law, each the library's own (``hapticop.haptics``)."""
+
+    centring: CentringParams = Field(default_factory=CentringParams)
+    driving: DrivingParams = Field(default_factory=DrivingParams)
+    force_model: ForceModelParams = Field(
+        default_factory=BrakingFieldParams, discriminator="kind",
+        description="the environmental force; 'kind' chooses the model (none, thesis, thesis_corrected, "
+        "braking_field) and the other keys are that model's parameters")
+    governor: GovernorParams | None = Field(
+        None, description="the robot-side speed governor S1 ({} for its defaults); null: none")
+    blind: BlindPolicy = Field(default_factory=BlindPolicy)
+    scan_filter: ScanFilterParams = Field(
+        default_factory=MovingAverageParams, discriminator="kind",
+        description="the per-beam filter of each scan: 'kind' moving_average or moving_median")
+    scan_points: int = Field(811, ge=2, le=10_000, description="points per scan (the ranges and angles ports)")
     centred_within_m: float = Field(0.005, gt=0, description="capability configuration ends with the handle this close")
-    k3_n_per_m: float = Field(100.0, ge=0, description="environmental force scale, z (eq. 5.5)")
-    k4_n_per_m: float = Field(100.0, ge=0, description="environmental force scale, x (eq. 5.6)")
-    d_max_m: float = Field(2.0, gt=0, description="range beyond which obstacles exert no force")
-    moving_average: int = Field(3, ge=1, description="window of the range filter (811 points give 809)")
-    scan_points: int = Field(811, ge=2, le=10_000)
-    blind: Literal["stop", "slow"] = Field(
-        "stop", description="while the scan is stale (older than its stream's max_age): 'stop' commands no motion, "
-        "'slow' limits the robot to blind_speed_mps and blind_turn_rad_s")
-    blind_speed_mps: float = Field(0.1, ge=0, description="speed limit while blind (policy 'slow')")
-    blind_turn_rad_s: float = Field(0.2, ge=0, description="turn-rate limit while blind (policy 'slow')")
 
 
 class HapticController(Block):
@@ -54,10 +49,8 @@ class HapticController(Block):
                      "handle_lost": "the handle position is stale (Falcon frames stopped): no force, no motion"}
     awaits = frozenset({"resources_ready"})
     optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
-    running_params = frozenset({"blind", "blind_speed_mps", "blind_turn_rad_s"})
-    capability_params = frozenset({"kp_n_per_m", "kd_ns_per_m", "force_limit_n", "k1", "k2", "dead_zone_m",
-                                   "k3_n_per_m", "k4_n_per_m", "d_max_m", "governor", "braking_field",
-                                   "force_model"})
+    running_params = frozenset({"blind"})
+    capability_params = frozenset({"centring", "driving", "force_model", "governor"})
 
     @classmethod
     def interface(cls, params: HapticControllerParams) -> Interface:
@@ -159,47 +152,33 @@ class HapticController(Block):
         if blind != self.blind:
             self.blind = self.flags["blind"] = blind
             if blind:
-                self.log.warning("scan stale: blind, policy '%s'", self.params.blind)
+                self.log.warning("scan stale: blind, policy '%s'", self.params.blind.policy)
             else:
                 self.log.info("scan fresh again")
         if blind:
-            p = self.params
-            if p.blind == "stop":
-                limit_blind(twist, 0.0, 0.0)
-            else:
-                limit_blind(twist, p.blind_speed_mps, p.blind_turn_rad_s)
+            limit_blind_by(twist, self.params.blind)
 
     def twist_measured(self):
         platform = self.inputs.platform_velocity
         return platform.value if platform.valid else self.outputs.velocity_setpoint.value
 
     def _build(self) -> None:
-        from hapticop.haptics.force_models import ThesisParams, make_force_model
-
         p = self.params
-        self.pd = CentringPD(CentringParams(kp_n_per_m=p.kp_n_per_m, kd_ns_per_m=p.kd_ns_per_m,
-                                            force_limit_n=p.force_limit_n))
-        self.driving = DrivingParams(k1_per_s=p.k1, k2_rad_per_s_m=p.k2, dead_zone_m=p.dead_zone_m)
-        self.filter = MovingAverage(window=p.moving_average)
+        self.pd = CentringPD(p.centring)
+        self.driving = p.driving
+        self.filter = make_scan_filter(p.scan_filter)
         angles = self.filter.configure(self.inputs.angles.value if self.inputs.angles.valid
                                        else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))
-        params = {"thesis": ThesisParams, "thesis_corrected": ThesisParams}.get(p.force_model)
-        model_params = params(k3_n_per_m=p.k3_n_per_m, k4_n_per_m=p.k4_n_per_m, d_max_m=p.d_max_m) if params else (
-            p.braking_field if p.force_model == "braking_field" else None)
-        self.model = make_force_model(p.force_model, angles, model_params)
-        self.governor: GovernorParams | None = None
-        self.beams_shared = False
-        if p.governor:
-            from hapticop.haptics.geometry import BeamGeometry, Footprint
-
-            self.governor = governor = GovernorParams()
-            # The braking field's scan points serve the governor too when both see the same body and
-            # side window: the scan is then loaded and its side points selected once, not twice.
-            field = getattr(self.model, "beams", None)
-            self.beams_shared = field is not None and field.footprint == Footprint() and (
-                (self.model.params.window_rear_m, self.model.params.window_ahead_m)  # type: ignore[attr-defined]
-                == (governor.window_rear_m, governor.window_ahead_m))
-            self.beams = field if self.beams_shared else BeamGeometry(angles, Footprint())
+        self.model = make_force_model(p.force_model, angles)
+        self.governor = governor = p.governor
+        # The braking field's scan points serve the governor too when both select the same side
+        # window: the scan is then loaded and its side points selected once, not twice.
+        field = getattr(self.model, "beams", None)
+        self.beams_shared = governor is not None and field is not None and (
+            (p.force_model.window_rear_m, p.force_model.window_ahead_m)  # type: ignore[union-attr]
+            == (governor.window_rear_m, governor.window_ahead_m))
+        if governor is not None:
+            self.beams = field if self.beams_shared else BeamGeometry(angles)
         self.scan_seq = 0  # no scan taken: the next compute takes the one in hand
         self.stop_gap_m = 0.0
 

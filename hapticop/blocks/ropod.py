@@ -2,55 +2,39 @@
 
 Three platform controllers (x, y, theta) and eight wheel controllers, each the generic
 gain / PI / lead-lag / low-pass chain at 1 kHz, with the thesis's Appendix D values
-(../shared/reference/ropod-controller.md).
+(``hapticop.devices.ropod``, whose parameter sets these are).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.ethercat import SMARTWHEEL_INPUT_BYTES, SMARTWHEEL_OUTPUT_BYTES
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.devices.ropod.kinematics import Geometry
+from hapticop.devices.ropod.linear_bank import LinearControllerParams
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
+from hapticop.devices.ropod.velocity_controller import PlatformControllerParams, PlatformVelocityController
 
-
-class LinearController(Params):
-    """Gain, PI with saturation and anti-windup, lead-lag, low pass (Tustin)."""
-
-    p_gain: float
-    i_fhz: float = Field(ge=0)
-    ll_zero_fhz: float = Field(gt=0)
-    ll_pole_fhz: float = Field(gt=0)
-    lpf_fhz: float = Field(gt=0)
-    i_saturation: float = Field(gt=0)
-
-
-class RopodGeometry(Params):
-    wheel_radius_m: float = 0.0525
-    caster_offset_m: float = 0.01
-    wheel_distance_m: float = 0.08
-    pivots_m: tuple[tuple[float, float], ...] = ((0.21, 0.21), (-0.21, 0.21), (-0.21, -0.21), (0.21, -0.21))
-    mass_kg: float = 36.5
+_LIBRARY = PlatformControllerParams()  # the defaults, written once in the library
 
 
 class RopodControllerParams(Params):
-    platform_xy: LinearController = Field(
-        default_factory=lambda: LinearController(p_gain=100, i_fhz=0.25, ll_zero_fhz=20, ll_pole_fhz=20,
-                                                 lpf_fhz=100, i_saturation=100)
-    )
-    platform_theta: LinearController = Field(
-        default_factory=lambda: LinearController(p_gain=755, i_fhz=0.3, ll_zero_fhz=20, ll_pole_fhz=20,
-                                                 lpf_fhz=100, i_saturation=100)
-    )
-    wheel: LinearController = Field(
-        default_factory=lambda: LinearController(p_gain=0.05, i_fhz=0, ll_zero_fhz=2, ll_pole_fhz=10,
-                                                 lpf_fhz=50, i_saturation=7)
-    )
-    torque_constant_nm_per_a: float = Field(0.28, gt=0)
-    current_limit_a: float = Field(10.0, gt=0)
-    pivot_offsets_rad: tuple[float, ...] = (4.691878, 3.224157, 0.028178, 5.856820)
-    geometry: RopodGeometry = Field(default_factory=RopodGeometry)
+    """The parameters of ``PlatformControllerParams`` a composition tunes, under the library's names."""
+
+    platform_xy: LinearControllerParams = Field(_LIBRARY.platform_xy, description="the x and y platform controllers")
+    platform_theta: LinearControllerParams = Field(_LIBRARY.platform_theta, description="the yaw platform controller")
+    wheel: LinearControllerParams = Field(_LIBRARY.wheel, description="the eight damping wheel controllers")
+    geometry: Geometry = _LIBRARY.geometry
+    torque_constant_nm_per_a: float = Field(_LIBRARY.torque_constant_nm_per_a, gt=0,
+                                            description="motor torque per ampere")
+    current_limit_a: float = Field(_LIBRARY.current_limit_a, gt=0, description="per-motor current limit")
+    pivot_offsets_rad: tuple[float, ...] = Field(
+        _LIBRARY.pivot_offsets_rad,
+        description="pivot encoder offsets, SW1 first: a unit's angle is its reading minus its offset")
 
 
 class RopodController(Block):
@@ -63,10 +47,10 @@ class RopodController(Block):
         return Interface(
             inputs={
                 "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "platform twist [vx, vy, wz]"),
-                "wheel_sensors": Port("uint8", (wheels, SMARTWHEEL_INPUT_BYTES), "1", "TxPDO image per wheel"),
+                "wheel_sensors": Port("uint8", (wheels, TXPDO_BYTES), "1", "TxPDO image per wheel"),
             },
             outputs={
-                "wheel_commands": Port("uint8", (wheels, SMARTWHEEL_OUTPUT_BYTES), "1", "RxPDO image per wheel"),
+                "wheel_commands": Port("uint8", (wheels, RXPDO_BYTES), "1", "RxPDO image per wheel"),
                 "platform_velocity": Port("float64", (3,), "m/s, m/s, rad/s", "measured platform twist"),
             },
             flags_read={"stop": "hold zero velocity (a wheel is not operational)"},
@@ -74,21 +58,16 @@ class RopodController(Block):
         )
 
     def configure_resources(self) -> None:
-        from hapticop.devices.ropod import Geometry, LinearControllerParams, PlatformControllerParams
-        from hapticop.devices.ropod import PlatformVelocityController
-
-        p = self.params
-        gains = {name: LinearControllerParams(**getattr(p, name).model_dump())
-                 for name in ("platform_xy", "platform_theta", "wheel")}
-        geometry = Geometry(wheel_radius_m=p.geometry.wheel_radius_m, caster_offset_m=p.geometry.caster_offset_m,
-                            wheel_distance_m=p.geometry.wheel_distance_m, pivots_m=p.geometry.pivots_m)
-        self.controller = PlatformVelocityController(PlatformControllerParams(
-            **gains, geometry=geometry, torque_constant_nm_per_a=p.torque_constant_nm_per_a,
-            current_limit_a=p.current_limit_a, pivot_offsets_rad=p.pivot_offsets_rad))
+        self.controller = PlatformVelocityController(self._controller_params())
         self.zero = np.zeros(3)
 
     def configure_capabilities(self) -> None:
-        self.controller.reset()  # new gains, or a restart: no stale integrator
+        """New gains (a live patch), or a restart: no stale integrator either way."""
+        params = self._controller_params()
+        if params != self.controller.params:
+            self.controller = PlatformVelocityController(params)
+        else:
+            self.controller.reset()
 
     def compute(self) -> None:
         sensors, setpoint = self.inputs.wheel_sensors, self.inputs.velocity_setpoint
@@ -106,6 +85,11 @@ class RopodController(Block):
 
     def clean(self) -> None:
         self._safe()
+
+    def _controller_params(self) -> PlatformControllerParams:
+        """The library's parameters with the composition's values."""
+        p = self.params
+        return dataclasses.replace(_LIBRARY, **{name: getattr(p, name) for name in type(p).model_fields})
 
     def _safe(self) -> None:
         if hasattr(self, "controller"):

@@ -1,7 +1,8 @@
 """Turning pydantic's validation errors into diagnostics a person can act on.
 
 pydantic knows what was wrong; this module adds where (the YAML path, with union tags
-removed), what was expected, and a hint such as the key that was probably meant.
+removed: a parameter set chosen by its `kind` is not a key of its own), what was expected,
+and a hint such as the key that was probably meant.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from hapticop.composition.diagnostics import Diagnostic, Path
 def diagnostics_from(error: ValidationError, model: type[BaseModel], prefix: Path = ()) -> list[Diagnostic]:
     found = []
     for item in error.errors(include_url=False):
-        loc = _clean_loc(item["loc"])
+        loc = _clean_loc(item["loc"], model)
         found.append(_one(item, loc, model, prefix))
     return found
 
@@ -29,16 +30,33 @@ def diagnostics_from(error: ValidationError, model: type[BaseModel], prefix: Pat
 _TAG = re.compile(r"^([A-Za-z_][\w-]*\[.*\]|\[key\])$")
 
 
-def _clean_loc(loc: tuple) -> Path:
+def _clean_loc(loc: tuple, model: type[BaseModel]) -> Path:
     """Drop the tags pydantic inserts for unions and validators (they are not YAML keys)."""
     cleaned: list = []
+    annotation: Any = model
     for index, part in enumerate(loc):
         is_tag = isinstance(part, str) and bool(_TAG.match(part))
         is_policy_tag = part in ("latest", "queue") and cleaned and cleaned[-1] == "policy" and index < len(loc) - 1
         if is_tag or is_policy_tag:
             continue
+        kind = _kind_member(annotation, part) if index < len(loc) - 1 else None
+        if kind is not None:  # a discriminated union's tag: the member its `kind` names
+            annotation = kind
+            continue
         cleaned.append(part)
+        annotation = _step(annotation, part)
     return tuple(cleaned)
+
+
+def _kind_member(annotation: Any, part: Any) -> type | None:
+    """The member of a union of models that `part` names by its `kind` field (pydantic's tag), if any."""
+    models = _models_in(annotation)
+    if len(models) < 2 or any(part in _fields(m) for m in models):
+        return None
+    for m in models:
+        if part in _kinds_of(m, "kind"):
+            return m
+    return None
 
 
 def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnostic:
@@ -47,7 +65,7 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
     path = prefix + loc
     name = str(item["loc"][-1]) if item["loc"] else "<document>"
     if kind in ("extra_forbidden", "unexpected_keyword_argument"):
-        allowed = allowed_keys(model, tuple(loc[:-1]))
+        allowed = allowed_keys(model, tuple(item["loc"][:-1]))
         close = difflib.get_close_matches(name, allowed, n=1, cutoff=0.6)
         hint = f"did you mean '{close[0]}'?" if close else ""
         return Diagnostic(
@@ -62,9 +80,18 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
     if kind == "literal_error":
         expected = item.get("ctx", {}).get("expected", "")
         return Diagnostic(rule="bad-value", message=f"{value!r} is not allowed", path=path, expected=expected)
+    if kind == "union_tag_not_found":
+        key = item.get("ctx", {}).get("discriminator", "").strip("'")
+        kinds = [value for m in _models_in(_annotation_at(model, item["loc"])) for value in _kinds_of(m, key)]
+        return Diagnostic(rule="missing-key", message=f"missing required key '{key}'", path=path,
+                          expected=", ".join(repr(k) for k in kinds))
     if kind == "union_tag_invalid":
         expected = item.get("ctx", {}).get("expected_tags", "")
         return Diagnostic(rule="bad-value", message=f"unknown kind {item['ctx'].get('tag')!r}", path=path, expected=expected)
+    if kind == "predicate_failed":
+        said = re.search(r"Predicate '?(\w+)'? failed", item["msg"])
+        must = f"must be {said.group(1)}" if said else "is not allowed"
+        return Diagnostic(rule="bad-value", message=f"'{name}' {must} (got {value!r})", path=path)
     if kind == "string_pattern_mismatch":
         pattern = item.get("ctx", {}).get("pattern", "")
         return Diagnostic(
@@ -110,12 +137,10 @@ def _pattern_expected(pattern: str) -> str:
 
 
 def allowed_keys(model: type[BaseModel], path: Path) -> list[str]:
-    """The keys the model accepts at `path` (for 'did you mean' hints)."""
-    annotation: Any = model
-    for part in path:
-        annotation = _step(annotation, part)
-        if annotation is None:
-            return []
+    """The keys the model accepts at `path`, pydantic's location with its tags (for 'did you mean' hints)."""
+    annotation = _annotation_at(model, path)
+    if annotation is None:
+        return []
     keys: list[str] = []
     for m in _models_in(annotation):
         for key in _fields(m):
@@ -124,11 +149,30 @@ def allowed_keys(model: type[BaseModel], path: Path) -> list[str]:
     return keys
 
 
+def _annotation_at(model: type[BaseModel], path: Path) -> Any:
+    """The type the model expects at pydantic's location `path` (tags and all); None if unknown."""
+    annotation: Any = model
+    for part in path:
+        if isinstance(part, str) and _TAG.match(part):
+            continue
+        annotation = _kind_member(annotation, part) or _step(annotation, part)
+        if annotation is None:
+            return None
+    return annotation
+
+
+def _kinds_of(model: type, key: str) -> tuple:
+    """The values a model's literal `key` field may take (a union member's tags)."""
+    annotation = _unwrap(_fields(model).get(key))
+    return typing.get_args(annotation) if typing.get_origin(annotation) is typing.Literal else ()
+
+
 def _fields(model: type) -> dict[str, Any]:
     """Key -> annotation of a pydantic model or a dataclass (block parameters may nest either)."""
     if isinstance(model, type) and issubclass(model, BaseModel):
         return {info.alias or name: info.annotation for name, info in model.model_fields.items()}
-    return {f.name: f.type for f in dataclasses.fields(model)}
+    hints = typing.get_type_hints(model, include_extras=True)  # the fields' types, not their source text
+    return {f.name: hints.get(f.name, f.type) for f in dataclasses.fields(model)}
 
 
 def _models_in(annotation: Any) -> list[type[BaseModel]]:

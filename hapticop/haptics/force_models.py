@@ -1,6 +1,7 @@
 """Environmental force models: what the operator feels from the scan, added to the centring PD.
 
-One interface, four models (names as the haptic controller's ``force_model`` parameter uses them):
+One interface, four models, each with its parameter set; the set's ``kind`` names the model (as
+the haptic controller's ``force_model`` parameter does):
 
 ``none``              F0: zero; the baseline.
 ``thesis``            Thesis eq. 5.5/5.6 exactly as written (see ``ThesisForce`` for what that does).
@@ -8,23 +9,26 @@ One interface, four models (names as the haptic controller's ``force_model`` par
 ``braking_field``     M1 of the notes §9.1: footprint clearance, braking-ratio risk, predictive
                       lateral clearance. The recommended model (with the S1 governor).
 
-Every model is configured once with the scan angles (robot frame, rad, 0 ahead, + left) so that
-everything that depends only on the scan geometry is precomputed, then ``compute`` runs per servo
-cycle: vectorised over the beams, into preallocated arrays, allocating nothing.
-Forces are in the handle frame of ``hapticop.haptics.handle`` (+x right, +z towards the operator).
+Every model is configured once with the scan angles (robot frame, rad, 0 ahead, + left) and the
+robot's body, so that everything that depends only on the scan geometry is precomputed, then
+``compute`` runs per servo cycle: vectorised over the beams, into preallocated arrays, allocating
+nothing. Forces are in the handle frame of ``hapticop.haptics.handle`` (+x right, +z towards the
+operator). A new model is a ``ForceModel`` subclass and its parameter set, both added to
+``FORCE_MODELS`` and ``ForceModelParams`` below.
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal, Union
 
 import numpy as np
+from annotated_types import Ge, Gt, Lt
 from numpy.typing import ArrayLike, NDArray
 
-from hapticop.haptics.geometry import BeamGeometry, Footprint
+from hapticop.devices.ropod.body import Body
+from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.handle import (
     BACKWARD_FORCE_Z,
     HANDLE_X,
@@ -34,6 +38,7 @@ from hapticop.haptics.handle import (
     TWIST_VX,
     TWIST_VY,
 )
+from hapticop.parameters import parameters
 
 Vec = NDArray[np.float64]
 
@@ -49,8 +54,9 @@ class ForceModel(ABC):
 
     name: ClassVar[str]
 
-    def configure(self, angles: ArrayLike) -> None:
-        """Fix the scan geometry (the angles of the ranges to come) and allocate work arrays."""
+    def configure(self, angles: ArrayLike, body: Body = Body()) -> None:
+        """Fix the scan geometry (the angles of the ranges to come, the body they are seen from)
+        and allocate work arrays."""
         self.angles = np.asarray(angles, dtype=np.float64).copy()
         self.n = self.angles.shape[0]
 
@@ -81,26 +87,38 @@ class ForceModel(ABC):
         return self.render(handle_pos, robot_twist, out_force, scan_age_s)
 
 
+@parameters
+class NoForceParams:
+    """F0 has no parameters."""
+
+    kind: Literal["none"] = "none"
+
+
 class NoForce(ForceModel):
     """F0: no environmental force."""
 
     name = "none"
+
+    def __init__(self, params: NoForceParams = NoForceParams()) -> None:
+        self.params = params
 
     def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0) -> Vec:
         out_force.fill(0.0)
         return out_force
 
 
-@dataclass(frozen=True)
+@parameters
 class ThesisParams:
-    """Scales of eq. 5.5/5.6. The thesis tunes them by experiment; defaults are the notes' F1 values."""
+    """Scales of eq. 5.5/5.6, for the field as written (``thesis``) or with its z branch centring
+    (``thesis_corrected``). The thesis tunes them by experiment; defaults are the notes' F1 values."""
 
-    k3_n_per_m: float = 100.0
-    """z scale: at most k3·|z| of extra force."""
-    k4_n_per_m: float = 100.0
-    """x scale: at most k4·|x|."""
-    d_max_m: float = 2.0
+    k3_n_per_m: Annotated[float, Ge(0)] = 100.0
+    """z scale: at most k3·|z| of extra force (eq. 5.5)."""
+    k4_n_per_m: Annotated[float, Ge(0)] = 100.0
+    """x scale: at most k4·|x| (eq. 5.6)."""
+    d_max_m: Annotated[float, Gt(0)] = 2.0
     """Obstacles at or beyond this range exert no force."""
+    kind: Literal["thesis", "thesis_corrected"] = "thesis"
 
 
 class ThesisForce(ForceModel):
@@ -140,8 +158,8 @@ class ThesisForce(ForceModel):
         self.extremes = np.zeros(4)
         """Signed max-abs value of each region for the last scan (M1..M4 above)."""
 
-    def configure(self, angles: ArrayLike) -> None:
-        super().configure(angles)
+    def configure(self, angles: ArrayLike, body: Body = Body()) -> None:
+        super().configure(angles, body)
         sin_d = np.cos(self.angles)  # sin θ_d
         cos_d = -np.sin(self.angles)  # cos θ_d
         # Precomputed per beam: trig(θ_d)/d_max, so a term is trig/d_max·(d − d_max).
@@ -207,6 +225,9 @@ class CorrectedThesisForce(ThesisForce):
 
     name = "thesis_corrected"
 
+    def __init__(self, params: ThesisParams = ThesisParams(kind="thesis_corrected")) -> None:
+        super().__init__(params)
+
     def _render(self, x: float, z: float, out_force: Vec) -> None:
         p, m = self.params, self.extremes
         rho_z = abs(float(m[self.BACK] if z >= 0 else m[self.FRONT]))
@@ -216,56 +237,63 @@ class CorrectedThesisForce(ThesisForce):
         out_force[HANDLE_Z] = -p.k3_n_per_m * rho_z * z
 
 
-@dataclass(frozen=True)
+@parameters
 class BrakingFieldParams:
-    """M1 parameters; defaults from hallway-experiment.md §2 and §9.1 unless marked as our choice."""
+    """M1, the braking field: footprint clearance, braking-ratio risk, predictive lateral clearance.
 
-    footprint: Footprint = field(default_factory=Footprint)
-    """Robot body and LIDAR mount (notes §2 simulation robot: 0.70 × 0.60 m, LIDAR 0.25 m ahead)."""
-    side_distance_m: float = 0.40
+    Defaults from hallway-experiment.md §2 and §9.1 unless marked as our choice."""
+
+    side_distance_m: Annotated[float, Ge(0)] = 0.40
     """dist1: comfortable side clearance (H1/H2)."""
-    stop_distance_m: float = 0.50
+    stop_distance_m: Annotated[float, Ge(0)] = 0.50
     """dist2: front-of-footprint clearance at the stop."""
-    bumper_m: float = 0.10
+    bumper_m: Annotated[float, Ge(0)] = 0.10
     """dist3: virtual bumper; the lateral cue is full here."""
-    corridor_margin_m: float = 0.10
+    corridor_margin_m: Annotated[float, Ge(0)] = 0.10
     """m_c, corridor half-width beyond the body. Not given in the notes; our choice (= dist3) keeps
     the side walls of the 1.5 m H3 hall (0.45 m beside the body) out of the stop corridor."""
-    brake_decel_mps2: float = 0.5
+    brake_decel_mps2: Annotated[float, Gt(0)] = 0.5
     """a_b: braking capacity the risk is measured against."""
-    silent_ratio: float = 0.4
+    silent_ratio: Annotated[float, Ge(0), Lt(1)] = 0.4
     """r0: no longitudinal cue below 40 % of braking capacity (v/v_allow)."""
-    proximity_gap_m: float = 0.3
+    proximity_gap_m: Annotated[float, Gt(0)] = 0.3
     """g_p: proximity risk ramps in over the last 0.3 m before the stop line, even at standstill."""
     longitudinal_risk: Literal["braking", "ttc"] = "braking"
     """"braking": v/v_allow (the notes' choice); "ttc": the time-to-collision alternative."""
-    ttc_horizon_s: float = 4.0
+    ttc_horizon_s: Annotated[float, Gt(0)] = 4.0
     """T_h: TTC risk starts below this."""
-    ttc_min_s: float = 1.0
+    ttc_min_s: Annotated[float, Ge(0)] = 1.0
     """T_min: TTC risk is full at or below this."""
-    fz_max_n: float = 6.0
+    fz_max_n: Annotated[float, Ge(0)] = 6.0
     """Longitudinal cue at full risk and full handle ramp (≤ 8 N target, §6)."""
-    z_ramp_m: float = 0.02
+    z_ramp_m: Annotated[float, Gt(0)] = 0.02
     """z_g: the cue ramps over the first 2 cm of forward push (300 N/m slope, inside the L0 budget)."""
-    window_rear_m: float = 0.5
+    window_rear_m: Annotated[float, Ge(0)] = 0.5
     """Side window reaches this far behind the body."""
-    window_ahead_m: float = 1.5
+    window_ahead_m: Annotated[float, Ge(0)] = 1.5
     """Side window reaches this far ahead of the body."""
-    side_margin_m: float = 0.25
+    side_margin_m: Annotated[float, Ge(0)] = 0.25
     """m_l: the lateral cue starts at dist1 + m_l of predicted clearance."""
-    lead_time_s: float = 1.5
+    lead_time_s: Annotated[float, Ge(0)] = 1.5
     """T_p: lateral prediction horizon (the phase lead §7.5 requires)."""
-    fx_max_n: float = 5.0
+    fx_max_n: Annotated[float, Ge(0)] = 5.0
     """Lateral cue at full risk on one side."""
-    lateral_speed_ref_mps: float = 0.25
+    lateral_speed_ref_mps: Annotated[float, Gt(0)] = 0.25
     """v_ref: lateral cue scales with sat(|v|/v_ref), none at standstill. Not given in the notes;
     our choice is just below the cautious operator's 0.28 m/s cruise."""
-    robust_k: int = 3
+    robust_k: Annotated[int, Ge(1)] = 3
     """Robust minimum: the k-th smallest clearance (the notes' "3rd smallest")."""
-    risk_rate_per_s: float = 3.0
+    risk_rate_per_s: Annotated[float, Gt(0)] = 3.0
     """|dρ/dt| limit on the risk state (ρ_z, e_L, e_R): bounds the force step at scan arrival."""
-    period_s: float = 0.001
+    period_s: Annotated[float, Gt(0)] = 0.001
     """Time between ``render`` (or ``compute``) calls, for the rate limiter."""
+    kind: Literal["braking_field"] = "braking_field"
+
+    def __post_init__(self) -> None:
+        if not self.bumper_m < self.side_distance_m + self.side_margin_m:
+            raise ValueError("the lateral cue needs bumper_m < side_distance_m + side_margin_m")
+        if not self.ttc_min_s < self.ttc_horizon_s:
+            raise ValueError("the TTC risk needs ttc_min_s < ttc_horizon_s")
 
 
 def _sat01(u: float) -> float:
@@ -303,9 +331,9 @@ class BrakingField(ForceModel):
         """Rate-limited risk state [ρ_z, e_L, e_R]: the scalars that may cross the network."""
         self.reset()
 
-    def configure(self, angles: ArrayLike) -> None:
-        super().configure(angles)
-        self.beams = BeamGeometry(self.angles, self.params.footprint)
+    def configure(self, angles: ArrayLike, body: Body = Body()) -> None:
+        super().configure(angles, body)
+        self.beams = BeamGeometry(self.angles, body)
         self._corridor_gap = math.inf
 
     def reset(self) -> None:
@@ -384,14 +412,20 @@ FORCE_MODELS: dict[str, type[ForceModel]] = {
     BrakingField.name: BrakingField,
 }
 
+ForceModelParams = Union[NoForceParams, ThesisParams, BrakingFieldParams]
+"""The parameters of one force model; their ``kind`` names it (a key of ``FORCE_MODELS``)."""
 
-def make_force_model(name: str, angles: ArrayLike | None = None, params: object | None = None) -> ForceModel:
-    """Build a model by name (``FORCE_MODELS``), with its params dataclass, configured if angles are given."""
+
+def make_force_model(
+    model: str | ForceModelParams, angles: ArrayLike | None = None, body: Body = Body()
+) -> ForceModel:
+    """Build the model its parameters name, or a model by name with its defaults; configured if angles are given."""
+    kind = model if isinstance(model, str) else model.kind
     try:
-        cls = FORCE_MODELS[name]
+        cls = FORCE_MODELS[kind]
     except KeyError:
-        raise ValueError(f"unknown force model {name!r}; known: {sorted(FORCE_MODELS)}") from None
-    model = cls() if params is None else cls(params)  # type: ignore[call-arg]
+        raise ValueError(f"unknown force model {kind!r}; known: {sorted(FORCE_MODELS)}") from None
+    built = cls() if isinstance(model, str) else cls(model)  # type: ignore[call-arg]
     if angles is not None:
-        model.configure(angles)
-    return model
+        built.configure(angles, body)
+    return built

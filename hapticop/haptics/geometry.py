@@ -1,33 +1,21 @@
-"""Robot footprint and the fixed beam geometry of a scan, shared by the M1 field and the governor.
+"""The fixed beam geometry of a scan seen from the robot's body, shared by the M1 field and the governor.
 
 The thesis models the robot as a point at the LIDAR; the notes (hallway-experiment.md §1 item 4,
 §9) measure clearance from the robot's rectangular body instead: for a 0.6 m wide robot a wall
-0.3 m beside the scanner is touching. Beam directions depend only on the scan angles, so their
-cosines and sines are computed once; a scan then costs a few numpy passes into preallocated
-arrays. Robot frame: x forward, y left (REP 103), origin at the footprint centre.
+0.3 m beside the scanner is touching. The body (footprint and LIDAR mount) is the robot's one
+description in ``hapticop.devices.ropod.body``. Beam directions depend only on the scan angles,
+so their cosines and sines are computed once; a scan then costs a few numpy passes into
+preallocated arrays. Robot frame: x forward, y left (REP 103), origin at the footprint centre.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-
-@dataclass(frozen=True)
-class Footprint:
-    """Rectangular robot body and where the LIDAR sits on it (notes §2; replace with the ropod's)."""
-
-    length_m: float = 0.70
-    """Along x."""
-    width_m: float = 0.60
-    """Along y."""
-    lidar_x_m: float = 0.25
-    """Scanner origin ahead of the footprint centre."""
-    lidar_y_m: float = 0.0
-    """Scanner origin left of the footprint centre."""
+from hapticop.devices.ropod.body import Body
 
 
 def kth_smallest(work: NDArray[np.float64], k: int) -> float:
@@ -48,9 +36,10 @@ def kth_smallest(work: NDArray[np.float64], k: int) -> float:
 class BeamGeometry:
     """Points of one scan in the robot frame and the clearances M1 and S1 need.
 
-    ``angles`` are beam directions in the robot frame (rad, 0 ahead, + left); ranges are measured
-    from the scanner origin given by ``footprint``. Per scan: ``load``, then ``corridor_gap`` and
-    ``select_sides``; per servo cycle (depends on the robot's velocity): ``side_clearances``.
+    ``angles`` are beam directions in the robot frame (rad, 0 ahead, + left: the mount's yaw is
+    already in them); ranges are measured from the scanner origin, ``body.lidar``. Per scan:
+    ``load``, then ``corridor_gap`` and ``select_sides``; per servo cycle (depends on the robot's
+    velocity): ``side_clearances``.
     Invalid beams (NaN) are parked far away and excluded from every selection, so no NaN
     reaches the arithmetic.
     """
@@ -58,10 +47,11 @@ class BeamGeometry:
     FAR_M = 1.0e6
     """Where invalid beams are parked."""
 
-    def __init__(self, angles: ArrayLike, footprint: Footprint = Footprint()) -> None:
+    def __init__(self, angles: ArrayLike, body: Body = Body()) -> None:
         a = np.asarray(angles, dtype=np.float64)
         n = a.shape[0]
-        self.footprint = footprint
+        self.body = body
+        footprint = body.footprint
         self.n = n
         self.half_length = footprint.length_m / 2.0
         self.half_width = footprint.width_m / 2.0
@@ -84,7 +74,7 @@ class BeamGeometry:
         # a beam with sin > 0 and one right of it on a beam with sin < 0: each side's k-th smallest
         # need only search the span of beams that can hold its points (half a scan, ascending angles).
         left, right = self._span(self.sin > 0.0), self._span(self.sin < 0.0)
-        if not abs(footprint.lidar_y_m) < self.half_width:
+        if not abs(body.lidar.y_m) < self.half_width:
             left = right = slice(0, n)
         self._side_views = tuple((self._dx[span], penalty[span], self._work[span])
                                  for span, penalty in ((left, self._left_penalty), (right, self._right_penalty)))
@@ -97,17 +87,17 @@ class BeamGeometry:
 
     def load(self, ranges: NDArray[np.floating]) -> None:
         """Scan points in the robot frame into ``px``, ``py``."""
-        fp, r, valid = self.footprint, self.ranges, self._valid
+        lidar, r, valid = self.body.lidar, self.ranges, self._valid
         np.copyto(r, ranges)  # float32 → float64 once, so no ufunc below needs a cast buffer
         np.less(r, self.FAR_M, out=valid)  # False for NaN
         np.logical_not(valid, out=self._m1)
         np.copyto(r, self.FAR_M, where=self._m1)
         np.multiply(r, self.cos, out=self.px)
-        if fp.lidar_x_m:
-            self.px += fp.lidar_x_m
+        if lidar.x_m:
+            self.px += lidar.x_m
         np.multiply(r, self.sin, out=self.py)
-        if fp.lidar_y_m:  # usually on the centre line: nothing to add
-            self.py += fp.lidar_y_m
+        if lidar.y_m:  # usually on the centre line: nothing to add
+            self.py += lidar.y_m
         self._dy_shift = math.nan  # new points: the cached lateral term is stale
         self._corridor = (math.nan, 0, math.inf)  # (margin, k, gap) of the last corridor_gap: none yet
 

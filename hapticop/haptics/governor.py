@@ -26,33 +26,50 @@ Limits: the LIDAR's 270° cannot see behind, so reversing is not limited; turnin
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
+from annotated_types import Ge, Gt
 from numpy.typing import NDArray
 
 from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.handle import TWIST_VX, TWIST_VY, TWIST_WZ
+from hapticop.parameters import parameters
 
 
-@dataclass(frozen=True)
+@parameters
 class GovernorParams:
-    """S1 parameters (notes §2, §10)."""
+    """S1, the robot-side speed governor (notes §2, §10): the robot stops before obstacles however hard it is pushed."""
 
-    brake_decel_mps2: float = 0.5
+    brake_decel_mps2: Annotated[float, Gt(0)] = 0.5
     """a_b: planned deceleration; tune to the robot's real limits (§10)."""
-    stop_distance_m: float = 0.50
+    stop_distance_m: Annotated[float, Ge(0)] = 0.50
     """dist2: the robot stops with this much front clearance."""
-    bumper_m: float = 0.10
+    bumper_m: Annotated[float, Ge(0)] = 0.10
     """dist3: hard side clearance the turning bound keeps."""
-    lead_time_s: float = 1.5
+    lead_time_s: Annotated[float, Gt(0)] = 1.5
     """T_p: prediction horizon for the side clearance."""
-    corridor_margin_m: float = 0.10
+    corridor_margin_m: Annotated[float, Ge(0)] = 0.10
     """Stop-corridor half-width beyond the body (same choice as M1's m_c)."""
-    window_rear_m: float = 0.5
-    window_ahead_m: float = 1.5
-    robust_k: int = 3
+    window_rear_m: Annotated[float, Ge(0)] = 0.5
+    """Side window reaches this far behind the body."""
+    window_ahead_m: Annotated[float, Ge(0)] = 1.5
+    """Side window reaches this far ahead of the body."""
+    robust_k: Annotated[int, Ge(1)] = 3
     """k-th smallest clearance: ignores up to k − 1 spurious beams."""
+
+
+@parameters
+class BlindPolicy:
+    """What the robot may do while the scan is stale (older than its stream's max_age), when nothing
+    can be felt nor governed."""
+
+    policy: Literal["stop", "slow"] = "stop"
+    """'stop' commands no motion; 'slow' limits the robot to speed_mps and turn_rad_s."""
+    speed_mps: Annotated[float, Ge(0)] = 0.1
+    """Speed limit while blind (policy 'slow')."""
+    turn_rad_s: Annotated[float, Ge(0)] = 0.2
+    """Turn-rate limit while blind (policy 'slow')."""
 
 
 def govern_scan(ranges: NDArray[np.floating], beams: BeamGeometry, params: GovernorParams = GovernorParams()) -> float:
@@ -138,3 +155,10 @@ def limit_blind(twist: NDArray[np.float64], speed_mps: float, turn_rad_s: float)
         twist[TWIST_VY] = vy * scale
     twist[TWIST_WZ] = min(max(float(twist[TWIST_WZ]), -turn_rad_s), turn_rad_s)
     return twist
+
+
+def limit_blind_by(twist: NDArray[np.float64], blind: BlindPolicy) -> NDArray[np.float64]:
+    """``limit_blind`` as the policy says: a full stop, or its slow limits."""
+    if blind.policy == "stop":
+        return limit_blind(twist, 0.0, 0.0)
+    return limit_blind(twist, blind.speed_mps, blind.turn_rad_s)

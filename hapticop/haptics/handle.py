@@ -20,10 +20,13 @@ Hence ``vx = k1·dz(−z)``, ``vy = 0``, ``wz = −k2·dz(x)``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from annotated_types import Ge, Gt, Le
 from numpy.typing import ArrayLike, NDArray
+
+from hapticop.parameters import parameters
 
 # Handle axes (indices into a position/force 3-vector, device frame).
 HANDLE_X = 0  # + operator's right: steer right
@@ -45,17 +48,17 @@ BACKWARD_FORCE_Z = +1.0
 RIGHTWARD_FORCE_X = +1.0
 
 
-@dataclass(frozen=True)
+@parameters
 class CentringParams:
-    """Gains of the centring PD (thesis §5.2, tuned on the real Falcon)."""
+    """Gains of the centring PD that holds the handle at its origin (thesis §5.2, tuned on the real Falcon)."""
 
-    kp_n_per_m: float = 55.0
+    kp_n_per_m: Annotated[float, Ge(0)] = 55.0
     """Spring to the origin, N/m."""
-    kd_ns_per_m: float = 0.2
+    kd_ns_per_m: Annotated[float, Ge(0)] = 0.2
     """Damper, N·s/m, on the handle velocity (see ``CentringPD`` for the eq. 5.2 ambiguity)."""
-    force_limit_n: float = 10.0
-    """Per-axis saturation: the Falcon renders about 10 N per axis."""
-    period_s: float = 0.001
+    force_limit_n: Annotated[float, Gt(0), Le(20.0)] = 10.0
+    """Per-axis saturation of the whole force (centring plus environment): the Falcon renders about 10 N per axis."""
+    period_s: Annotated[float, Gt(0)] = 0.001
     """Servo period, used only to difference positions when no velocity is supplied."""
 
 
@@ -149,7 +152,7 @@ def dead_zone(u: float, width: float, subtractive: bool = True) -> float:
     return math.copysign(a - width, u)
 
 
-@dataclass(frozen=True)
+@parameters
 class DrivingParams:
     """Car-driving metaphor gains (thesis §5.3.1: ratio of robot top speed to handle reach)."""
 
@@ -157,7 +160,7 @@ class DrivingParams:
     """Forward speed per forward handle displacement, (m/s)/m."""
     k2_rad_per_s_m: float = 10.0
     """Turn rate per sideways handle displacement, (rad/s)/m."""
-    dead_zone_m: float = 0.005
+    dead_zone_m: Annotated[float, Ge(0)] = 0.005
     """Dead zone on both x and z (thesis: z_dz = x_dz = 0.5 cm)."""
     subtractive_dead_zone: bool = True
     """True: continuous dead zone (notes). False: the thesis's literal, discontinuous one."""

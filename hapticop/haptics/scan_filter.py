@@ -11,14 +11,52 @@ Invalid beams are NaN (the LIDAR block's convention). A window averages only its
 it is NaN when fewer than ``min_valid`` are valid, so one dropout neither erases nor invents
 an obstacle.
 
-Both filters work into preallocated arrays: ``configure`` once per scan geometry, then
-``apply`` per scan allocates nothing.
+Both filters work into preallocated arrays: ``configure`` once per scan geometry (it returns the
+filtered points' angles), then ``apply`` per scan allocates nothing. Their parameter sets are
+told apart by ``kind``; ``make_scan_filter`` builds the one they name.
 """
 
 from __future__ import annotations
 
+from typing import Annotated, Literal, Union
+
 import numpy as np
+from annotated_types import Ge, Predicate
 from numpy.typing import ArrayLike, NDArray
+
+from hapticop.parameters import parameters
+
+
+def odd(n: int) -> bool:
+    return n % 2 == 1
+
+
+@parameters
+class MovingAverageParams:
+    """The thesis's moving average (§5.3.2): n beams give n − window + 1 points."""
+
+    window: Annotated[int, Ge(1)] = 3
+    """Beams per window (811 beams give 809 points with 3)."""
+    min_valid: Annotated[int, Ge(1)] = 1
+    """A window with fewer valid beams is NaN (no obstacle); at most ``window``."""
+    kind: Literal["moving_average"] = "moving_average"
+
+    def __post_init__(self) -> None:
+        if self.min_valid > self.window:
+            raise ValueError(f"min_valid {self.min_valid} is more than the window {self.window}")
+
+
+@parameters
+class MovingMedianParams:
+    """A running median that keeps the scan length and rejects single-beam outliers (notes §9)."""
+
+    window: Annotated[int, Ge(1), Predicate(odd)] = 5
+    """Beams per window, odd; the window // 2 beams at each end pass through."""
+    kind: Literal["moving_median"] = "moving_median"
+
+
+ScanFilterParams = Union[MovingAverageParams, MovingMedianParams]
+"""The parameters of one scan filter; their ``kind`` says which."""
 
 
 class MovingAverage:
@@ -105,12 +143,15 @@ class MovingMedian:
         self.window = window
         self.out: NDArray[np.float64] = np.zeros(0)
 
-    def configure(self, n: int) -> None:
-        """Allocate for scans of ``n`` beams."""
+    def configure(self, angles: ArrayLike) -> NDArray[np.float64]:
+        """Allocate for scans of these beams; returns their angles (the scan keeps its length)."""
+        a = np.array(angles, dtype=np.float64)
+        n = a.shape[0]
         if n < self.window:
             raise ValueError(f"a scan of {n} beams is shorter than the window {self.window}")
         self.out = np.empty(n)
         self._rows = np.empty((n - self.window + 1, self.window))
+        return a
 
     def apply(self, ranges: NDArray[np.floating]) -> NDArray[np.float64]:
         """Filter one scan; returns ``self.out`` (overwritten by the next call)."""
@@ -124,6 +165,13 @@ class MovingMedian:
         rows.partition(h, axis=1)
         np.copyto(out[h : h + m], rows[:, h])
         return out
+
+
+def make_scan_filter(params: ScanFilterParams) -> MovingAverage | MovingMedian:
+    """The filter its parameters name."""
+    if isinstance(params, MovingMedianParams):
+        return MovingMedian(params.window)
+    return MovingAverage(params.window, params.min_valid)
 
 
 def _window_mean(a: NDArray[np.float64], w: int) -> NDArray[np.float64]:

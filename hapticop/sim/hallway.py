@@ -5,8 +5,9 @@ TiM561, the force models and the metrics all agree on. Robot motion is not model
 pose that the ropod plant produced.
 
 Frames. World: x along the hallway towards the end wall, y to the left, theta counter-clockwise from +x
-(ROS REP 103). Robot: x forward, y left, origin at the footprint's centre. LIDAR: mounted at (x, y, yaw) in
-the robot frame; beam angles are in its sensor frame (x forward, y left, counter-clockwise; sick-cola-a.md §5),
+(ROS REP 103). Robot: x forward, y left, origin at the footprint's centre; its footprint and LIDAR mount are
+the robot's body (hapticop.devices.ropod.body). LIDAR: mounted at (x, y, yaw) in the robot frame; beam
+angles are in its sensor frame (x forward, y left, counter-clockwise; sick-cola-a.md §5),
 so a TiM561 covers -135 deg ... +134.973 deg in 811 steps of 0.3333 deg and index 405 looks about straight ahead.
 """
 
@@ -20,27 +21,11 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hapticop.devices.ropod.body import Body, Footprint, SensorMount
+
 F64 = NDArray[np.float64]
 
 SegmentKind = Literal["side", "end", "pillar", "other"]
-
-
-@dataclass(frozen=True)
-class Footprint:
-    """The robot's rectangular outline, centred on the pose (§2: 0.70 m long, 0.60 m wide)."""
-
-    length_m: float = 0.70
-    width_m: float = 0.60
-
-    def corners(self, poses: ArrayLike) -> F64:
-        """Corners (..., 4, 2) in world coordinates, counter-clockwise from front-left, for poses (..., 3)."""
-        p = np.asarray(poses, dtype=np.float64)
-        hl, hw = 0.5 * self.length_m, 0.5 * self.width_m
-        local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
-        c, s = np.cos(p[..., 2])[..., None], np.sin(p[..., 2])[..., None]
-        x = p[..., 0:1] + c * local[:, 0] - s * local[:, 1]
-        y = p[..., 1:2] + s * local[:, 0] + c * local[:, 1]
-        return np.stack([x, y], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -57,7 +42,7 @@ class Pillar:
 class LidarModel:
     """The TiM561 as §2 and sick-cola-a.md §5 describe it: where it sits, its beams, range limits and noise."""
 
-    mount: tuple[float, float, float] = (0.25, 0.0, 0.0)  # x, y [m], yaw [rad] in the robot frame
+    mount: SensorMount = Body().lidar  # x, y [m], yaw [rad] in the robot frame
     beams: int = 811
     start_deg: float = -135.0  # SICK -45 deg minus 90 deg into the sensor frame
     step_deg: float = 0.3333  # transmitted as 3333/10000 deg, not 1/3 deg

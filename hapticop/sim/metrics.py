@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal, NamedTuple
 
@@ -223,9 +223,6 @@ class RunMetrics:
     oscillation_index_mps: float  # largest 2 s rms of the handle velocity band-passed to 1-10 Hz
     sustained_oscillation: bool  # oscillation index above 2 cm/s
     divergence: bool  # handle at the workspace limit or force saturated for more than 0.5 s
-
-    def as_dict(self) -> dict[str, object]:
-        return asdict(self)
 
 
 def compute_metrics(

@@ -265,14 +265,6 @@ class FalconKinematics:
             _put(out_theta3, l1[2], l2[2], l3[2])
         return True
 
-    def counts_from_position(self, position: ArrayLike, out: I64) -> bool:
-        """Encoder counts (absolute, homed) for a handle position; False if unreachable."""
-        pose = self.pose(*_three(position))
-        if pose is None:
-            return False
-        _put(out, self.count(pose[0][0]), self.count(pose[1][0]), self.count(pose[2][0]))
-        return True
-
     # ------------------------------------------------------------------ Jacobian
     def _jac(self, pose: Pose) -> bool:
         """M = d theta1 / d p (§5) and Q = det * M^-1 at `pose`; False if near-singular."""

@@ -219,11 +219,6 @@ class VirtualFalcon:
     def unplug(self) -> None:
         self.plugged = False
 
-    def power_cycle(self) -> None:
-        """Firmware gone, back to the boot ROM; the handle stays where it is."""
-        self.phase = Phase.BOOT_ROM
-        self._segments.clear()
-
     # ------------------------------------------------------------ time
     def _time(self) -> float:
         """The device's time: the clock's, but never behind what the device already lived

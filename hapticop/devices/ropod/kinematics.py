@@ -17,11 +17,14 @@ sign flip is the controller's business).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from math import cos, hypot, sin
+from typing import Annotated
 
 import numpy as np
+from annotated_types import Gt
 from numpy.typing import ArrayLike, NDArray
+
+from hapticop.parameters import parameters
 
 __all__ = ["Geometry", "SmartWheelKinematics", "jacobian", "distribute_qp", "inverse_sym3"]
 
@@ -42,17 +45,21 @@ def inverse_sym3(n00: float, n01: float, n02: float, n11: float, n12: float, n22
             (n00 * n11 - n01 * n01) * inv)
 
 
-@dataclass(frozen=True)
+@parameters
 class Geometry:
     """Ropod geometry as compiled in the June-2019 controller (ropod-controller.md §2.2), in metres.
 
     Pivots SW1..SW4 counter-clockwise from front-left; the order is a known open question (§10 Q1).
     """
 
-    wheel_radius_m: float = 0.0525
-    caster_offset_m: float = 0.01
-    wheel_distance_m: float = 0.08
+    wheel_radius_m: Annotated[float, Gt(0)] = 0.0525
+    """r, the radius of each wheel."""
+    caster_offset_m: Annotated[float, Gt(0)] = 0.01
+    """s, how far each unit's axle trails its pivot."""
+    wheel_distance_m: Annotated[float, Gt(0)] = 0.08
+    """d, the distance between a unit's two wheels."""
     pivots_m: tuple[tuple[float, float], ...] = ((0.21, 0.21), (-0.21, 0.21), (-0.21, -0.21), (0.21, -0.21))
+    """(x, y) of each unit's pivot in the robot frame, SW1 first."""
 
     @property
     def units(self) -> int:

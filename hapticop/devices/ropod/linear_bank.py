@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
-from typing import Any
+from dataclasses import fields
+from typing import Annotated, Any
 
 import numpy as np
+from annotated_types import Ge, Gt
 from numpy.typing import ArrayLike, NDArray
+
+from hapticop.parameters import parameters
 
 __all__ = [
     "LinearControllerParams", "ControllerBank",
@@ -28,20 +31,22 @@ __all__ = [
 F64 = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@parameters
 class LinearControllerParams:
-    """Parameters in the thesis's / ropod's names; frequencies in Hz, each a scalar or a per-channel array.
+    """One generic controller (gain, PI, lead-lag, low-pass) in the thesis's / ropod's names; frequencies in Hz."""
 
-    `i_fhz = 0` makes the PI a pure gain; `ll_zero_fhz == ll_pole_fhz` removes the lead-lag.
-    `i_saturation` (the thesis's "I saturation", ropod's `i_sat`) clamps the PI *output*.
-    """
-
-    p_gain: float | F64
-    i_fhz: float | F64
-    ll_zero_fhz: float | F64
-    ll_pole_fhz: float | F64
-    lpf_fhz: float | F64
-    i_saturation: float | F64
+    p_gain: float
+    """K, the gain: N/(m/s) or Nm/(rad/s) on the platform, Nm/(rad/s) on a wheel."""
+    i_fhz: Annotated[float, Ge(0)]
+    """The PI's corner frequency; 0 makes the PI a pure gain."""
+    ll_zero_fhz: Annotated[float, Gt(0)]
+    """The lead-lag's zero; equal to its pole, there is no lead-lag."""
+    ll_pole_fhz: Annotated[float, Gt(0)]
+    """The lead-lag's pole."""
+    lpf_fhz: Annotated[float, Gt(0)]
+    """The low-pass's cut-off."""
+    i_saturation: Annotated[float, Gt(0)]
+    """Clamps the PI's output (the thesis's "I saturation", ropod's `i_sat`), in the gain's output unit."""
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> "LinearControllerParams":
@@ -51,11 +56,6 @@ class LinearControllerParams:
             data["i_saturation"] = values["i_sat"]
         return cls(**data)
 
-    @classmethod
-    def stack(cls, channels: Sequence["LinearControllerParams"]) -> "LinearControllerParams":
-        """One parameter set of per-channel arrays from one set per channel."""
-        return cls(**{f.name: np.array([np.float64(getattr(c, f.name)) for c in channels])
-                      for f in fields(cls)})
 
 
 # Parameter sets of ropod-controller.md §6.3 (platform K in N/(m/s) or Nm/(rad/s), wheel K in Nm/(rad/s)).
@@ -72,18 +72,21 @@ ROPOD_PIVOT_DAMPING = LinearControllerParams(0.1, 0.0, 2.0, 2.0, 50.0, 7.0)
 class ControllerBank:
     """`n` generic controllers stepped together; state and scratch preallocated.
 
-    `params` holds scalars (shared) or length-`n` arrays; `n` is taken from the arrays
-    unless given. `step(error, out, reset)` writes the `n` outputs into `out`. The channels
+    `params` is one parameter set shared by the `n` channels, or one set per channel (then
+    `n` is their number unless given). `step(error, out, reset)` writes the `n` outputs into `out`. The channels
     run on Python floats (a dozen channels are too few for numpy to pay off); `step_values`
     is the same step on float sequences, for callers that keep their signals in floats.
     The states (`xi`, `xd`, `xl`) and last step's stage outputs (`y_pi`, `y_leadlag`,
     `clamped`) read as arrays, made on access (diagnostics and tests).
     """
 
-    def __init__(self, params: LinearControllerParams, ts: float, n: int | None = None):
-        cols = {f.name: np.asarray(getattr(params, f.name), np.float64) for f in fields(params)}
+    def __init__(self, params: LinearControllerParams | Sequence[LinearControllerParams], ts: float,
+                 n: int | None = None):
+        channels = [params] if isinstance(params, LinearControllerParams) else list(params)
+        cols = {f.name: np.array([getattr(c, f.name) for c in channels], np.float64)
+                for f in fields(LinearControllerParams)}
         if n is None:
-            n = max((c.size for c in cols.values() if c.ndim), default=1)
+            n = len(channels)
         p = {k: np.broadcast_to(v, (n,)).astype(np.float64) for k, v in cols.items()}
         if ts <= 0 or np.any(p["i_saturation"] <= 0) or np.any(p["i_fhz"] < 0):
             raise ValueError("need ts > 0, i_saturation > 0 and i_fhz >= 0")

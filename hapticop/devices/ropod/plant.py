@@ -268,7 +268,7 @@ class RopodPlant:
 
     def _measure(self) -> None:
         """Wheel speeds and pivot rates of the current state (what the sensors will report)."""
-        y, speeds, rates, units = self._y, self._speeds, self._rates, self.units
+        y, speeds, rates = self._y, self._speeds, self._rates
         vx, vy, wz = y[3], y[4], y[5]
         inv_s, inv_r, k = self._inv_s, self._inv_r, self._k
         for i, (ua, ub, qa, qb) in enumerate(self._rows):

@@ -101,7 +101,7 @@ class PlatformVelocityController:
         self.units, self.wheels = units, wheels
         self.kinematics = SmartWheelKinematics(p.geometry)
         self.bank = ControllerBank(
-            LinearControllerParams.stack([p.platform_xy, p.platform_xy, p.platform_theta] + [p.wheel] * wheels),
+            [p.platform_xy, p.platform_xy, p.platform_theta] + [p.wheel] * wheels,
             p.ts_s,
         )
         self._tau_max = p.tau_max

@@ -74,11 +74,6 @@ class RopodSegment:
         self._publish_sensors()
         self.last_step_ns: int | None = None
 
-    def wheel_index(self, position: int) -> int | None:
-        """The wheel (0-3) at a bus position (0-6), or None for a coupler or junction."""
-        slave = self.slaves[position]
-        return self.wheels.index(slave) if slave in self.wheels else None
-
     def tick(self, now_ns: int) -> None:
         for slave in self.slaves:
             if slave.present:
