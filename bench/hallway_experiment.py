@@ -30,7 +30,7 @@ at 36 s); an operator who never lets go of the handle would otherwise hold the r
 def run_one(model: str, profile: str, variation: int, hallway: str, braking_field: dict | None = None) -> dict:
     """One seeded run. ``braking_field+governor`` is the hallway's own tuning; ``braking_field`` alone
     drops that tuning (a precursor for the governor) and runs M1 with the notes' parameters."""
-    from hapticop.runtime.patching import apply_patch
+    from hapticop.validation.patches import apply_patch
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.validation import validate_source
     from hapticop.composition.yamlsource import Source, read_file

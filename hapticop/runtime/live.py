@@ -20,7 +20,8 @@ from hapticop.composition.description import Composition
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import ResolvedActivity
 from hapticop.runtime.assembly import make_runner, make_transports, thread_of
-from hapticop.runtime.patching import ChangePlan, PatchError
+from hapticop.validation.changes import ChangePlan
+from hapticop.validation.patches import PatchError
 
 if TYPE_CHECKING:
     from hapticop.runtime.system import System

@@ -35,7 +35,7 @@ from hapticop.runtime.lifecycle import OK
 from hapticop.runtime.logs import Level, LogWriter, default_run_dir
 from hapticop.runtime import live, realtime
 from hapticop.runtime.control import ControlError, ControlServer, socket_path
-from hapticop.runtime.patching import PatchError, load_patch, prepare
+from hapticop.validation.patches import PatchError, load_patch, prepare
 from hapticop.runtime.deadlines import first_deadline, phases
 from hapticop.runtime.region import Region
 from hapticop.composition.yamlsource import parse_text, plain
