@@ -46,15 +46,9 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     tree = apply_patch(source.tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
-    from ruamel.yaml import YAML
-    import io
-
-    text = io.StringIO()
-    YAML().dump(tree, text)
     with tempfile.TemporaryDirectory() as run_dir:
         started = time.perf_counter()
-        result = run_system(validated.graph.loaded, text.getvalue(), "hallway.yaml",
-                            RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
+        result = run_system(validated, RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
         wall = time.perf_counter() - started
         metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
         results = json.loads((Path(run_dir) / "results.json").read_text())
