@@ -42,6 +42,8 @@ def _never() -> bool:
 
 class Scheduler:
     def __init__(self, composition: Composition, region: Region, clock: RealtimeClock | VirtualClock, log: Logger):
+        # The composition at start: its threads (but their schedules) and its coordination
+        # never change live, so this is all the scheduler and the supervisor read of it.
         self.composition, self.region, self.clock, self.log = composition, region, clock, log
         self.virtual = isinstance(clock, VirtualClock)
         self.main_name = next(t for t, spec in composition.threads.items() if spec.deploy == "main")
