@@ -298,7 +298,7 @@ def schema(
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
-    from hapticop.runtime.system import ForcedExit
+    from hapticop.runtime.supervisor import ForcedExit
 
     try:
         app()

@@ -71,20 +71,16 @@ def _refuse(path: tuple, message: str) -> Diagnostic:
     return Diagnostic(rule="patch-unsupported", message=f"{message}; {RESTART}", path=path)
 
 
-def check(target: LiveTarget, plan: ChangePlan, new: Composition) -> dict[str, ResolvedActivity]:
-    """Resolve what the plan needs, or raise PatchError for what cannot change live."""
-    from hapticop.blocks.registry import resolve  # the blocks a patch names, as the loader finds them
-
+def check(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> dict[str, ResolvedActivity]:
+    """What the plan needs of the patched composition (its activities as validation resolved
+    them), or PatchError for what cannot change live."""
     problems: list[Diagnostic] = []
     resolved: dict[str, ResolvedActivity] = {}
-    current = target.description
+    current, new = target.description, loaded.composition
     new_owner = thread_of(new)
     for name in list(plan.params) + list(plan.added_activities):
-        spec = new.activities[name]
+        resolved[name] = loaded.activities[name]
         old = current.activities.get(name)
-        block = old.block if old else resolve(spec.block)
-        params = block.Params.model_validate(spec.params)
-        resolved[name] = ResolvedActivity(name, spec, block, params, block.interface(params))
         if old and resolved[name].interface != old.interface:
             problems.append(_refuse(("activities", name, "params"), f"the new parameters change the ports of '{name}'"))
     for name in plan.added_activities:
@@ -208,9 +204,10 @@ class LiveChanges:
         `base`, a (tree, composition) some earlier pending patch will leave."""
         current = self.target.description
         tree, composition = base or (current.tree, current.composition)
-        new_tree, new, plan, diff = prepare(tree, patch, old=composition, patch_file=patch_file, name=self.name)
-        resolved = check(self.target, plan, new)
-        return PendingPatch(plan, new, new_tree, resolved, threading.Event(), diff)
+        prepared = prepare(tree, patch, old=composition, patch_file=patch_file, name=self.name)
+        resolved = check(self.target, prepared.plan, prepared.loaded)
+        return PendingPatch(prepared.plan, prepared.composition, prepared.tree, resolved, threading.Event(),
+                            prepared.diff)
 
     def prepare_scripted(self) -> None:
         """Validate the scripted patches before any loop runs, each on the tree the one before

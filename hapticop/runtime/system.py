@@ -31,11 +31,12 @@ from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.scheduler import Scheduler
 from hapticop.runtime.service import ControlService
-from hapticop.runtime.supervisor import SECOND, ExitStatus, ForcedExit, Supervisor
+from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 from hapticop.validation import Validated
 
-__all__ = ["SECOND", "ExitStatus", "ForcedExit", "Outcome", "RunOptions", "RunResult", "System", "run_system"]
+# ExitStatus is part of what a run returns (`Outcome.status`), so it is offered here too.
+__all__ = ["ExitStatus", "Outcome", "RunOptions", "RunResult", "System", "run_system"]
 
 
 @dataclass

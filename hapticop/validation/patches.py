@@ -18,8 +18,8 @@ from __future__ import annotations
 import copy
 import re
 from collections.abc import Mapping
-from dataclasses import replace
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, Iterator
 
 import jsonpatch
 from jsonpointer import JsonPointer, JsonPointerException
@@ -28,7 +28,7 @@ from ruamel.yaml.comments import CommentedMap, CommentedSeq
 from hapticop.composition.description import Composition
 from hapticop.composition.diagnostics import Diagnostic, Path, Severity
 from hapticop.composition.documents import diff, dump, is_flow, key_for, merge, restyle
-from hapticop.composition.loader import load_tree
+from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.yamlsource import (Source, SourceError, parse_text, reject_aliases_of_containers,
                                              round_trip_yaml)
 from hapticop.validation.changes import RESTART, ChangePlan, plan_changes, plain_value, show
@@ -288,6 +288,23 @@ def validate_patched(new_tree: CommentedMap, file: str = "<patched>", state_limi
     return validated
 
 
+@dataclass(frozen=True)
+class Prepared:
+    """A patch applied, validated and planned; unpacks as (tree, composition, plan, diff)."""
+
+    tree: CommentedMap
+    loaded: Loaded  # the patched composition, its activities resolved by validation
+    plan: ChangePlan
+    diff: str
+
+    @property
+    def composition(self) -> Composition:
+        return self.loaded.composition
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter((self.tree, self.composition, self.plan, self.diff))
+
+
 def prepare(
     tree: Mapping,
     patch: list | Mapping,
@@ -297,8 +314,8 @@ def prepare(
     patch_file: str = "<patch>",
     name: str = "composition.yaml",
     state_limit: int = DEFAULT_STATE_LIMIT,
-) -> tuple[CommentedMap, Composition, ChangePlan, str]:
-    """Apply, validate and plan: (new tree, new composition, plan, diff), or `PatchError`.
+) -> Prepared:
+    """Apply, validate and plan, or raise `PatchError`.
 
     `old` is the running composition (read from `tree` when not given). A plan with
     changes the runtime cannot make live is refused with one 'patch-unsupported'
@@ -323,4 +340,4 @@ def prepare(
                                     "activities, streams and stream max_age live",
                                     file=file, line=line, column=column))
         raise PatchError(found)
-    return new_tree, new, plan, diff(tree, new_tree, name)
+    return Prepared(new_tree, validated.graph.loaded, plan, diff(tree, new_tree, name))
