@@ -28,8 +28,7 @@ def run(clock: str) -> list:
     validated = validate_path(ROOT / "systems" / "faults.yaml")
     assert validated.report.ok
     with tempfile.TemporaryDirectory() as tmp:
-        result = run_system(validated.graph.loaded, validated.source.text, "faults.yaml",
-                            RunOptions(clock=clock, run_dir=Path(tmp), echo=False))
+        result = run_system(validated, RunOptions(clock=clock, run_dir=Path(tmp), echo=False))
         recording = np.load(Path(tmp) / "trajectory.npz")
         meta = json.loads(str(recording["__meta__"]))
         return reactions(recording["t"], recording["cmd"], recording["robot_velocity"], meta["operator_start_ns"],

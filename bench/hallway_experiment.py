@@ -30,7 +30,7 @@ at 36 s); an operator who never lets go of the handle would otherwise hold the r
 def run_one(model: str, profile: str, variation: int, hallway: str, braking_field: dict | None = None) -> dict:
     """One seeded run. ``braking_field+governor`` is the hallway's own tuning; ``braking_field`` alone
     drops that tuning (a precursor for the governor) and runs M1 with the notes' parameters."""
-    from hapticop.runtime.patching import apply_patch
+    from hapticop.validation.patches import apply_patch
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.validation import validate_source
     from hapticop.composition.yamlsource import Source, read_file
@@ -49,15 +49,9 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     tree = apply_patch(tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
-    from ruamel.yaml import YAML
-    import io
-
-    text = io.StringIO()
-    YAML().dump(tree, text)
     with tempfile.TemporaryDirectory() as run_dir:
         started = time.perf_counter()
-        result = run_system(validated.graph.loaded, text.getvalue(), "hallway.yaml",
-                            RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
+        result = run_system(validated, RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
         wall = time.perf_counter() - started
         metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
         results = json.loads((Path(run_dir) / "results.json").read_text())

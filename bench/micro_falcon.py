@@ -135,7 +135,7 @@ def system(seconds: float) -> None:
     validated = validate_path(path)
     with tempfile.TemporaryDirectory() as run_dir:
         options = RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir), echo=False)
-        result = run_system(validated.graph.loaded, validated.source.text, str(path), options)
+        result = run_system(validated, options)
     falcon = result.timing["activities"]["falcon"]
     c = falcon["compute_us"]
     print(f"\nhallway.yaml, virtual clock, {seconds:g} s: falcon activity {falcon['steps']} steps, compute "

@@ -123,8 +123,7 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
         path = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
         validated = validate_path(path)
         with tempfile.TemporaryDirectory() as run_dir:
-            run_system(validated.graph.loaded, validated.source.text, str(path),
-                       RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir), echo=False))
+            run_system(validated, RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir), echo=False))
     finally:
         HapticController.compute, HallwayWorld.compute = originals  # type: ignore[method-assign]
     return {k: np.array(v, dtype=np.float64) / 1e3 for k, v in samples.items()}

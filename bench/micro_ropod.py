@@ -54,11 +54,10 @@ def block_cases(run_dir: Path, warm_up_s: float = 4.0) -> tuple[object, dict[str
     from hapticop.validation import validate_path
 
     validated = validate_path(HALLWAY)
-    system = System(validated.graph.loaded, validated.source.text, str(HALLWAY),
-                    RunOptions(clock="virtual", run_dir=run_dir, echo=False))
-    threads, queue, order = system.built.threads, system.virtual_queue, list(system.composition.threads)
-    heapq.heappush(queue, (0, order.index(system.main_name), system.main_name))
-    while queue and queue[0][0] < warm_up_s * 1e9:  # System._run_virtual, stopped part way
+    system = System(validated, RunOptions(clock="virtual", run_dir=run_dir, echo=False))
+    threads, queue, order = system.built.threads, system.scheduler.queue, list(system.composition.threads)
+    heapq.heappush(queue, (0, order.index(system.scheduler.main_name), system.scheduler.main_name))
+    while queue and queue[0][0] < warm_up_s * 1e9:  # Scheduler.run_virtual, stopped part way
         deadline, rank, name = heapq.heappop(queue)
         system.clock.advance_to(deadline)
         threads[name].cycle()

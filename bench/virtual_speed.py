@@ -28,7 +28,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as run_dir:
             options = RunOptions(clock="virtual", duration_ns=duration, run_dir=Path(run_dir), echo=False)
             started = time.perf_counter()
-            result = run_system(validated.graph.loaded, validated.source.text, str(path), options)
+            result = run_system(validated, options)
             wall = time.perf_counter() - started
         cycles = sum(t["cycles"] for t in result.timing["threads"].values())
         print(f"| {path} | {duration / 1e9:g} | {wall:.2f} | {duration / 1e9 / wall:.1f} | {cycles} |")

@@ -18,7 +18,7 @@ def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name
     options = RunOptions(clock=clock, duration_ns=parse_duration_ns(duration) if duration else None, seed=seed,
                          run_dir=tmp_path / f"run-{name}", shutdown_timeout_ns=parse_duration_ns(shutdown_timeout),
                          echo=False, control=control)
-    return run_system(validated.graph.loaded, validated.source.text, str(path), options, on_start=on_start)
+    return run_system(validated, options, on_start=on_start)
 
 
 PIPELINE = """

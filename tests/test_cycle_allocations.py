@@ -13,8 +13,7 @@ def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
     text = counting()
     validated = validate_text(text, "alloc.yaml")
     assert validated.report.ok, validated.report.diagnostics
-    system = System(validated.graph.loaded, text, "alloc.yaml",
-                    RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
     try:
         threads = system.built.threads
         main, slow = threads["main"], threads["slow"]

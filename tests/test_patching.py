@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from hapticop.runtime.patching import (
+from hapticop.composition import documents
+from hapticop.validation.patches import (
     ChangePlan,
     PatchError,
     apply_patch,
-    diff_text,
     load_patch,
     plan_changes,
     prepare,
@@ -254,13 +254,13 @@ def test_doc_changes_are_not_changes(hallway):
 def test_diff_shows_the_changed_line_and_keeps_comments(hallway):
     tree, _ = hallway
     new_tree = apply_patch(tree, load_patch("threads:\n  fieldbus:\n    schedules:\n      1: []\n", "p.yaml"))
-    diff = diff_text(tree, new_tree, "hallway.yaml")
+    diff = documents.diff(tree, new_tree, "hallway.yaml")
     assert diff.startswith("--- a/hallway.yaml\n+++ b/hallway.yaml\n")
     assert "-      1: [ethercat, ropod]\n+      1: []\n" in diff
     assert "  watchdog:                   # thread 3: watches the EtherCAT slaves, above thread 2\n" in diff
     assert sum(line.startswith(("+", "-")) for line in diff.splitlines()) == 4  # two headers, one change
-    assert "+# yaml-language-server: $schema=" in diff_text({}, new_tree)
-    assert diff_text(tree, copy.deepcopy(tree)) == ""
+    assert "+# yaml-language-server: $schema=" in documents.diff({}, new_tree)
+    assert documents.diff(tree, copy.deepcopy(tree)) == ""
 
 
 # --- adding ---------------------------------------------------------------------------------
@@ -333,7 +333,7 @@ def test_patching_a_patched_description_removes_what_was_added(hallway):
     assert plan.removed_activities == ["spare_watchdog"]
     assert plan.removed_streams == ["spare_states", "spare_counter"]
     assert plan.schedules == {"watchdog": {0: [], 1: ["ethercat_watchdog"]}}
-    assert diff_text(tree, back_tree) == ""
+    assert documents.diff(tree, back_tree) == ""
 
 
 def test_changing_max_age_is_a_live_stream_change(hallway):

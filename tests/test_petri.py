@@ -3,12 +3,12 @@
 import pytest
 
 from hapticop.composition.description import PetriNet
-from hapticop.coordination.petri import CompiledNet, Livelock
+from hapticop.coordination.petri import Net, Livelock
 from hapticop.validation.reachability import Environment, explore
 
 
-def net(**spec) -> CompiledNet:
-    return CompiledNet.from_spec(PetriNet.model_validate(spec))
+def net(**spec) -> Net:
+    return Net.from_spec(PetriNet.model_validate(spec))
 
 
 def test_fire_to_steady_state_follows_declaration_order():

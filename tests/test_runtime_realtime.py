@@ -42,7 +42,7 @@ def test_a_killed_process_is_detected_and_reported(tmp_path):
         def killer():
             deadline = time.monotonic() + 20
             while time.monotonic() < deadline:
-                handle = system.processes.get("slow")
+                handle = system.scheduler.processes.get("slow")
                 if handle and system.state("recorder") is State.RUNNING:
                     os.kill(handle.process.pid, signal.SIGKILL)
                     return

@@ -134,7 +134,7 @@ def compose(
 
             threading.Thread(target=progress_line, args=(system, console), daemon=True).start()
 
-    result = run_system(validated.graph.loaded, validated.source.text, str(file), options, on_start=announce)
+    result = run_system(validated, options, on_start=announce)
     print_timing(result.timing, console, result.virtual)
     print_results(result.outcome.run_dir, console)
     for reason in result.outcome.reasons:
@@ -298,7 +298,7 @@ def schema(
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
-    from hapticop.runtime.system import ForcedExit
+    from hapticop.runtime.supervisor import ForcedExit
 
     try:
         app()

@@ -16,7 +16,8 @@ from pathlib import Path as FilePath
 from ruamel.yaml.comments import CommentedMap
 
 from hapticop.composition.diagnostics import Diagnostic, Path
-from hapticop.composition.yamlsource import Source, SourceError, _find_key, _MISSING, locate, read_file
+from hapticop.composition.documents import dump, merge
+from hapticop.composition.yamlsource import MISSING, Source, SourceError, find_key, locate, read_file
 
 MAX_DEPTH = 8
 
@@ -37,8 +38,8 @@ def _depth(tree: CommentedMap, path: Path) -> int:
     node, depth = tree, 0
     for part in path:
         if isinstance(node, CommentedMap):
-            name = _find_key(node, part)
-            if name is _MISSING:
+            name = find_key(node, part)
+            if name is MISSING:
                 break
             node, depth = node[name], depth + 1
         elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
@@ -52,8 +53,6 @@ def resolve(source: Source, seen: tuple[str, ...] = ()) -> Source:
     """`source` itself, or, if it extends a base, the base with it merged on top."""
     if "extends" not in source.tree:
         return source
-    from hapticop.runtime.patching import _dump, _merge  # patching builds on validation, which builds on this
-
     base_name = source.tree["extends"]
     line, column = locate(source.tree, ("extends",))
     if not isinstance(base_name, str) or not base_name.strip():
@@ -73,6 +72,6 @@ def resolve(source: Source, seen: tuple[str, ...] = ()) -> Source:
                                          column=column)) from None
         raise
     overlay = CommentedMap((k, v) for k, v in source.tree.items() if k != "extends")
-    merged = _merge(copy.deepcopy(base.tree), overlay)
+    merged = merge(copy.deepcopy(base.tree), overlay)
     layers = [source] + (base.layers if isinstance(base, LayeredSource) else [base])
-    return LayeredSource(file=source.file, tree=merged, text=_dump(merged), layers=layers)
+    return LayeredSource(file=source.file, tree=merged, text=dump(merged), layers=layers)

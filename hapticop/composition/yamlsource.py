@@ -48,7 +48,8 @@ class Source:
         return diagnostic.located(self.file, line, column)
 
 
-def _yaml() -> YAML:
+def round_trip_yaml() -> YAML:
+    """The one YAML reader and writer: round trip (comments, positions), no duplicate keys."""
     yaml = YAML(typ="rt")
     yaml.allow_duplicate_keys = False
     return yaml
@@ -73,7 +74,7 @@ def parse_text(text: str, file: str = "<string>") -> Source:
             )
         )
     try:
-        tree = _yaml().load(text)
+        tree = round_trip_yaml().load(text)
     except DuplicateKeyError as error:
         raise _mark_error(
             file,
@@ -110,7 +111,7 @@ def parse_text(text: str, file: str = "<string>") -> Source:
                 column=1,
             )
         )
-    _reject_aliases_of_containers(tree, file)
+    reject_aliases_of_containers(tree, file)
     return Source(file=file, tree=tree, text=text)
 
 
@@ -152,7 +153,7 @@ def _yaml_type(value: Any) -> str:
     return type(value).__name__
 
 
-def _reject_aliases_of_containers(tree: Any, file: str) -> None:
+def reject_aliases_of_containers(tree: Any, file: str) -> None:
     """Refuse recursive anchors: a mapping that contains itself would hang every check."""
     seen: set[int] = set()
 
@@ -188,8 +189,8 @@ def locate(tree: Any, path: Path, *, key: bool = False) -> tuple[int, int]:
     for index, part in enumerate(parts):
         last = index == len(parts) - 1
         if isinstance(node, CommentedMap):
-            name = _find_key(node, part)
-            if name is _MISSING:
+            name = find_key(node, part)
+            if name is MISSING:
                 continue
             value = node[name]
             if key and last or value is None or isinstance(value, (CommentedMap, CommentedSeq)):
@@ -207,17 +208,19 @@ def locate(tree: Any, path: Path, *, key: bool = False) -> tuple[int, int]:
     return position
 
 
-_MISSING = object()
+MISSING = object()
+"""What `find_key` answers for a key the mapping does not hold."""
 
 
-def _find_key(mapping: CommentedMap, part: Any) -> Any:
+def find_key(mapping: CommentedMap, part: Any) -> Any:
+    """The key of `mapping` that a path segment means, or `MISSING`."""
     if part in mapping:
         return part
     # YAML integer keys (schedule IDs) arrive from pydantic as ints or as their text.
     for candidate in mapping:
         if str(candidate) == str(part):
             return candidate
-    return _MISSING
+    return MISSING
 
 
 def plain(node: Any) -> Any:

@@ -1,18 +1,26 @@
-"""Place/transition nets as numpy arrays: the coordination engine of the mediator.
+"""Place/transition nets, compiled once: fired by the mediator's coordinator, explored by validation.
 
 A transition is enabled when every input place holds at least its arc weight; firing
 subtracts the input weights and adds the output weights. `fire_to_steady_state` fires
-enabled transitions in declaration order, round after round, until none is enabled,
-which is what the mediator does once per coordination step.
+enabled transitions in declaration order, round after round, until none is enabled: the
+coordinator does that once per coordination step, on a marking it keeps as a Python list
+(no allocation per cycle), and `validation/reachability` explores the same arcs through
+the matrices `pre` and `post`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import MutableSequence
 
 import numpy as np
 
 from hapticop.composition.description import PetriNet
+
+MAX_FIRINGS = 10_000
+"""Firings within one step beyond which a net counts as livelocked."""
+
+Arcs = tuple[tuple[int, int], ...]  # (place index, weight)
 
 
 class Livelock(RuntimeError):
@@ -20,29 +28,33 @@ class Livelock(RuntimeError):
 
 
 @dataclass(frozen=True)
-class CompiledNet:
+class Net:
+    name: str
     places: tuple[str, ...]
     transitions: tuple[str, ...]
+    arcs: tuple[tuple[Arcs, Arcs], ...]  # per transition: the places it takes from, those it puts into
     pre: np.ndarray  # (transitions, places) tokens consumed
     post: np.ndarray  # (transitions, places) tokens produced
     initial: np.ndarray  # (places,)
 
     @classmethod
-    def from_spec(cls, spec: PetriNet) -> "CompiledNet":
+    def from_spec(cls, spec: PetriNet, name: str = "") -> "Net":
         places = tuple(spec.places)
-        index = {name: i for i, name in enumerate(places)}
+        index = {place: i for i, place in enumerate(places)}
         transitions = tuple(spec.transitions)
+        arcs = tuple((tuple((index[p], w) for p, w in spec.transitions[t].inputs.items()),
+                      tuple((index[p], w) for p, w in spec.transitions[t].outputs.items())) for t in transitions)
         pre = np.zeros((len(transitions), len(places)), dtype=np.int64)
         post = np.zeros_like(pre)
-        for t, name in enumerate(transitions):
-            for pname, weight in spec.transitions[name].inputs.items():
-                pre[t, index[pname]] = weight
-            for pname, weight in spec.transitions[name].outputs.items():
-                post[t, index[pname]] = weight
+        for t, (inputs, outputs) in enumerate(arcs):
+            for p, weight in inputs:
+                pre[t, p] = weight
+            for p, weight in outputs:
+                post[t, p] = weight
         initial = np.zeros(len(places), dtype=np.int64)
-        for pname, tokens in spec.marking.items():
-            initial[index[pname]] = tokens
-        return cls(places, transitions, pre, post, initial)
+        for place, tokens in spec.marking.items():
+            initial[index[place]] = tokens
+        return cls(name, places, transitions, arcs, pre, post, initial)
 
     def index(self, place_name: str) -> int:
         return self.places.index(place_name)
@@ -51,22 +63,22 @@ class CompiledNet:
         """Boolean mask of the transitions enabled in `marking`."""
         return np.all(marking >= self.pre, axis=1)
 
-    def fire(self, marking: np.ndarray, t: int) -> None:
-        """Fire transition `t` in place."""
-        marking -= self.pre[t]
-        marking += self.post[t]
-
-    def fire_to_steady_state(self, marking: np.ndarray, max_firings: int = 10_000) -> int:
-        """Fire in declaration order until no transition is enabled; returns the count."""
+    def fire_to_steady_state(self, marking: MutableSequence[int], max_firings: int = MAX_FIRINGS) -> int:
+        """Fire in declaration order until no transition is enabled, changing `marking` in
+        place (a list or an array); returns the count, or raises `Livelock`."""
         fired = 0
-        while True:
+        progressed = True
+        while progressed:
             progressed = False
-            for t in range(len(self.transitions)):
-                if np.all(marking >= self.pre[t]):
-                    self.fire(marking, t)
+            for inputs, outputs in self.arcs:
+                if all(marking[p] >= w for p, w in inputs):
+                    for p, w in inputs:
+                        marking[p] -= w
+                    for p, w in outputs:
+                        marking[p] += w
                     fired += 1
                     progressed = True
                     if fired > max_firings:
-                        raise Livelock(f"more than {max_firings} firings without a steady state")
-            if not progressed:
-                return fired
+                        raise Livelock(f"net '{self.name}' fired more than {max_firings} times without reaching "
+                                       "a steady state")
+        return fired

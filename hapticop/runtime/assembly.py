@@ -10,6 +10,7 @@ from __future__ import annotations
 import zlib
 from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -23,14 +24,9 @@ from hapticop.runtime.streams import LatestSlot, SpscQueue, latest_nbytes, queue
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 
 
-def flag_names(loaded: Loaded) -> list[str]:
-    from hapticop.composition.graph import CompositionGraph  # networkx: not needed by a process that is handed the flags
-
-    return [node[1] for node, _ in CompositionGraph(loaded).nodes_of("flag")]
-
-
-def layout_of(loaded: Loaded, flags: list[str] | None = None) -> Layout:
-    return Layout.build(loaded.composition, loaded.activities, flag_names(loaded) if flags is None else flags)
+def layout_of(loaded: Loaded, flags: list[str]) -> Layout:
+    """The region's layout; `flags` as validation's graph lists them (`Validated.flags`)."""
+    return Layout.build(loaded.composition, loaded.activities, flags)
 
 
 def thread_of(composition: Composition) -> dict[str, str]:
@@ -55,7 +51,8 @@ class Built:
 
 
 def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer: LogWriter, seed: int,
-          apply_realtime: bool) -> Built:
+          apply_realtime: bool, coordination: Any = None) -> Built:
+    """`coordination`: the mediator's handle, in the main process only."""
     composition = loaded.composition
     owner = thread_of(composition)
     transports = _transports(loaded, region, owner)
@@ -68,7 +65,8 @@ def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer
         mine = {}
         for name in members:
             resolved = loaded.activities[name]
-            mine[name] = runners[name] = make_runner(name, resolved, composition, region, transports, clock, writer, seed)
+            mine[name] = runners[name] = make_runner(name, resolved, composition, region, transports, clock, writer, seed,
+                                                      coordination)
         log = writer.logger(f"thread-{thread_name}", Level[spec.log.upper()], clock.now_ns)
         threads[thread_name] = CyclicThread(thread_name, spec, region, mine, clock, log, apply_realtime)
     return Built(threads, runners)
@@ -104,7 +102,8 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
 
 
 def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
-                transports: dict[str, list], clock, writer: LogWriter, seed: int) -> ActivityRunner:
+                transports: dict[str, list], clock, writer: LogWriter, seed: int,
+                coordination: Any = None) -> ActivityRunner:
     """The block instance of one activity, its ports wired to the given transports."""
     iface = resolved.interface
     track = bool(composition.latencies)
@@ -137,6 +136,6 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name), writer.run_dir, timer)
+                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination)
     block = resolved.block(context)
     return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)

@@ -19,7 +19,7 @@ from hapticop.runtime.assembly import build, layout_of
 from hapticop.runtime.clock import RealtimeClock
 from hapticop.runtime import realtime
 from hapticop.runtime.logs import Level, LogWriter
-from hapticop.runtime.deadlines import first_deadline, phases
+from hapticop.runtime.deadlines import thread_start
 from hapticop.runtime.region import Region
 
 
@@ -45,9 +45,7 @@ def process_main(tree: dict, flags: list[str], region_name: str, threads: list[s
         index = region.layout.thread_index[thread]
         while not region.go[index] and not region.system[Region.TERMINATE]:
             time.sleep(0.001)  # created early; runs once the mediator starts the thread
-        spec = composition.threads[thread]
-        start = first_deadline(int(region.system[Region.EPOCH_NS]), spec.period, phases(composition)[thread],
-                               clock.now_ns())
+        start = thread_start(composition, thread, int(region.system[Region.EPOCH_NS]), clock.now_ns())
         built.threads[thread].run_realtime(start, lambda: False)
 
     others = [threading.Thread(target=run, args=(t,), name=f"hapticop-{t}", daemon=True) for t in threads[1:]]

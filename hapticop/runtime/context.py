@@ -170,3 +170,4 @@ class ActivityContext:
     rng: np.random.Generator
     run_dir: Path  # where the activity may leave results (logs live there too)
     simulation: SimulationTimer = field(default_factory=SimulationTimer)
+    coordination: Any = None  # the mediator's handle in the main process: start_threads(), step()

@@ -43,3 +43,8 @@ def first_deadline(epoch_ns: int, period_ns: int, phase_ns: int, now_ns: int) ->
     if earliest <= base:
         return base
     return base + -(-(earliest - base) // period_ns) * period_ns
+
+
+def thread_start(composition: Composition, thread: str, epoch_ns: int, now_ns: int) -> int:
+    """When a real-time thread, in whatever process, first runs: its first deadline on its grid."""
+    return first_deadline(epoch_ns, composition.threads[thread].period, phases(composition)[thread], now_ns)

@@ -173,6 +173,16 @@ class Region:
     def name(self) -> str:
         return self.memory.name
 
+    def flag(self, name: str) -> bool:
+        return bool(self.flags[self.layout.flag_index[name]])
+
+    def set_flag(self, name: str, value: bool = True) -> None:
+        self.flags[self.layout.flag_index[name]] = 1 if value else 0
+
+    def state_of(self, owner: str) -> lcsm.State:
+        """The LCSM state of an activity or of a thread ('threads.NAME')."""
+        return lcsm.State(int(self.state[self.layout.owner_index[owner]]))
+
     def buffer_at(self, offset: int, nbytes: int) -> np.ndarray:
         return np.ndarray((nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=offset)
 

@@ -13,7 +13,7 @@ from typing import Iterator
 
 from hapticop.composition import graph as G
 from hapticop.composition.diagnostics import Diagnostic, Severity
-from hapticop.coordination.petri import CompiledNet
+from hapticop.coordination.petri import Net
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT, Environment, explore
 
 Check = Iterator[Diagnostic]
@@ -163,7 +163,7 @@ def reachability(cg: G.CompositionGraph, state_limit: int = DEFAULT_STATE_LIMIT)
             continue  # the undeclared place was reported; the net cannot be compiled
         if any(not t.inputs for t in spec.transitions.values()):
             continue
-        compiled = CompiledNet.from_spec(spec)
+        compiled = Net.from_spec(spec, name)
         env = _environment(cg, name)
         analysis = explore(compiled, env, frozenset(spec.terminal), state_limit)
         path = ("coordination", "nets", name)

@@ -10,7 +10,8 @@ conservatively:
 - a place read by a *converting sink* may lose a token at any step.
 
 From the initial marking every interleaving of transitions and environment moves is
-explored breadth first, up to a state limit. A marking is *dead* when no sequence of moves
+explored breadth first, up to a state limit, with the arcs the coordinator fires
+(`coordination.petri.Net`). A marking is *dead* when no sequence of moves
 from it ever fires a transition again and none of the net's terminal places is marked;
 a place is *unbounded* when a marking strictly covers an earlier one on its own path; the
 net *livelocks* when transitions alone can fire in a cycle, so the mediator's "fire to a
@@ -24,7 +25,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
-from hapticop.coordination.petri import CompiledNet
+from hapticop.coordination.petri import Net
 
 DEFAULT_STATE_LIMIT = 20_000
 
@@ -55,7 +56,7 @@ class Analysis:
 
 
 def explore(
-    net: CompiledNet,
+    net: Net,
     env: Environment,
     terminal: frozenset[str] = frozenset(),
     state_limit: int = DEFAULT_STATE_LIMIT,
@@ -67,13 +68,13 @@ def explore(
 
     # Transitions over the kept places only; tracked inputs become static guards.
     transitions = []
-    for t, tname in enumerate(net.transitions):
-        if any(net.pre[t, i] > 1 for i in tracked):
+    for tname, (inputs, outputs) in zip(net.transitions, net.arcs):
+        if any(w > 1 for i, w in inputs if i in tracked):
             continue  # a level flag never holds more than one token
-        pre = [(position[i], int(w)) for i, w in enumerate(net.pre[t]) if w and i not in tracked]
-        post = [(position[i], int(w)) for i, w in enumerate(net.post[t]) if w and i not in tracked]
+        pre = [(position[i], int(w)) for i, w in inputs if w and i not in tracked]
+        post = [(position[i], int(w)) for i, w in outputs if w and i not in tracked]
         # A transition guarded by a level flag consumes that token: once per step at most.
-        guarded = any(net.pre[t, i] for i in tracked)
+        guarded = any(w for i, w in inputs if i in tracked)
         transitions.append((tname, pre, post, guarded))
     events = [position[net.index(p)] for p in sorted(env.converting_sources) if net.index(p) not in tracked]
     emits = [position[net.index(p)] for p in sorted(env.converting_sinks) if net.index(p) not in tracked]

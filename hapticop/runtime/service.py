@@ -1,0 +1,82 @@
+"""What a running system answers on its control socket (`control.py`): its status, and patches."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from hapticop.composition.description import Composition
+from hapticop.coordination.coordinator import Coordinator
+from hapticop.runtime.clock import RealtimeClock, VirtualClock
+from hapticop.runtime.control import ControlError, ControlServer, socket_path
+from hapticop.runtime.lifecycle import OK
+from hapticop.runtime.live import LiveChanges
+from hapticop.runtime.logs import Logger
+from hapticop.runtime.region import Region
+from hapticop.runtime.report import timing
+from hapticop.runtime.supervisor import SECOND, failure
+from hapticop.validation.patches import PatchError, load_patch
+
+APPLY_TIMEOUT_S = 5.0  # a patch waits this long for the main thread's next cycle boundary
+
+
+class ControlService:
+    """Requests are handled on the control server's thread; patches are only prepared there
+    and handed to the main thread through `live.pending`."""
+
+    def __init__(self, name: str, live: LiveChanges, region: Region, clock: RealtimeClock | VirtualClock,
+                 coordinator: Coordinator, composition: Callable[[], Composition], log: Logger):
+        self.name, self.live, self.region, self.clock = name, live, region, clock
+        self.coordinator, self.composition, self.log = coordinator, composition, log  # composition(): the running one
+        self.server: ControlServer | None = None
+
+    def start(self, socket: str | None) -> None:
+        """Listen at `socket` (a name or a path; default: the system's name), or warn and run on."""
+        try:
+            self.server = ControlServer(socket_path(socket or self.name), self.handle).start()
+            self.log.info("control socket %s", self.server.path)
+        except (ControlError, OSError) as error:
+            self.log.warning("no control socket, so no live patches: %s", error)
+
+    def stop(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+
+    def handle(self, request: dict) -> dict:
+        """A request on the control socket (its own thread): status, or a patch."""
+        op = request.get("op")
+        if op == "status":
+            return {"ok": True, "status": self.status()}
+        if op != "patch":
+            return {"ok": False, "error": f"unknown request {op!r}; expected 'status' or 'patch'"}
+        try:
+            patch = load_patch(request.get("text", ""), request.get("file", "<patch>"))
+            pending = self.live.prepare(patch, request.get("file", "<patch>"))
+        except PatchError as error:
+            return {"ok": False, "error": "patch refused", "diagnostics": [d.to_json() for d in error.diagnostics]}
+        result = {"ok": True, "diff": pending.diff, "changes": pending.plan.describe()}
+        if request.get("dry_run"):
+            return {**result, "applied": False}
+        self.live.pending.append(pending)
+        if not pending.applied.wait(timeout=APPLY_TIMEOUT_S):
+            return {"ok": False, "error": "the main thread did not reach a cycle boundary within 5 s"}
+        if pending.error:
+            return {"ok": False, "error": f"patch not applied: {pending.error}"}
+        return {**result, "applied": True}
+
+    def status(self) -> dict:
+        region, layout, clock = self.region, self.region.layout, self.clock
+        owners = {owner: {"state": region.state_of(owner).flag_name,
+                          "failed": failure(region, owner) if region.failed[i] != OK else None}
+                  for owner, i in layout.owner_index.items()}
+        composition = self.composition()
+        return {
+            "name": self.name,
+            "clock": "virtual" if isinstance(clock, VirtualClock) else "realtime",
+            "uptime_s": (clock.now_ns() - int(region.system[Region.STARTED_NS])) / SECOND,
+            "threads": {t: {**owners[f"threads.{t}"], "schedule": int(region.selected[i])}
+                        for t, i in layout.thread_index.items()},
+            "activities": {a: owners[a] for a in layout.activity_index},
+            "flags": sorted(name for name, i in layout.flag_index.items() if region.flags[i]),
+            "markings": self.coordinator.markings(),
+            "timing": timing(region, composition),
+        }
