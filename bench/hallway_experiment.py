@@ -2,7 +2,7 @@
 
 Each run is systems/hallway.yaml with a merge patch choosing the force model (``MODEL+governor``
 adds the robot-side speed governor S1), the operator
-profile and a seeded operator variation; it runs to its end in simulated time and the
+profile and a seeded operator variation (whose hand the simulated Falcon's handle carries); it runs to its end in simulated time and the
 world activity's metrics are collected. Results are appended as JSON lines, so an
 interrupted sweep keeps what it measured; `--summary` turns them into the README table.
 
@@ -40,9 +40,14 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     governor = robot_side == "governor"
     haptic = {"force_model": force_model, "governor": governor,
               "braking_field": braking_field or ({} if governor else None)}
+    from hapticop.sim.operator import BlindOperator
+
+    hand_kg = BlindOperator.variant(profile, seed=variation).profile.m_h_kg  # moves with the simulated handle
     patch = {"activities": {"haptic": {"params": haptic},
-                            "world": {"params": {"hallway": hallway, "operator": profile, "variation": variation,
-                                                 "plot": False, "time_limit_s": TIME_LIMIT_S}}}}
+                            "operator": {"params": {"variant": profile, "variation": variation,
+                                                    "time_limit_s": TIME_LIMIT_S}},
+                            "falcon_sim": {"params": {"hand_mass_kg": hand_kg}},
+                            "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": TIME_LIMIT_S}}}}
     tree = apply_patch(source.tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
