@@ -17,7 +17,10 @@ from pydantic_core import PydanticCustomError
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Need, Params, Port, RateRange
+from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Homing, Status, new_frame
 from hapticop.devices.falcon.kinematics import Geometry
+from hapticop.devices.falcon.link import DatagramFalconLink, FalconLink
+from hapticop.devices.link import DatagramLink
 
 
 class FalconParams(Params):
@@ -68,38 +71,39 @@ class Falcon(Block):
 
     # -- life cycle -------------------------------------------------------------------------
     def create(self) -> None:
-        from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Homing, Status, new_frame
-
-        self.kinematics, self.codec, self.homing = FalconKinematics(self.params.geometry), FrameCodec(), Homing()
-        self.status, self.command = Status(), new_frame()
+        self.codec, self.status, self.command = FrameCodec(), Status(), new_frame()
         self.centre_xyz = tuple(WORKSPACE_CENTRE_M)
-        self.position = (0.0, 0.0, 0.0)  # device frame, workspace origin: last published, as floats
         self.motor = np.zeros(3, dtype=np.int64)
         self.absolute = np.zeros(3)
-        self.fk_ok = self.frames_ok = self.open = False
-        self.link = None  # a FalconLink, from resource configuration on
+        self.link: FalconLink | None = None  # from resource configuration on
+        self.open = self.frames_ok = False
         self.virtual = None  # the virtual USB Falcon (usb_backend: virtual), for tests to look at
-        self.opened_ns = self.last_frame_ns = self.last_read_ns = 0
+        self._fresh()
+
+    def _fresh(self) -> None:
+        """What a newly opened Falcon starts from: not homed, no position, the parameters' geometry."""
+        self.kinematics, self.homing = FalconKinematics(self.params.geometry), Homing()
+        self.position = (0.0, 0.0, 0.0)  # device frame, workspace origin: last published, as floats
+        self.fk_ok = False
+        self.opened_ns = self.last_frame_ns = self.last_read_ns = self.clock.now_ns()
 
     def configure_resources(self) -> bool:
+        if self.open:  # configured before, and now with other parameters: a link of their own
+            self.link.close()
+            self.link, self.open = None, False
         if self.link is None:
             self.link = self._link()
         if not self.link.ready():
             return False  # opening, and maybe loading firmware, on a helper thread
-        from hapticop.devices.falcon import Homing
-
+        self._fresh()
         self.open = True
-        self.opened_ns = self.last_frame_ns = self.last_read_ns = self.clock.now_ns()
         self.log.info("Falcon link open (driver %s); %s", self.params.driver, Homing.INSTRUCTIONS)
         return True
 
-    def _link(self):
-        """The FalconLink `driver` chooses."""
+    def _link(self) -> FalconLink:
+        """The link `driver` chooses."""
         p = self.params
         if p.driver == "sim":
-            from hapticop.devices.falcon.link import DatagramFalconLink
-            from hapticop.devices.link import DatagramLink
-
             return DatagramFalconLink(DatagramLink.host(self.run_dir, p.simulator))
         from hapticop.devices.falcon.firmware import read_firmware
         from hapticop.devices.falcon.usb_driver import system_backend

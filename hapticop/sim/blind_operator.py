@@ -18,6 +18,10 @@ from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params, Port
+from hapticop.devices.falcon import WORKSPACE_CENTRE_M, Flag
+from hapticop.devices.falcon.homing import HomingHand
+from hapticop.sim.operator import BlindOperator
+from hapticop.sim.world_share import publish_operator
 
 
 class OperatorParams(Params):
@@ -49,13 +53,6 @@ class Operator(Block):
     awaits = frozenset({"operator_go"})
 
     def create(self) -> None:
-        from hapticop.devices.falcon import WORKSPACE_CENTRE_M, Flag
-        from hapticop.devices.falcon.homing import HomingHand
-        from hapticop.sim.operator import BlindOperator
-        from hapticop.sim.world_share import publish_operator
-
-        p = self.params
-        self.operator = BlindOperator.variant(p.variant, seed=p.variation, t_max_s=p.time_limit_s)
         self.homing = HomingHand()
         self.red, self.green = int(Flag.LED_RED), int(Flag.LED_GREEN)
         self.centre = np.asarray(WORKSPACE_CENTRE_M, dtype=float)
@@ -63,6 +60,12 @@ class Operator(Block):
         self.nothing = np.zeros(3)  # felt while the haptic controller has said nothing yet
         self.homing_since_ns: int | None = None
         self.driving_since_ns: int | None = None
+        self.operator: BlindOperator | None = None  # from resource configuration on
+
+    def configure_resources(self) -> None:
+        """The operator the parameters describe (again after a patch: another one takes the grip)."""
+        p = self.params
+        self.operator = BlindOperator.variant(p.variant, seed=p.variation, t_max_s=p.time_limit_s)
         publish_operator(self.run_dir, self.name, {"variant": p.variant, "variation": p.variation})
 
     def compute(self) -> None:
@@ -72,16 +75,18 @@ class Operator(Block):
             self.driving_since_ns = now
             self.log.info("the operator starts driving")
         leds = int(self.inputs.leds.value)
-        if self.driving_since_ns is not None:
-            self._drive(now, hand)
-        elif leds & self.red and not leds & self.green:
+        if leds & self.red and not leds & self.green:  # the Falcon asks to be homed (again, if it lost it)
             self._home(now, hand)
         else:
-            hand.fill(0.0)  # hands resting on the grip: nothing asked yet, or homed and waiting to drive
+            self.homing_since_ns = None
+            if self.driving_since_ns is not None:
+                self._drive(now, hand)
+            else:
+                hand.fill(0.0)  # hands resting on the grip: nothing asked yet, or homed and waiting to drive
         self.outputs.hand_force.publish()
 
     def _home(self, now: int, hand: np.ndarray) -> None:
-        """Grip out, then straight in, until the LED turns green (falcon-protocol.md §6)."""
+        """Grip out, then straight in, again, until the LED turns green: how a Falcon is homed."""
         if self.homing_since_ns is None:
             self.homing_since_ns = now
         np.add(self.inputs.handle_position.value, self.centre, out=self.absolute)

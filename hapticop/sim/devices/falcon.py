@@ -20,7 +20,9 @@ from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params, Port
+from hapticop.devices.falcon import WORKSPACE_CENTRE_M, Flag, SimulatedFalcon, new_frame
 from hapticop.devices.falcon.kinematics import Geometry
+from hapticop.devices.link import DatagramLink
 
 
 class FalconSimulatorParams(Params):
@@ -47,19 +49,19 @@ class FalconSimulator(Block):
     }
 
     def create(self) -> None:
-        from hapticop.devices.falcon import WORKSPACE_CENTRE_M, Flag, SimulatedFalcon, new_frame
-
-        p = self.params
-        self.device = SimulatedFalcon(p.geometry, handle_mass_kg=p.handle_mass_kg + p.hand_mass_kg, rng=self.rng)
         self.centre = np.asarray(WORKSPACE_CENTRE_M, dtype=float)
         self.led_bits = int(Flag.LED_RED | Flag.LED_GREEN | Flag.LED_BLUE)
         self.command, self.reply = new_frame(), new_frame()
-        self.link = None  # the device end of the Falcon's DatagramLink, from resource configuration on
+        self.device: SimulatedFalcon | None = None  # from resource configuration on
+        self.link: DatagramLink | None = None  # the device end of the Falcon's link
         self.last_ns = 0
 
     def configure_resources(self) -> None:
-        from hapticop.devices.link import DatagramLink
-
+        """A Falcon powered on, answering on its link (again, with a patch's new parameters)."""
+        p = self.params
+        if self.link is not None:
+            self.link.close()
+        self.device = SimulatedFalcon(p.geometry, handle_mass_kg=p.handle_mass_kg + p.hand_mass_kg, rng=self.rng)
         self.link = DatagramLink.device(self.run_dir, self.name)
         self.last_ns = self.clock.now_ns()
 
