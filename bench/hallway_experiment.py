@@ -2,8 +2,8 @@
 
 Each run is systems/hallway.yaml with a merge patch choosing the force model (``MODEL+governor``
 adds the robot-side speed governor S1), the operator
-profile and a seeded operator variation (whose hand the simulated Falcon's handle carries); it runs to its end in simulated time and the
-world activity's metrics are collected. Results are appended as JSON lines, so an
+profile and a seeded operator variation (whose hand the simulated Falcon's handle carries); it runs
+to its end in simulated time and the world activity's metrics are collected. Results are appended as JSON lines, so an
 interrupted sweep keeps what it measured; `--summary` turns them into the README table.
 
     python bench/hallway_experiment.py --variations 50 --workers 2
@@ -32,6 +32,7 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     drops that tuning (a precursor for the governor) and runs M1 with the notes' parameters."""
     from hapticop.runtime.patching import apply_patch
     from hapticop.runtime.system import RunOptions, run_system
+    from hapticop.sim.operator import BlindOperator
     from hapticop.validation import validate_source
     from hapticop.composition.yamlsource import Source, read_file
 
@@ -40,8 +41,6 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     governor = robot_side == "governor"
     haptic = {"force_model": force_model, "governor": governor,
               "braking_field": braking_field or ({} if governor else None)}
-    from hapticop.sim.operator import BlindOperator
-
     hand_kg = BlindOperator.variant(profile, seed=variation).profile.m_h_kg  # moves with the simulated handle
     patch = {"activities": {"haptic": {"params": haptic},
                             "operator": {"params": {"variant": profile, "variation": variation,

@@ -156,8 +156,9 @@ def system(seconds: float) -> None:
     for name in ("falcon", "falcon_sim", "operator"):
         activity = result.timing["activities"][name]
         c = activity["compute_us"]
-        print(f"hallway.yaml, virtual clock, {seconds:g} s: {name} {activity['steps']} steps, compute p50 {c['p50']} us, "
-              f"p99 {c['p99']} us, of which simulation {activity.get('simulation_us_per_step')} us per step (mean)")
+        print(f"hallway.yaml, virtual clock, {seconds:g} s: {name} {activity['steps']} steps, compute p50 "
+              f"{c['p50']} us, p99 {c['p99']} us, of which simulation {activity.get('simulation_us_per_step')} us "
+              "per step (mean)")
 
 
 def main(argv: list[str] | None = None) -> None:

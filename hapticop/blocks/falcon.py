@@ -45,7 +45,7 @@ class FalconParams(Params):
         return value
 
     @model_validator(mode="after")
-    def _usb_needs_firmware(self) -> "FalconParams":
+    def _usb_needs_firmware(self) -> FalconParams:
         if self.driver == "usb" and not self.firmware:
             raise PydanticCustomError(
                 "usb_firmware", "driver 'usb' needs 'firmware': the path to Novint's Falcon firmware image "

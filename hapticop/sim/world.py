@@ -24,7 +24,8 @@ from hapticop.blocks.interface import Params, Port
 
 
 class HallwayWorldParams(Params):
-    hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] = Field("H1", description="hallway of hallway-experiment.md §2")
+    hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] = Field(
+        "H1", description="hallway of hallway-experiment.md §2")
     operator: str = Field("operator", description="the activity whose run this world judges (block blind_operator): "
                           "its variant sets the targets")
     time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hapticop.parameters import parameters
+
 __all__ = [
     "Geometry", "Drive", "FalconKinematics", "WORKSPACE_CENTRE_M", "WORKSPACE_BOX_M",
 ]
@@ -46,7 +48,7 @@ WORKSPACE_BOX_M: tuple[tuple[float, float, float], tuple[float, float, float]] =
     (-0.045, -0.045, 0.080), (0.045, 0.045, 0.170))
 
 
-@dataclass(frozen=True)
+@parameters
 class Geometry:
     """Mechanism dimensions in metres, libnifalcon's values and signs (falcon-kinematics.md §1).
 
@@ -54,11 +56,8 @@ class Geometry:
     g; following the notes we default to libnifalcon's r = 40.00, s = -23.09, f = -25.00 mm,
     the values all reference data was produced with. With r = 36.6 mm the same counts land
     up to ~4 mm elsewhere, so keep the geometry a parameter: the Falcon block and its
-    simulator take this class as their `geometry` parameter as it is (pydantic validates it
-    from YAML, refusing unknown keys, and the schema carries the docstrings below).
+    simulator take this class as their `geometry` parameter as it is.
     """
-
-    __pydantic_config__ = {"extra": "forbid", "use_attribute_docstrings": True}
 
     a: float = 0.060
     """Thigh length (m)."""
