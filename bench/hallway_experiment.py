@@ -2,8 +2,8 @@
 
 Each run is systems/hallway.yaml with a merge patch choosing the force model (``MODEL+governor``
 adds the robot-side speed governor S1), the operator
-profile and a seeded operator variation; it runs to its end in simulated time and the
-world activity's metrics are collected. Results are appended as JSON lines, so an
+profile and a seeded operator variation (whose hand the simulated Falcon's handle carries); it runs
+to its end in simulated time and the world activity's metrics are collected. Results are appended as JSON lines, so an
 interrupted sweep keeps what it measured; `--summary` turns them into the README table.
 
     python bench/hallway_experiment.py --variations 50 --workers 2
@@ -32,6 +32,7 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     drops that tuning (a precursor for the governor) and runs M1 with the notes' parameters."""
     from hapticop.validation.patches import apply_patch
     from hapticop.runtime.system import RunOptions, run_system
+    from hapticop.sim.operator import BlindOperator
     from hapticop.validation import validate_source
     from hapticop.composition.yamlsource import Source, read_file
 
@@ -43,9 +44,12 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     if not tuned:  # the model's own defaults, not the hallway's tuning of M1
         tree = apply_patch(tree, {"activities": {"haptic": {"params": {"force_model": None}}}})
     haptic = {"force_model": {"kind": force_model, **(braking_field or {})}, "governor": {} if governor else None}
+    hand_kg = BlindOperator.variant(profile, seed=variation).profile.m_h_kg  # moves with the simulated handle
     patch = {"activities": {"haptic": {"params": haptic},
-                            "world": {"params": {"hallway": hallway, "operator": profile, "variation": variation,
-                                                 "plot": False, "time_limit_s": TIME_LIMIT_S}}}}
+                            "operator": {"params": {"variant": profile, "variation": variation,
+                                                    "time_limit_s": TIME_LIMIT_S}},
+                            "falcon_sim": {"params": {"hand_mass_kg": hand_kg}},
+                            "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": TIME_LIMIT_S}}}}
     tree = apply_patch(tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]

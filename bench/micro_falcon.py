@@ -2,13 +2,13 @@
 
     python bench/micro_falcon.py [--calls N] [--system SECONDS]
 
-Kinematics, frame codec, the simulated device's 1 ms exchange, and the Falcon block's whole
-cycle (sim driver, homed, operator driving, a force to render) with its host side: the cycle
-less the time its simulation timer counted (device and operator), i.e. decode, forward
-kinematics, velocity, Jacobian-transpose force, encode and publishing. `--system` also runs systems/hallway.yaml on the virtual clock and prints the
-falcon activity's compute time per step as the runtime measures it, of which simulation
-(the simulated device and the scene's operator). Numbers depend on the machine: compare
-changes run on the same machine, never assert them.
+Kinematics, frame codec, the simulated device's 1 ms exchange, the Falcon block's cycle (sim
+driver, homed, a force to render: receive and decode, forward kinematics, velocity, publishing,
+Jacobian-transpose force, encode and send) and its simulator's (the frame in, one period of
+physics, the frame out, the true handle state published). `--system` also runs
+systems/hallway.yaml on the virtual clock and prints the compute time per step of the falcon,
+falcon_sim and operator activities as the runtime measures it. Numbers depend on the machine:
+compare changes run on the same machine, never assert them.
 """
 
 from __future__ import annotations
@@ -69,61 +69,78 @@ def cases() -> dict[str, Callable[[], object]]:
     }
 
 
-def falcon_block():
-    """The real Falcon block (sim driver) in a scene of its own, homed, the operator driving,
-    a force coming in; returns a call of one cycle and the timer of its simulation part."""
+def _block(cls, name: str, params, clock, run_dir: Path):
+    """One block with its own ports, as the runtime would make it (no streams: the caller copies)."""
     import logging
     from types import SimpleNamespace
 
-    from hapticop.blocks.falcon import Falcon, FalconParams
-    from hapticop.runtime.clock import VirtualClock
-    from hapticop.runtime.context import ActivityContext, InputPort, OutputPort, SimulationTimer
-    from hapticop.sim.hallway import HallwayGeometry, World
-    from hapticop.sim.operator import BlindOperator
-    from hapticop.sim.scene import Scene, open_scene
+    from hapticop.runtime.context import ActivityContext, InputPort, OutputPort
 
-    geometry = HallwayGeometry.named("H1")
-    open_scene(Scene("bench", geometry, World.from_geometry(geometry), BlindOperator.variant("nominal")))
-    clock, sim_ns = VirtualClock(), np.zeros(1, dtype=np.int64)
-    inputs = SimpleNamespace(**{n: InputPort(n, q, clock.now_ns) for n, q in Falcon.inputs.items()})
-    outputs = SimpleNamespace(**{n: OutputPort(n, q, clock.now_ns) for n, q in Falcon.outputs.items()})
-    context = ActivityContext("falcon", FalconParams(scene="bench"), inputs, outputs, {}, clock,
-                              logging.getLogger("bench.falcon"), np.random.default_rng(0), Path(tempfile.mkdtemp()),
-                              simulation=SimulationTimer(sim_ns, 0))
-    block = Falcon(context)
+    inputs = SimpleNamespace(**{n: InputPort(n, q, clock.now_ns) for n, q in cls.inputs.items()})
+    outputs = SimpleNamespace(**{n: OutputPort(n, q, clock.now_ns) for n, q in cls.outputs.items()})
+    block = cls(ActivityContext(name, params, inputs, outputs, {}, clock, logging.getLogger(f"bench.{name}"),
+                                np.random.default_rng(0), run_dir))
+    block.create()
+    return block
+
+
+def falcon_blocks():
+    """The Falcon block (sim driver) and the Falcon simulator on their link, homed, a hand holding the grip
+    near the centre, a force coming in; returns one cycle of each: (Falcon read and write, simulator)."""
+    from hapticop.blocks.falcon import Falcon, FalconParams
+    from hapticop.devices.falcon.homing import HomingHand
+    from hapticop.runtime.clock import VirtualClock
+    from hapticop.sim.devices.falcon import FalconSimulator, FalconSimulatorParams
+
+    clock, run_dir = VirtualClock(), Path(tempfile.mkdtemp())
+    device = _block(FalconSimulator, "falcon_sim", FalconSimulatorParams(), clock, run_dir)
+    falcon = _block(Falcon, "falcon", FalconParams(), clock, run_dir)
+    device.configure_resources()
+    assert falcon.configure_resources()
+    homing, hand = HomingHand(), device.inputs.hand_force.value
+    position, velocity = device.outputs.handle_position.value, device.outputs.handle_velocity.value
 
     def tick() -> None:
         clock.advance_to(clock.now_ns() + 1_000_000)
 
-    assert block.configure_resources()
-    while not block.configure_capabilities():
+    while True:
+        device.compute()
+        if falcon.configure_capabilities():
+            break
+        homing.push(clock.now_ns() / 1e9, position + CENTRE, velocity, hand)
         tick()
-    block.scene.operator_since_ns = clock.now_ns()
-    inputs.force.value[:] = (0.5, -1.0, 2.0)
+    falcon.inputs.force.value[:] = (0.5, -1.0, 2.0)
 
-    def cycle() -> None:
-        block.compute()
+    def host() -> None:
+        falcon.compute()
+        falcon.flush()
+
+    def simulator() -> None:
         tick()
+        np.multiply(position, -200.0, out=hand)  # a hand holding the grip near the centre
+        device.compute()
 
     for _ in range(500):
-        cycle()
-    return cycle, sim_ns
+        simulator()
+        host()
+    return host, simulator
 
 
-def time_host_side(calls: int) -> tuple[float, float, float, float]:
-    """(median, p99) µs of a whole Falcon block cycle and of its host side (less simulation)."""
+def time_blocks(calls: int) -> tuple[float, float, float, float]:
+    """(median, p99) µs of the Falcon block's cycle (the host side) and of its simulator's."""
     import time
 
-    cycle, sim_ns = falcon_block()
-    whole, host = np.empty(calls), np.empty(calls)
+    host, simulator = falcon_blocks()
+    host_us, device_us = np.empty(calls), np.empty(calls)
     clock = time.perf_counter_ns
     for i in range(calls):
-        sim_before, started = int(sim_ns[0]), clock()
-        cycle()
-        whole[i] = clock() - started
-        host[i] = whole[i] - (int(sim_ns[0]) - sim_before)
-    return (float(np.median(whole)) / 1e3, float(np.percentile(whole, 99)) / 1e3,
-            float(np.median(host)) / 1e3, float(np.percentile(host, 99)) / 1e3)
+        started = clock()
+        simulator()
+        between = clock()
+        host()
+        host_us[i], device_us[i] = clock() - between, between - started
+    return (float(np.median(host_us)) / 1e3, float(np.percentile(host_us, 99)) / 1e3,
+            float(np.median(device_us)) / 1e3, float(np.percentile(device_us, 99)) / 1e3)
 
 
 def system(seconds: float) -> None:
@@ -136,11 +153,12 @@ def system(seconds: float) -> None:
     with tempfile.TemporaryDirectory() as run_dir:
         options = RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir), echo=False)
         result = run_system(validated, options)
-    falcon = result.timing["activities"]["falcon"]
-    c = falcon["compute_us"]
-    print(f"\nhallway.yaml, virtual clock, {seconds:g} s: falcon activity {falcon['steps']} steps, compute "
-          f"p50 {c['p50']} us, p99 {c['p99']} us, of which simulation {falcon.get('simulation_us_per_step')} us "
-          "per step (mean; device + operator)")
+    for name in ("falcon", "falcon_sim", "operator"):
+        activity = result.timing["activities"][name]
+        c = activity["compute_us"]
+        print(f"hallway.yaml, virtual clock, {seconds:g} s: {name} {activity['steps']} steps, compute p50 "
+              f"{c['p50']} us, p99 {c['p99']} us, of which simulation {activity.get('simulation_us_per_step')} us "
+              "per step (mean)")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -154,9 +172,9 @@ def main(argv: list[str] | None = None) -> None:
         median, p99 = time_per_call(fn, args.calls)
         grown, peak = allocation_stats(fn)
         print(f"{label:44s} {median:10.1f} {p99:8.1f} {grown:8d} {peak:7d}")
-    whole, whole99, host, host99 = time_host_side(args.calls)
-    print(f"{'Falcon block compute (sim driver, whole)':44s} {whole:10.1f} {whole99:8.1f}")
-    print(f"{'  of which host side (less simulation)':44s} {host:10.1f} {host99:8.1f}")
+    host, host99, device, device99 = time_blocks(args.calls)
+    print(f"{'Falcon block cycle (compute + flush)':44s} {host:10.1f} {host99:8.1f}")
+    print(f"{'Falcon simulator block cycle':44s} {device:10.1f} {device99:8.1f}")
     if args.system > 0:
         system(args.system)
 

@@ -96,7 +96,7 @@ def world_cases() -> dict[str, Callable[[], object]]:
 def block_computes(seconds: float) -> dict[str, np.ndarray]:
     """Run systems/hallway.yaml on the virtual clock; µs of every haptic and world compute, by kind of cycle."""
     from hapticop.blocks.haptic import HapticController
-    from hapticop.blocks.world import HallwayWorld
+    from hapticop.sim.world import HallwayWorld
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.validation import validate_path
 
@@ -111,7 +111,7 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
         samples["haptic block, new scan" if new_scan else "haptic block, no new scan"].append(clock() - started)
 
     def world(self: HallwayWorld, compute=HallwayWorld.compute) -> None:
-        driving = self.scene.operator_since_ns is not None
+        driving = self.started_ns is not None
         started = clock()
         compute(self)
         if driving:

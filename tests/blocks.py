@@ -181,3 +181,19 @@ class PingPong(Block):
     def clean(self):
         self.host.close()
         (self.run_dir / f"{self.name}.round_trips").write_text(str(self.round_trips))
+
+
+class SpringParams(Params):
+    stiffness_n_per_m: float = 50.0
+
+
+class Spring(Block):
+    """Centres a Falcon's handle with a spring: a haptic controller without a LIDAR."""
+
+    Params = SpringParams
+    inputs = {"position": Port("float64", (3,), "m")}
+    outputs = {"force": Port("float64", (3,), "N")}
+
+    def compute(self):
+        np.multiply(self.inputs.position.value, -self.params.stiffness_n_per_m, out=self.outputs.force.value)
+        self.outputs.force.publish()

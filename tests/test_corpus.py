@@ -60,6 +60,13 @@ CASES = [
     ("invalid-block-param-value.yaml", "bad-value", 15, "'serial' is not allowed", None),
     ("invalid-falcon-usb-no-firmware.yaml", "bad-value", 14, "driver 'usb' needs 'firmware'", None),
     ("invalid-block-param-key.yaml", "unknown-key", 19, "unknown key 'pionts'", "did you mean 'points'?"),
+    # needs: a simulated device and its simulator
+    ("invalid-falcon-sim-no-simulator.yaml", "missing-need", 13,
+     "'falcon' needs an activity 'falcon_sim' that provides 'falcon_device'", "built-in: falcon_simulator"),
+    ("invalid-falcon-sim-misspelt.yaml", "missing-need", 13,
+     "'falcon' needs an activity 'falcon_sm' that provides 'falcon_device'", "did you mean 'falcon_sim'?"),
+    ("invalid-falcon-sim-not-a-falcon.yaml", "missing-need", 13,
+     "'falcon' needs 'lidar' to provide 'falcon_device'", None),
     # schema: streams
     ("invalid-bad-name.yaml", "bad-name", 17, "'Pos' is not a valid name", None),
     ("invalid-stream-from-list.yaml", "stream-writers", 17, "exactly one writer port, got 2", None),

@@ -42,3 +42,44 @@ def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
         system.writer.stop()
         system.built = system.main = None
         system.region.close()
+
+
+def test_the_simulated_falcon_operator_and_world_allocate_nothing_that_stays(tmp_path):
+    """The Falcon block, its simulator, the operator driving it and the world recording, on two threads."""
+    from .conftest import FIXTURES
+
+    text = ((FIXTURES / "simulation_process.yaml").read_text()
+            .replace("time_limit_s: 1.0", "time_limit_s: 60.0").replace("time_limit_s: 5.0", "time_limit_s: 60.0"))
+    validated = validate_text(text, "sim.yaml")
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated.graph.loaded, text, "sim.yaml", RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    try:
+        main, simulation = system.built.threads["main"], system.built.threads["simulation"]
+        operator = simulation.runners["operator"].block
+        system.start_threads()
+
+        def cycles(start, count):
+            for i in range(start, start + count):
+                system.clock.advance_to(i * 1_000_000)
+                main.cycle()
+                simulation.cycle()
+
+        cycles(0, 3_000)  # homed, and the operator drives
+        assert system.state("falcon").flag_name == "running" and operator.driving_since_ns is not None
+        while not system.writer.queue.empty():
+            time.sleep(0.01)
+        only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
+        tracemalloc.start()
+        before = tracemalloc.take_snapshot().filter_traces(only_cycle)
+        cycles(3_000, 5_000)
+        after = tracemalloc.take_snapshot().filter_traces(only_cycle)
+        tracemalloc.stop()
+        grown = sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
+        assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
+    finally:
+        for thread in (main, simulation):
+            for runner in thread.runners.values():
+                runner.block.clean()  # links closed, the world withdrawn: this process runs more tests
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()

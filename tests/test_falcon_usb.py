@@ -297,7 +297,9 @@ def _falcon_block(tmp_path, **params):
     outputs = SimpleNamespace(**{n: OutputPort(n, p, clock.now_ns) for n, p in Falcon.outputs.items()})
     context = ActivityContext("falcon", params, inputs, outputs, {}, clock, logging.getLogger("test.falcon"),
                               np.random.default_rng(0), tmp_path)
-    return Falcon(context), clock
+    block = Falcon(context)
+    block.create()
+    return block, clock
 
 
 def _until(step, clock, cycles: int) -> int:
@@ -305,8 +307,9 @@ def _until(step, clock, cycles: int) -> int:
         if step():
             return cycle
         clock.advance_to(clock.now_ns() + 1_000_000)
-        if getattr(step.__self__, "_connecting", None) is not None:
-            step.__self__._connecting.join(30)  # the firmware load runs on its own thread
+        opening = getattr(step.__self__.link, "opening", None)
+        if opening is not None:
+            opening.join(30)  # the firmware load runs on its own thread
     raise AssertionError(f"{step.__name__} did not complete in {cycles} cycles")
 
 

@@ -39,14 +39,14 @@ def faults_run(tmp_path_factory):
 
 def test_every_scripted_fault_is_found(faults_run):
     _, _, found = faults_run
-    assert set(found) == {("falcon", "silent"), ("falcon", "corrupt"), ("lidar", "stall"), ("lidar", "unplugged"),
-                          ("lidar", "garbage")}
+    assert set(found) == {("falcon_sim", "silent"), ("falcon_sim", "corrupt"), ("lidar", "stall"),
+                          ("lidar", "unplugged"), ("lidar", "garbage")}
 
 
 @pytest.mark.parametrize("fault", ["silent", "corrupt"])
 def test_lost_falcon_frames_stop_the_robot_within_100_ms_and_driving_resumes(faults_run, fault):
     _, _, found = faults_run
-    reaction = found[("falcon", fault)]
+    reaction = found[("falcon_sim", fault)]
     assert reaction.to_zero_setpoint_s <= 0.100  # the firmware itself holds a force only 100 ms
     assert reaction.to_rest_s < 1.0  # at rest before the fault clears (1 s window)
     assert reaction.resumed_after_s < 0.5
@@ -74,7 +74,7 @@ def test_the_run_still_ends_at_the_wall(faults_run):
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["ended_by"] == "stopped" and not metrics["crash"] and metrics["n_collisions"] == 0
     log = (run / "falcon.log").read_text() + (run / "haptic.log").read_text() + (run / "lidar.log").read_text()
-    for activity in ("falcon", "lidar"):  # a fault is a running parameter: no reconfiguration, no re-homing
+    for activity in ("falcon_sim", "falcon", "lidar"):  # a running parameter: no reconfiguration, no re-homing
         assert (run / f"{activity}.log").read_text().count("-> running") == 1
     for said in ("no good frame for 100 ms", "frames are back", "handle position stale", "driving resumes",
                  "scan stale: blind", "scan fresh again", "stream stalled"):

@@ -9,7 +9,6 @@ import numpy as np
 
 from hapticop.devices.sick.client import ColaClient
 from hapticop.sim.hallway import HallwayGeometry, World
-from hapticop.sim.operator import BlindOperator
 from hapticop.sim.scanner_process import ScannerProcess
 from hapticop.sim.scene import Scene, close_scene, open_scene
 
@@ -24,7 +23,7 @@ def _until(condition, seconds: float = 20.0) -> None:
 
 def test_scans_follow_the_world_and_faults_switch(tmp_path):
     geometry = HallwayGeometry.named("H1")
-    scene = open_scene(Scene("scanner-test", geometry, World.from_geometry(geometry), BlindOperator.variant("nominal")))
+    scene = open_scene(Scene("scanner-test", geometry, World.from_geometry(geometry)))
     scanner = ScannerProcess(scene.shared_pose.name, 15.0, seed=1)
     try:
         _until(scanner.ready)

@@ -19,11 +19,14 @@ def test_hallway_is_the_thesis_layout():
     assert list(threads) == ["main", "lidar", "fieldbus", "watchdog"]
     assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 1_000_000, 1_000_000]
     assert threads["fieldbus"].priority == 39 and threads["watchdog"].priority == 40
-    # the thesis's thread 0, plus the simulated world that stands in for the real one
-    assert threads["main"].schedules == {0: ["mediator"], 1: ["mediator", "world", "falcon", "haptic"]}
+    # the thesis's thread 0, plus the simulation that stands in for the real world: the world, the
+    # operator and the simulated Falcon, which answers just before the Falcon reads
+    assert threads["main"].schedules == {
+        0: ["mediator"], 1: ["mediator", "world", "operator", "falcon_sim", "falcon", "haptic"]}
     assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
-    assert set(composition.activities) == thesis | {"world"}
+    assert set(composition.activities) == thesis | {"world", "operator", "falcon_sim"}
+    assert composition.activities["falcon"].params["simulator"] == "falcon_sim"
     haptic = composition.activities["haptic"].params
     centring, driving = haptic["centring"], haptic["driving"]
     assert (centring["kp_n_per_m"], centring["kd_ns_per_m"], driving["k1_per_s"], driving["k2_rad_per_s_m"]) == (

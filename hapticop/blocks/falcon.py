@@ -1,16 +1,14 @@
 """The Novint Falcon haptic device: handle position in, motor forces out, at 1 kHz.
 
 Geometry defaults to libnifalcon's values so its reference data applies
-(../shared/reference/falcon-kinematics.md). `driver: sim` exchanges frames with a simulated
-handle held by the scene's operator; `driver: usb` runs the USB driver (`usb_driver`) on a
-real Falcon, or with `usb_backend: virtual` on the virtual Falcon of `virtual_usb`, whose
-simulated hand does the homing motion and then lets go.
+(../shared/reference/falcon-kinematics.md). The block speaks the Falcon's 16-byte frames on a
+link that `driver` chooses: `usb` is the USB driver on a real Falcon (or, with
+`usb_backend: virtual`, on the virtual USB Falcon the tests use); `sim` sends the same frames
+to the activity named by `simulator`, which simulates the Falcon and whoever holds it.
 """
 
 from __future__ import annotations
 
-import threading
-import time
 from typing import Literal
 
 import numpy as np
@@ -18,26 +16,18 @@ from pydantic import Field, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Params, Port, RateRange
-
-
-class FalconGeometry(Params):
-    """Stamper's parallel-mechanism dimensions in metres (libnifalcon's signs)."""
-
-    a: float = 0.060
-    b: float = 0.1025
-    c: float = 0.01443
-    d: float = 0.01125
-    e: float = 0.01125
-    f: float = -0.025
-    r: float = 0.0400
-    s: float = -0.02309
-    leg_angles_deg: tuple[float, float, float] = (105.0, -15.0, -135.0)
+from hapticop.blocks.interface import Need, Params, Port, RateRange
+from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Homing, Status, new_frame
+from hapticop.devices.falcon.kinematics import Geometry
+from hapticop.devices.falcon.link import DatagramFalconLink, FalconLink
+from hapticop.devices.link import DatagramLink
 
 
 class FalconParams(Params):
-    driver: Literal["sim", "usb"] = Field("sim", description="'sim': simulated handle over the real frame codec")
-    scene: str = Field("hallway", description="the simulated world whose operator holds the handle (sim driver)")
+    driver: Literal["sim", "usb"] = Field("sim", description="'usb': a Falcon on USB; 'sim': the activity "
+                                          "named by 'simulator', over the real frame codec")
+    simulator: str = Field("falcon_sim", description="sim driver: the activity that simulates the Falcon, "
+                           "a falcon_simulator")
     device_index: int = Field(0, ge=0, description="which Falcon, when several are on USB")
     firmware: str | None = Field(None, description="path to Novint's firmware image (usb driver); never shipped")
     firmware_sha256: str | None = Field(
@@ -45,10 +35,7 @@ class FalconParams(Params):
     usb_backend: Literal["libusb", "virtual"] = Field(
         "libusb", description="usb driver: 'libusb' for a real Falcon, 'virtual' for the simulated USB device")
     homing: bool = Field(True, description="home the encoders in capability configuration")
-    geometry: FalconGeometry = Field(default_factory=FalconGeometry)
-    sim_fault: Literal["none", "silent", "corrupt"] = Field(
-        "none", description="sim driver: a fault of the simulated link, for fault scenarios (set it by a patch): "
-        "'silent' the device stops answering, 'corrupt' every status frame arrives with a byte flipped")
+    geometry: Geometry = Field(default_factory=Geometry, description="the mechanism's dimensions")
 
     @field_validator("firmware_sha256")
     @classmethod
@@ -58,26 +45,12 @@ class FalconParams(Params):
         return value
 
     @model_validator(mode="after")
-    def _usb_needs_firmware(self) -> "FalconParams":
+    def _usb_needs_firmware(self) -> FalconParams:
         if self.driver == "usb" and not self.firmware:
             raise PydanticCustomError(
                 "usb_firmware", "driver 'usb' needs 'firmware': the path to Novint's Falcon firmware image "
                 "(nvent_firmware.bin, from Novint's installer or a libnifalcon checkout; hapticop never ships it)")
         return self
-
-
-class _DeviceClock:
-    """The runtime's clock as the virtual USB device wants it (seconds; sleeps only in real time)."""
-
-    def __init__(self, clock) -> None:
-        self._clock = clock
-
-    def now(self) -> float:
-        return self._clock.now_ns() / 1e9
-
-    def sleep(self, seconds: float) -> None:
-        if seconds > 0 and not getattr(self._clock, "virtual", False):
-            time.sleep(seconds)
 
 
 class Falcon(Block):
@@ -88,156 +61,97 @@ class Falcon(Block):
         "velocity": Port("float64", (3,), "m/s", "handle velocity, differentiated from position"),
         "buttons": Port("uint8", (), "1", "button bit mask"),
     }
-    running_params = frozenset({"sim_fault"})
     flags_written = {"frames_ok": "frames arrive and decode (false after 100 ms without one)"}
     rate = RateRange(900.0, 1100.0, "the Falcon firmware exchanges frames at about 1 kHz and holds a force only 100 ms")
+    needs = {"simulator": "falcon_device"}
+
+    @classmethod
+    def needs_of(cls, params: FalconParams) -> tuple[Need, ...]:
+        return super().needs_of(params) if params.driver == "sim" else ()  # a real Falcon needs no simulator
 
     # -- life cycle -------------------------------------------------------------------------
-    def configure_resources(self) -> bool:
-        from hapticop.devices.falcon import (
-            WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Geometry, Homing, SimulatedFalcon, Status, new_frame,
-        )
-        from hapticop.sim.scene import find_scene
-
-        geometry = Geometry(**self.params.geometry.model_dump())
-        self.usb = None
-        if self.params.driver == "usb":
-            if not self._usb_connected(geometry):
-                return False  # opening, and maybe loading firmware, on a helper thread
-        else:
-            self.scene = find_scene(self.params.scene)
-            if self.scene is None:
-                return False  # the world activity has not opened the simulated world yet
-        self.kinematics, self.codec, self.homing = FalconKinematics(geometry), FrameCodec(), Homing()
-        self.status, self.command, self.reply = Status(), new_frame(), new_frame()
-        self.centre = np.asarray(WORKSPACE_CENTRE_M, dtype=float)
+    def create(self) -> None:
+        self.codec, self.status, self.command = FrameCodec(), Status(), new_frame()
         self.centre_xyz = tuple(WORKSPACE_CENTRE_M)
-        if self.usb is None:
-            self.device = SimulatedFalcon(geometry, handle_mass_kg=0.1 + self.scene.operator.mass_kg, rng=self.rng)
-        self.position = (0.0, 0.0, 0.0)  # device frame, workspace origin: last published, as floats
         self.motor = np.zeros(3, dtype=np.int64)
-        self.hand = np.zeros(3)
         self.absolute = np.zeros(3)
+        self.link: FalconLink | None = None  # from resource configuration on
+        self.open = self.frames_ok = False
+        self.virtual = None  # the virtual USB Falcon (usb_backend: virtual), for tests to look at
+        self._fresh()
+
+    def _fresh(self) -> None:
+        """What a newly opened Falcon starts from: not homed, no position, the parameters' geometry."""
+        self.kinematics, self.homing = FalconKinematics(self.params.geometry), Homing()
+        self.position = (0.0, 0.0, 0.0)  # device frame, workspace origin: last published, as floats
         self.fk_ok = False
-        self.last_frame_ns = self.started_ns = self.last_ns = self.last_read_ns = self.clock.now_ns()
-        self.replied = False  # the simulated device's reply to the last command waits in `reply`
-        self.frames_ok = False
-        self.homing_target = np.zeros(3)
-        self.outputs.position.value[:] = 0.0
+        self.opened_ns = self.last_frame_ns = self.last_read_ns = self.clock.now_ns()
+
+    def configure_resources(self) -> bool:
+        if self.open:  # configured before, and now with other parameters: a link of their own
+            self.link.close()
+            self.link, self.open = None, False
+        if self.link is None:
+            self.link = self._link()
+        if not self.link.ready():
+            return False  # opening, and maybe loading firmware, on a helper thread
+        self._fresh()
+        self.open = True
+        self.log.info("Falcon link open (driver %s); %s", self.params.driver, Homing.INSTRUCTIONS)
         return True
 
-    def _usb_connected(self, geometry) -> bool:
-        """Open the Falcon (loading its firmware if needed) without blocking the thread's cycles.
-
-        The firmware file is checked first, here, so a wrong file fails at once and clearly.
-        """
-        from hapticop.devices.falcon import Homing
+    def _link(self) -> FalconLink:
+        """The link `driver` chooses."""
+        p = self.params
+        if p.driver == "sim":
+            return DatagramFalconLink(DatagramLink.host(self.run_dir, p.simulator))
         from hapticop.devices.falcon.firmware import read_firmware
-        from hapticop.devices.falcon.usb_driver import FalconUsbError, connect, system_backend
+        from hapticop.devices.falcon.usb_driver import system_backend
+        from hapticop.devices.falcon.usb_link import UsbLink, virtual_falcon
 
-        self._usb_error = FalconUsbError
-        if getattr(self, "_connecting", None) is None:
-            p = self.params
-            image = read_firmware(p.firmware, p.firmware_sha256)
-            backend = system_backend() if p.usb_backend == "libusb" else self._virtual_backend(geometry)
-            self._connection: dict = {"log": []}
-
-            def run() -> None:
-                try:
-                    self._connection["falcon"] = connect(image, p.device_index, backend,
-                                                         log=self._connection["log"].append)
-                except BaseException as error:  # noqa: BLE001 - handed to the life cycle below
-                    self._connection["error"] = error
-
-            self._connecting = threading.Thread(target=run, name=f"{self.name}-usb-open", daemon=True)
-            self._connecting.start()
-        if self._connecting.is_alive():
-            return False
-        self._connecting = None
-        for line in self._connection["log"]:
-            self.log.info("%s", line)
-        if "error" in self._connection:
-            raise self._connection["error"]
-        self.usb = self._connection["falcon"]
-        self.log.info("Falcon open on USB; %s", Homing.INSTRUCTIONS)
-        return True
-
-    def _virtual_backend(self, geometry):
-        from hapticop.devices.falcon import SimulatedFalcon
-        from hapticop.devices.falcon.virtual_usb import HomingHand, VirtualFalcon, VirtualUsbBackend
-
-        falcon = SimulatedFalcon(geometry, rng=self.rng)
-        self.virtual = VirtualFalcon(_DeviceClock(self.clock), falcon=falcon, hand=HomingHand())
-        return VirtualUsbBackend(self.virtual)
+        image = read_firmware(p.firmware, p.firmware_sha256)  # a wrong file fails here, at once and clearly
+        if p.usb_backend == "virtual":
+            self.virtual, backend = virtual_falcon(p.geometry, self.clock.now_ns, not self.clock.virtual, self.rng)
+        else:
+            backend = system_backend()
+        return UsbLink(image, p.device_index, backend, self.log)
 
     def configure_capabilities(self) -> bool:
-        """Homing: the hand pulls the grip out, then pushes it in (falcon-protocol.md §6)."""
-        elapsed = (self.clock.now_ns() - self.started_ns) / 1e9
-        if self.usb is not None:  # a person (or the virtual device's hand) does the moving
-            self._exchange(self.hand, forces=False)
-            if self.homing.homed:
-                self.log.info("homed after %.2f s", elapsed)
-            return self.homing.homed
-        self.homing_target[2] = 0.178 if elapsed % 2.5 < 0.8 else 0.075
-        np.subtract(self.homing_target, self.device.position, out=self.hand)
-        self.hand *= 300.0
-        self.hand -= 20.0 * self.device.velocity
-        self._exchange(self.hand, forces=False)
+        """Homing: someone pulls the grip out, then pushes it in (falcon-protocol.md §6)."""
+        self._receive()
+        self._send(forces=False)
         if self.homing.homed:
-            self.log.info("homed after %.2f s", elapsed)
-            self.scene.operator.reset()
-            return True
-        return False
+            self.log.info("homed after %.2f s", (self.clock.now_ns() - self.opened_ns) / 1e9)
+        return self.homing.homed
 
     def compute(self) -> None:
-        """Read: the status frame answering the last command (and, simulated, the operator's
-        hand). The force goes out in `flush`, once the haptic controller has computed it from
-        this reading."""
-        if self.usb is None:
-            scene = self.scene
-            self.device.copy_state(scene.handle_position, scene.handle_velocity)
-            np.subtract(scene.handle_position, self.centre, out=scene.handle_position)
-            np.copyto(scene.device_force, self.inputs.force.value)
-            if scene.operator_since_ns is None:
-                self.hand.fill(0.0)  # hands resting on the grip until told to drive
-            else:
-                with self.context.simulation:
-                    scene.operator.step(scene.operator_time(self.clock.now_ns()), scene.environment_force,
-                                        scene.handle_position, self.hand, scene.handle_velocity)
-            np.copyto(scene.hand_force, self.hand)
+        """Read: the status frame answering the last command. The force goes out in `flush`,
+        once the haptic controller has computed it from this reading."""
         self._receive()
 
     def flush(self) -> None:
         """Write: the command frame with the force this cycle computed."""
-        self._send(self.hand, forces=True)
+        self._send(forces=True)
 
     def pausing(self) -> None:
-        self.hand[:] = 0.0
-        self._exchange(self.hand, forces=False)
+        self._receive()
+        self._send(forces=False)
 
     def clean(self) -> None:
-        if hasattr(self, "device") or getattr(self, "usb", None) is not None:
-            self.hand[:] = 0.0
-            self._exchange(self.hand, forces=False)  # a last frame with zero forces
+        if self.open:
+            self._receive()
+            self._send(forces=False)  # a last frame with zero forces
             self.frames_ok = self.flags["frames_ok"] = False
-        connecting = getattr(self, "_connecting", None)
-        if connecting is not None:  # cleaned while still opening: wait for it, then let go
-            connecting.join(30.0)
-            self._connecting = None
-            self.usb = self._connection.get("falcon")
-        if getattr(self, "usb", None) is not None:
-            self.usb.close()
-            self.usb = None
+            self.open = False
+        if self.link is not None:
+            self.link.close()
+            self.link = None
 
-    def _exchange(self, hand_force: np.ndarray, forces: bool) -> None:
-        """Both halves of a cycle at once, outside running (homing, pausing, the last frame)."""
-        self._receive()
-        self._send(hand_force, forces)
-
+    # -- the frames -------------------------------------------------------------------------
     def _receive(self) -> None:
         """The status frame answering the last command: encoders in, then kinematics."""
         now = self.clock.now_ns()
-        if not self._received():
+        if not self.link.receive(self.status):
             self._frames(now)
             return
         self.last_frame_ns = now
@@ -261,24 +175,14 @@ class Falcon(Block):
         self.last_read_ns = now
         self._frames(now)
 
-    def _send(self, hand_force: np.ndarray, forces: bool) -> None:
+    def _send(self, forces: bool) -> None:
         """The command frame: forces out when allowed (homed, position known), else zero."""
-        now = self.clock.now_ns()
-        dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9 or 1e-3
-        self.last_ns = now
         if forces and self.homing.forces_allowed and self.fk_ok:
             self.kinematics.forces_to_motor(None, self.inputs.force.value, self.motor)  # zeros if it fails
         else:
             self.motor.fill(0)
         self.codec.encode_command(self.motor, self.homing.command_flags(), self.command)
-        if self.usb is not None:
-            try:
-                self.usb.send(self.command)
-            except self._usb_error as error:
-                self._usb_lost(error)
-            return
-        with self.context.simulation:
-            self.replied = self.device.exchange(self.command, dt, hand_force, out=self.reply) is not None
+        self.link.send(self.command)
 
     def _frames(self, now: int) -> None:
         """`frames_ok` falls 100 ms after the last good frame (the firmware's own force hold) and
@@ -291,31 +195,3 @@ class Falcon(Block):
             else:
                 self.log.warning("no good frame for 100 ms: the Falcon holds no force, the robot is stopped")
             self.frames_ok = self.flags["frames_ok"] = ok
-
-    def _received(self) -> bool:
-        """True when `self.status` holds a new status frame: the reply to the last command."""
-        if self.usb is not None:
-            try:
-                return self.usb.receive(self.status)
-            except self._usb_error as error:
-                self._usb_lost(error)
-                return False
-        if not self.replied:
-            return False
-        self.replied = False
-        fault = self.params.sim_fault
-        if fault == "silent":
-            return False  # the device moved on, but its reply never arrived
-        if fault == "corrupt":
-            self.reply[7] ^= 0x5A  # a flipped byte on the wire: the codec must refuse the frame
-        try:
-            self.codec.decode_status(self.reply, self.status)
-        except Exception:  # noqa: BLE001 - a corrupted frame is dropped; frames_ok tells
-            return False
-        return True
-
-    def _usb_lost(self, error: Exception) -> None:
-        """Unplugged, powered off: frames stop and frames_ok tells; the error is logged once."""
-        if not getattr(self, "_usb_failed", False):
-            self._usb_failed = True
-            self.log.error("%s", error)

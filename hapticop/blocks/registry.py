@@ -22,7 +22,9 @@ BUILTIN: dict[str, str] = {
     "ropod_controller": "hapticop.blocks.ropod:RopodController",
     "ropod_truth": "hapticop.blocks.ropod_truth:RopodTruth",
     "haptic_controller": "hapticop.blocks.haptic:HapticController",
-    "hallway_world": "hapticop.blocks.world:HallwayWorld",
+    "hallway_world": "hapticop.sim.world:HallwayWorld",
+    "blind_operator": "hapticop.sim.blind_operator:Operator",
+    "falcon_simulator": "hapticop.sim.devices.falcon:FalconSimulator",
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
 }

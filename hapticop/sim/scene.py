@@ -1,17 +1,14 @@
-"""The simulated world the device simulators share.
+"""The simulated world the LIDAR block's built-in simulator scans, found by name.
 
-Real devices share the real world: the LIDAR sees the hallway where the robot actually is,
-and the operator feels what the Falcon renders. The simulators share a `Scene` instead,
-found by name: the world activity opens it, the simulated ropod writes the robot's pose
-into it, the simulated LIDAR ray-casts from that pose, and the simulated Falcon's operator
-holds the handle in it. The blocks themselves still know nothing of each other. The pose
-and the hallway's geometry are also in shared memory, for simulated devices in other
-processes (the LIDAR's thread runs in one of its own, its scanner in another).
+The world activity opens a `Scene` and keeps the robot's pose in the hallway in it; the lidar
+block's `driver: sim` ray-casts from that pose. The pose and the hallway's geometry are also in
+shared memory, for a scanner in another process. Everything else the simulators share travels
+in declared streams; this goes too once the LIDAR has a simulator of its own that reads the
+world's `pose_in_hallway`.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import pickle
 import struct
@@ -22,7 +19,6 @@ from multiprocessing.shared_memory import SharedMemory
 import numpy as np
 
 from hapticop.sim.hallway import HallwayGeometry, World
-from hapticop.sim.operator import BlindOperator
 
 
 @dataclass
@@ -30,20 +26,8 @@ class Scene:
     name: str
     geometry: HallwayGeometry
     world: World
-    operator: BlindOperator
     pose: np.ndarray = field(default_factory=lambda: np.zeros(3))  # robot x, y, theta in the world
-    twist: np.ndarray = field(default_factory=lambda: np.zeros(3))  # robot vx, vy, wz (robot frame)
-    handle_position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # true handle position (device frame)
-    handle_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    device_force: np.ndarray = field(default_factory=lambda: np.zeros(3))  # what the Falcon renders
-    environment_force: np.ndarray = field(default_factory=lambda: np.zeros(3))  # its obstacle part: what the operator reacts to
-    hand_force: np.ndarray = field(default_factory=lambda: np.zeros(3))  # what the operator applies
-    operator_since_ns: int | None = None  # when the operator was told to drive; None: hands resting
     shared_pose: SharedMemory | None = None  # where `pose` lives, for simulated devices in other processes
-
-    def operator_time(self, now_ns: int) -> float:
-        """Seconds since the operator started driving (the operator's and the judge's clock)."""
-        return 0.0 if self.operator_since_ns is None else (now_ns - self.operator_since_ns) / 1e9
 
 
 _scenes: dict[str, Scene] = {}
@@ -120,14 +104,3 @@ def close_scene(name: str) -> None:
         scene.pose = scene.pose.copy()  # whoever still looks at the scene sees the last pose
         scene.shared_pose.unlink()  # the mapping itself goes with the process (views may remain)
 
-
-def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """The robot's pose in the hallway: its start pose composed with how far it has moved
-    (`moved` = [x, y, theta] from where it started, in the start frame), into `out`."""
-    sx, sy, st = start
-    rx, ry, rt = float(moved[0]), float(moved[1]), float(moved[2])
-    c, s = math.cos(st), math.sin(st)
-    out[0] = sx + c * rx - s * ry
-    out[1] = sy + s * rx + c * ry
-    out[2] = st + rt
-    return out

@@ -12,6 +12,8 @@ meaningless or violent, so the Falcon block runs this in capability configuratio
    then green LED, forget the FK warm start (the counts just jumped) and allow forces.
 
 Homed is not latched: if the flags vanish (power cycle, firmware reload) forces must stop.
+`HomingHand` is the other side: the person who moves the grip out and in (the virtual USB
+Falcon's hand, and the simulated operator's while the Falcon's LED is red).
 """
 
 from __future__ import annotations
@@ -19,9 +21,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+import numpy as np
+
 from hapticop.devices.falcon.codec import Flag, Status
 
-__all__ = ["Homing"]
+__all__ = ["Homing", "HomingHand"]
 
 # As plain ints: IntFlag arithmetic builds enum members, too slow for every 1 ms frame.
 _HOMED_FLAGS = int(Flag.HOMING | Flag.LED_GREEN)
@@ -66,3 +70,39 @@ class Homing:
     def missing_axes(self) -> tuple[int, ...]:
         """Axes (1-3: top, right, left seen from the front) still waiting for their flag."""
         return tuple(i + 1 for i in range(3) if not self.mask >> i & 1)
+
+
+class HomingHand:
+    """A person homing the grip (falcon-protocol.md §6): out, then straight in, again until homed.
+
+    A spring-damper hand pulls the handle to `out_z` for `out_s`, then pushes it to `in_z` for
+    the rest of each `period_s` (absolute device frame, metres).
+    """
+
+    def __init__(self, out_z: float = 0.178, in_z: float = 0.075, out_s: float = 0.8, period_s: float = 2.5,
+                 stiffness: float = 300.0, damping: float = 20.0) -> None:
+        self.out_z, self.in_z, self.out_s, self.period_s = out_z, in_z, out_s, period_s
+        self.stiffness, self.damping = stiffness, damping
+        self.start: float | None = None
+        self._force = [0.0, 0.0, 0.0]
+
+    def push(self, t: float, position: np.ndarray, velocity: np.ndarray, out) -> None:
+        """The hand's force (N) into `out`, `t` seconds after it began, on a handle at `position`
+        moving at `velocity` (absolute device frame)."""
+        target_z = self.out_z if t % self.period_s < self.out_s else self.in_z
+        k, c = self.stiffness, self.damping
+        px, py, pz = position.tolist()
+        vx, vy, vz = velocity.tolist()
+        out[0] = k * (0.0 - px) - c * vx
+        out[1] = k * (0.0 - py) - c * vy
+        out[2] = k * (target_z - pz) - c * vz
+
+    def __call__(self, t: float, falcon) -> list[float]:
+        """The force on a `SimulatedFalcon` at time `t`: homing motion until it is homed, then hands off."""
+        if falcon.homed.all():
+            self._force[:] = (0.0, 0.0, 0.0)
+            return self._force
+        if self.start is None:
+            self.start = t
+        self.push(t - self.start, falcon.position, falcon.velocity, self._force)
+        return self._force

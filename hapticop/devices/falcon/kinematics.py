@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hapticop.parameters import parameters
+
 __all__ = [
     "Geometry", "Drive", "FalconKinematics", "WORKSPACE_CENTRE_M", "WORKSPACE_BOX_M",
 ]
@@ -46,27 +48,35 @@ WORKSPACE_BOX_M: tuple[tuple[float, float, float], tuple[float, float, float]] =
     (-0.045, -0.045, 0.080), (0.045, 0.045, 0.170))
 
 
-@dataclass(frozen=True)
+@parameters
 class Geometry:
     """Mechanism dimensions in metres, libnifalcon's values and signs (falcon-kinematics.md §1).
 
     The thesis (appendix B) lists r = 36.60, s = 23.09, f = 25.00 mm unsigned plus an unused
     g; following the notes we default to libnifalcon's r = 40.00, s = -23.09, f = -25.00 mm,
     the values all reference data was produced with. With r = 36.6 mm the same counts land
-    up to ~4 mm elsewhere, so keep the geometry a parameter. Field names match the Falcon
-    block's `FalconGeometry` params, so `Geometry(**params.model_dump())` works.
+    up to ~4 mm elsewhere, so keep the geometry a parameter: the Falcon block and its
+    simulator take this class as their `geometry` parameter as it is.
     """
 
-    a: float = 0.060  # thigh length
-    b: float = 0.1025  # parallelogram link length
-    c: float = 0.01443  # platform radius
-    d: float = 0.01125  # parallelogram to platform joint offset
-    e: float = 0.01125  # thigh to parallelogram offset
-    f: float = -0.025  # platform-side offset along the joint axis v
-    r: float = 0.0400  # base radius
-    s: float = -0.02309  # base-side offset along v
-    # Leg directions in the x-y plane, legs 1 (top), 2 (right), 3 (left) seen from the front.
+    a: float = 0.060
+    """Thigh length (m)."""
+    b: float = 0.1025
+    """Parallelogram link length (m)."""
+    c: float = 0.01443
+    """Platform radius (m)."""
+    d: float = 0.01125
+    """Parallelogram to platform joint offset (m)."""
+    e: float = 0.01125
+    """Thigh to parallelogram offset (m)."""
+    f: float = -0.025
+    """Platform-side offset along the joint axis v (m, libnifalcon's sign)."""
+    r: float = 0.0400
+    """Base radius (m)."""
+    s: float = -0.02309
+    """Base-side offset along the joint axis v (m, libnifalcon's sign)."""
     leg_angles_deg: tuple[float, float, float] = (105.0, -15.0, -135.0)
+    """Leg directions in the x-y plane (deg): legs 1 (top), 2 (right), 3 (left) seen from the front."""
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 
 from hapticop.devices.falcon import ftdi
 from hapticop.devices.falcon.codec import FrameReader, new_frame
+from hapticop.devices.falcon.homing import HomingHand
 from hapticop.devices.falcon.simulated import SimulatedFalcon
 
 __all__ = ["VirtualClock", "WallClock", "Phase", "VirtualFalcon", "VirtualUsbBackend", "HomingHand"]
@@ -96,33 +97,6 @@ class _Segment:
 
     def time_of(self, i: int) -> float:
         return self.start + (i + 1) * self.byte_s
-
-
-class HomingHand:
-    """A user homing the grip (falcon-protocol.md §6): out, then straight in, until homed; then hands off.
-
-    A spring-damper hand pulls the handle to `out_z` for `out_s`, pushes it to `in_z` for the
-    rest of each `period_s`, and lets go once the device reports all three axes homed.
-    """
-
-    def __init__(self, out_z: float = 0.178, in_z: float = 0.075, out_s: float = 0.8, period_s: float = 2.5,
-                 stiffness: float = 300.0, damping: float = 20.0) -> None:
-        self.out_z, self.in_z, self.out_s, self.period_s = out_z, in_z, out_s, period_s
-        self.stiffness, self.damping = stiffness, damping
-        self.start: float | None = None
-        self._force = [0.0, 0.0, 0.0]
-
-    def __call__(self, t: float, falcon: SimulatedFalcon) -> list[float]:
-        if falcon.homed.all():
-            self._force[:] = (0.0, 0.0, 0.0)
-            return self._force
-        if self.start is None:
-            self.start = t
-        target_z = self.out_z if (t - self.start) % self.period_s < self.out_s else self.in_z
-        p, v = falcon.position, falcon.velocity
-        for i, target in enumerate((0.0, 0.0, target_z)):
-            self._force[i] = self.stiffness * (target - p[i]) - self.damping * v[i]
-        return self._force
 
 
 def _usb_error(message: str, code: int, err: int) -> usb.core.USBError:

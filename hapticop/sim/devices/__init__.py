@@ -1,0 +1,1 @@
+"""Simulated devices: each an activity that serves the bytes its real device would, on the device's link."""

@@ -1,0 +1,193 @@
+"""The simulated hallway: where the robot is in it, and the judge of the run.
+
+It publishes the hallway's fixed geometry for the simulators that need it (`world_share`) and,
+every cycle, the robot's pose in the hallway (its start composed with the motion the robot
+plant reports), which the simulated LIDAR scans from. Once the operator drives it records the
+run (robot pose and velocity, handle, forces, clearance) and raises `finished` when the
+operator is done and the robot still, the robot crashes, or time is up, so the mediator can
+end the run. When it is cleaned it leaves the trajectory, the metrics of hallway-experiment.md
+section 5 and a picture of the run in the run directory.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Params, Port
+
+
+class HallwayWorldParams(Params):
+    hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] = Field(
+        "H1", description="hallway of hallway-experiment.md §2")
+    operator: str = Field("operator", description="the activity whose run this world judges (block blind_operator): "
+                          "its variant sets the targets")
+    time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
+    plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
+
+
+class HallwayWorld(Block):
+    Params = HallwayWorldParams
+    simulator = True  # everything it does is the simulation
+    provides = frozenset({"hallway"})
+    needs = {"operator": "operator"}
+    inputs = {
+        "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
+        "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),
+        "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
+        "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
+        "device_force": Port("float64", (3,), "N", "the whole force the Falcon renders", required=False),
+        "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip", required=False),
+        "handle_position": Port("float64", (3,), "m", "true handle position, device frame", required=False),
+        "handle_velocity": Port("float64", (3,), "m/s", "true handle velocity, device frame", required=False),
+        "operator_time": Port("float64", (), "s", "seconds the operator has driven: the recording's clock"),
+        "operator_done": Port("uint8", (), "1", "the operator believes the task is over"),
+    }
+    outputs = {"pose_in_hallway": Port("float64", (3,), "m, m, rad", "the robot's pose in the hallway (x along it, "
+                                       "y to the left, theta counter-clockwise)")}
+    flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
+
+    def create(self) -> None:
+        from hapticop.sim.hallway import HallwayGeometry, World
+        from hapticop.sim.metrics import TrajectoryRecorder
+        from hapticop.sim.world_share import publish_world
+
+        p = self.params
+        self.geometry = HallwayGeometry.named(p.hallway)
+        self.world = World.from_geometry(self.geometry)
+        publish_world(self.run_dir, self.name, self.geometry)
+        from hapticop.sim.scene import Scene, open_scene
+
+        # The lidar block's own simulator still scans the scene named "hallway" (until a LIDAR
+        # simulator reads `pose_in_hallway`): the robot's pose is kept there too.
+        self.scene = open_scene(Scene("hallway", self.geometry, self.world))
+        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": p.hallway})
+        self.pose = self.outputs.pose_in_hallway.value
+        self.pose[:] = self.geometry.start
+        self.started_ns: int | None = None  # when the operator started driving, on the system's clock
+        self.ended = ""
+        self.still_since: float | None = None
+        self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
+        self.command = np.zeros(2)
+        self.nothing = np.zeros(3)
+        self.variant = "unknown"  # the operator's, once it has said (clean)
+
+    def compute(self) -> None:
+        inputs = self.inputs
+        if inputs.robot_pose.seq:  # the robot where it is, for the LIDAR, even before the operator drives
+            place(self.geometry.start, inputs.robot_pose.value, self.pose)
+        self.outputs.pose_in_hallway.publish()
+        np.copyto(self.scene.pose, self.pose)
+        driven = inputs.operator_time
+        if not driven.seq or self.ended:
+            return
+        now = self.clock.now_ns()
+        if self.started_ns is None:  # the recording's time 0: when the operator started, on the system's clock
+            self.started_ns = driven.stamp_ns - round(float(driven.value) * 1e9)
+            self.recorder.meta["operator_start_ns"] = self.started_ns
+        t = (now - self.started_ns) / 1e9
+        clearance, crashed = self.world.clearance(self.pose, self.geometry.footprint)
+        vx, vy, wz = inputs.robot_twist.value.tolist()  # floats: numpy scalars are slow to compare
+        self.velocity[0], self.velocity[1] = vx, wz
+        setpoint = inputs.velocity_setpoint.value
+        self.command[0], self.command[1] = setpoint[0], setpoint[2]
+        force = inputs.environment_force
+        self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
+                             handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
+                             force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
+                             force_device=inputs.device_force.value, clearance=clearance)
+        g = self.geometry
+        moving = abs(vx) >= g.still_speed_mps or abs(vy) >= g.still_speed_mps
+        self.still_since = None if moving else (t if self.still_since is None else self.still_since)
+        still = self.still_since is not None and t - self.still_since >= g.still_time_s
+        if crashed:
+            self.ended = "crash"
+        elif inputs.operator_done.value and still:  # the judge's rule: stopped, and still for a while
+            self.ended = "operator done"
+        elif t >= self.params.time_limit_s:
+            self.ended = "time limit"
+        if self.ended:
+            self.log.always("run ended at %.2f s: %s", t, self.ended)
+            self.flags["finished"] = True
+
+    def clean(self) -> None:
+        from hapticop.sim.metrics import compute_metrics
+        from hapticop.sim.world_share import find_operator, withdraw_world
+
+        withdraw_world(self.run_dir, self.name)
+        from hapticop.sim.scene import close_scene
+
+        close_scene("hallway")
+        if self.recorder.n < 2:
+            return
+        operator = find_operator(self.run_dir, self.params.operator) or {}
+        self.variant = str(operator.get("variant", self.variant))
+        self.recorder.meta.update(operator=self.variant, variation=operator.get("variation"))
+        self.recorder.save(self.run_dir / "trajectory.npz")
+        metrics = compute_metrics(self.recorder, self.geometry)
+        (self.run_dir / "metrics.json").write_text(json.dumps(_plain(asdict(metrics)), indent=2))
+        if self.params.plot:
+            try:
+                from hapticop.sim.plot import plot_run
+
+                plot_run(self.recorder, self.geometry, self.run_dir / "run.png",
+                         title=f"{self.params.hallway}, {self.variant} operator")
+            except RuntimeError as error:  # matplotlib missing: the numbers are still there
+                self.log.warning("no picture of the run: %s", error)
+        self._results(metrics)
+
+    def _results(self, m) -> None:
+        """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
+        from hapticop.sim.metrics import Targets, targets_met
+
+        g = self.geometry
+        checks = targets_met(m, Targets.for_variant(self.variant)).checks
+
+        def row(name, value, unit, target, check):
+            return {"metric": name, "value": None if value is None or value != value else round(float(value), 3),
+                    "unit": unit, "target": target, "ok": checks.get(check) if check else None}
+
+        rows = [
+            {"metric": "ended by", "value": m.ended_by, "unit": "", "target": "stopped", "ok": checks.get("completed")},
+            row(f"collisions (clearance under dist3 = {g.dist3_m} m)", m.n_collisions, "", "0", "no_crash"),
+            row(f"stop error against dist2 = {g.dist2_m} m (+ early)", m.e_stop_m, "m", "-0.05 to +0.10", "e_stop"),
+            row(f"least side clearance (dist1 = {g.dist1_m} m)", m.side_clearance_min_m, "m",
+                f">= {g.dist1_m - 0.10:.2f}", "side_clearance"),
+            row("completion time", m.completion_time_s, "s", "", None),
+            row("peak force", m.force_peak_n, "N", "<= 8", "force_peak"),
+            row("rms force", m.force_rms_n, "N", "", None),
+            row("rms force rate", m.force_rate_rms_nps, "N/s", "<= 30", "force_rate"),
+        ]
+        results = {"title": f"hallway {self.params.hallway}, {self.variant} operator",
+                   "rows": rows, "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
+        (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
+
+
+def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The robot's pose in the hallway: its start pose composed with how far it has moved
+    (`moved` = [x, y, theta] from where it started, in the start frame), into `out`."""
+    sx, sy, st = start
+    rx, ry, rt = float(moved[0]), float(moved[1]), float(moved[2])
+    c, s = math.cos(st), math.sin(st)
+    out[0] = sx + c * rx - s * ry
+    out[1] = sy + s * rx + c * ry
+    out[2] = st + rt
+    return out
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return None if not np.isfinite(value) else float(value)
+    if isinstance(value, (np.integer, int, bool, np.bool_)) and not isinstance(value, str):
+        return value.item() if hasattr(value, "item") else value
+    return value if isinstance(value, (str, type(None))) else str(value)
