@@ -52,7 +52,7 @@ def test_the_simulated_falcon_operator_and_world_allocate_nothing_that_stays(tmp
             .replace("time_limit_s: 1.0", "time_limit_s: 60.0").replace("time_limit_s: 5.0", "time_limit_s: 60.0"))
     validated = validate_text(text, "sim.yaml")
     assert validated.report.ok, validated.report.diagnostics
-    system = System(validated.graph.loaded, text, "sim.yaml", RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
     try:
         main, simulation = system.built.threads["main"], system.built.threads["simulation"]
         operator = simulation.runners["operator"].block
