@@ -23,6 +23,8 @@ BUILTIN: dict[str, str] = {
     "ropod_truth": "hapticop.blocks.ropod_truth:RopodTruth",
     "haptic_controller": "hapticop.blocks.haptic:HapticController",
     "hallway_world": "hapticop.blocks.world:HallwayWorld",
+    "tim561_simulator": "hapticop.sim.devices.tim561:Tim561Simulator",
+    "ropod_plant": "hapticop.sim.devices.ropod_plant:RopodPlantSimulator",
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
 }

@@ -33,11 +33,16 @@ class HallwayWorldParams(Params):
 class HallwayWorld(Block):
     Params = HallwayWorldParams
     simulator = True  # everything it does is the simulation
+    provides = frozenset({"hallway"})
     inputs = {
         "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
         "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),
         "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
         "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
+    }
+    outputs = {
+        "pose_in_hallway": Port("float64", (3,), "m, m, rad", "where the robot is in the hallway, every cycle "
+                                "(its start until the robot's motion arrives)"),
     }
     flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
     flags_read = {"operator_go": "the haptic loop runs: the operator may start driving"}
@@ -48,9 +53,11 @@ class HallwayWorld(Block):
         from hapticop.sim.metrics import TrajectoryRecorder
         from hapticop.sim.operator import BlindOperator
         from hapticop.sim.scene import Scene, open_scene
+        from hapticop.sim.world_share import publish_world
 
         p = self.params
         self.geometry = HallwayGeometry.named(p.hallway)
+        publish_world(self.run_dir, self.name, self.geometry)  # for its simulators, in any process
         operator = BlindOperator.variant(p.operator, seed=p.variation, t_max_s=p.time_limit_s)
         self.scene = open_scene(Scene(p.scene, self.geometry, World.from_geometry(self.geometry), operator))
         self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000,
@@ -73,6 +80,9 @@ class HallwayWorld(Block):
         now = self.clock.now_ns()
         scene = self.scene
         self._place_robot()  # the LIDAR sees the robot where it is, even before the operator drives
+        where = self.outputs.pose_in_hallway
+        np.copyto(where.value, scene.pose)
+        where.publish()
         if scene.operator_since_ns is None:
             if not self.flags["operator_go"]:
                 return
@@ -109,8 +119,10 @@ class HallwayWorld(Block):
     def clean(self) -> None:
         from hapticop.sim.metrics import compute_metrics
         from hapticop.sim.scene import close_scene
+        from hapticop.sim.world_share import withdraw_world
 
         close_scene(self.params.scene)
+        withdraw_world(self.run_dir, self.name)
         if self.recorder.n < 2:
             return
         self.recorder.save(self.run_dir / "trajectory.npz")
