@@ -58,6 +58,13 @@ CASES = [
     ("invalid-block-param-value.yaml", "bad-value", 15, "'serial' is not allowed", None),
     ("invalid-falcon-usb-no-firmware.yaml", "bad-value", 14, "driver 'usb' needs 'firmware'", None),
     ("invalid-block-param-key.yaml", "unknown-key", 19, "unknown key 'pionts'", "did you mean 'points'?"),
+    # needs: a simulated device without the activity that simulates it, a simulator without its world
+    ("invalid-lidar-sim-no-simulator.yaml", "missing-need", 16,
+     "'lidar' needs an activity 'lidar_sim' that provides 'tim561'", "built-in: tim561_simulator"),
+    ("invalid-tim561-no-world.yaml", "missing-need", 17,
+     "'lidar_sim' needs an activity 'hallway' that provides 'hallway'", "built-in: hallway_world"),
+    ("invalid-ethercat-sim-no-plant.yaml", "missing-need", 19,
+     "'ethercat' needs an activity 'ropod_plnt' that provides 'ropod_wheels'", "did you mean 'ropod_plant'?"),
     # schema: streams
     ("invalid-bad-name.yaml", "bad-name", 17, "'Pos' is not a valid name", None),
     ("invalid-stream-from-list.yaml", "stream-writers", 17, "exactly one writer port, got 2", None),

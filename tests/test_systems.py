@@ -16,14 +16,16 @@ def test_system_validates_clean(path):
 def test_hallway_is_the_thesis_layout():
     composition = validate_path(SYSTEMS / "hallway.yaml").composition
     threads = composition.threads
-    assert list(threads) == ["main", "lidar", "fieldbus", "watchdog"]
-    assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 1_000_000, 1_000_000]
+    # the thesis's four threads, and one for the simulated scanner just before the LIDAR's
+    assert list(threads) == ["main", "simulation", "lidar", "fieldbus", "watchdog"]
+    assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 66_666_667, 1_000_000, 1_000_000]
     assert threads["fieldbus"].priority == 39 and threads["watchdog"].priority == 40
+    assert threads["simulation"].priority is None and threads["simulation"].deploy == "process"
     # the thesis's thread 0, plus the simulated world that stands in for the real one
     assert threads["main"].schedules == {0: ["mediator"], 1: ["mediator", "world", "falcon", "haptic"]}
-    assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
+    assert all(threads[t].schedules[0] == [] for t in ("simulation", "lidar", "fieldbus", "watchdog"))
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
-    assert set(composition.activities) == thesis | {"world"}
+    assert set(composition.activities) == thesis | {"world", "lidar_sim", "ropod_plant"}
     haptic = composition.activities["haptic"].params
     assert (haptic["kp_n_per_m"], haptic["kd_ns_per_m"], haptic["k1"], haptic["k2"]) == (55.0, 0.2, 28.0, 10.0)
     assert (haptic["dead_zone_m"], haptic["force_limit_n"]) == (0.005, 10.0)

@@ -51,7 +51,7 @@ def _ropod_segment() -> dict[str, SlaveSpec]:
 
 
 class EthercatMasterParams(Params):
-    driver: Literal["sim", "pysoem"] = Field("sim", description="'pysoem': the SOEM master on `interface`; "
+    driver: Literal["pysoem", "sim"] = Field("pysoem", description="'pysoem': the SOEM master on `interface`; "
                                               "'sim': the segment the `simulator` activity simulates")
     simulator: str | None = Field(None, description="driver sim: the activity that simulates the smart wheels")
     interface: str = Field("hapticop-ecat0", description="network interface of the segment (pysoem driver)")

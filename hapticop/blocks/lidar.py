@@ -26,7 +26,7 @@ class MountPose(Params):
 
 
 class LidarParams(Params):
-    driver: Literal["sim", "tcp"] = Field("sim", description="'tcp': the scanner at host:port; 'sim': the "
+    driver: Literal["tcp", "sim"] = Field("tcp", description="'tcp': the scanner at host:port; 'sim': the "
                                           "simulated scanner the `simulator` activity serves")
     simulator: str | None = Field(None, description="driver sim: the activity that simulates the TiM561")
     host: str = Field("127.0.0.1", description="scanner address (the TiM's factory default is 192.168.0.1)")
