@@ -79,6 +79,8 @@ class Lidar(Block):
         address = (p.host, p.port) if p.driver == "tcp" else published_address(self.run_dir, p.simulator)
         if address is None:
             return False  # the simulated scanner is not listening yet
+        if self.client is not None:  # configured again (a patch): a new connection
+            self.client.close()
         # The SICK frame counts from the sensor's right side: robot-frame -135 deg is SICK -45 deg.
         output_range = OutputRange(start=round((p.angle_min_deg + 90.0) * 10_000),
                                    stop=round((p.angle_max_deg + 90.0) * 10_000))

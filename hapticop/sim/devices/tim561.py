@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Params, Port, RateRange
+from hapticop.blocks.interface import Interface, Params, Port, RateRange
 
 # A thread's first cycle may wake a little later than the ones after it; stepping this far
 # ahead of the clock keeps every scan in the cycle due for it instead of the next one.
@@ -39,8 +39,13 @@ class Tim561Simulator(Block):
     provides = frozenset({"tim561"})
     needs = {"world": "hallway"}
     running_params = frozenset({"sim_fault"})
-    inputs = {"pose_in_hallway": Port("float64", (3,), "m, m, rad", "where the robot is in the hallway")}
-    rate = RateRange(15.0, 1000.0, "it sends each scan at the first step after it is due")
+
+    @classmethod
+    def interface(cls, params: Tim561SimulatorParams) -> Interface:
+        return Interface(
+            inputs={"pose_in_hallway": Port("float64", (3,), "m, m, rad", "where the robot is in the hallway")},
+            rate=RateRange(params.scan_rate_hz, 1000.0, "it sends each scan at the first step after it is due"),
+        )
 
     def create(self) -> None:
         self.device = None
@@ -61,6 +66,8 @@ class Tim561Simulator(Block):
                 self.log.info("waiting for the world '%s' to open its hallway", world)
                 self.waiting_logged = True
             return False
+        if self.device is not None:  # configured again (a patch): a new scanner, without faults
+            self.device.close()
         self.walls = World.from_geometry(geometry)
         self.lidar = geometry.lidar
         self.start_pose = np.asarray(geometry.start, dtype=float)
@@ -69,6 +76,7 @@ class Tim561Simulator(Block):
         self.ranges = np.zeros(len(self.angles))
         self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=geometry.lidar.noise_sigma_m,
                                    rng=self.rng, clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
+        self.fault = "none"
         publish_address(self.run_dir, self.name, self.device.host, self.device.port)
         self.log.info("TiM561 in the hallway of '%s' on %s:%d", world, self.device.host, self.device.port)
         return True
