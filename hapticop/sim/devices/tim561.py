@@ -19,10 +19,6 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 
-# A thread's first cycle may wake a little later than the ones after it; stepping this far
-# ahead of the clock keeps every scan in the cycle due for it instead of the next one.
-_AHEAD_NS = 5_000_000
-
 
 class Tim561SimulatorParams(Params):
     world: str = Field(description="the world activity whose hallway it scans")
@@ -77,6 +73,10 @@ class Tim561Simulator(Block):
         self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=geometry.lidar.noise_sigma_m,
                                    rng=self.rng, clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
         self.fault = "none"
+        # The first step sets the scans' schedule. A thread at the scan rate may wake later for
+        # that step than for the next ones; stepping half a period ahead of the clock sends each
+        # scan at the step nearest its time instead of a whole period late.
+        self.ahead_ns = round(0.5e9 / self.params.scan_rate_hz)
         publish_address(self.run_dir, self.name, self.device.host, self.device.port)
         self.log.info("TiM561 in the hallway of '%s' on %s:%d", world, self.device.host, self.device.port)
         return True
@@ -97,7 +97,7 @@ class Tim561Simulator(Block):
             self._switch(fault)
         if fault == "garbage":
             self.device.inject_garbage()  # noise before every telegram, as long as it lasts
-        self.device.step(self.clock.now_ns() + _AHEAD_NS)
+        self.device.step(self.clock.now_ns() + self.ahead_ns)
 
     def _switch(self, fault: str) -> None:
         self.device.set_fault(fault)
