@@ -103,7 +103,12 @@ class EthercatMaster(Block):
             self.rx = self.inputs.wheel_commands.value
             self.rx.fill(0)
             self.link = self._connect()
-        return self.link.start(self.rx, self.outputs.wheel_sensors.value)
+        try:
+            return self.link.start(self.rx, self.outputs.wheel_sensors.value)
+        except Exception:
+            self.link.close(self.rx)  # a failed bring-up starts over when configured again
+            self.link = None
+            raise
 
     def _connect(self) -> SegmentLink:
         p = self.params

@@ -255,6 +255,8 @@ class SoemLink:
     def close(self, outputs: np.ndarray) -> None:
         """Drives disabled (these outputs) before the slaves leave OP, then INIT and closed."""
         m = self.master
+        if not m.opened:  # never opened, or closed when its bring-up failed
+            return
         if self.in_flight:
             m.receive()
             self.in_flight = False
