@@ -5,7 +5,8 @@
 Runs controller and plant in closed loop at 1 kHz (a turning 0.3 m/s setpoint), then times
 each `step` alone on the warmed-up state. Then it runs the hallway composition in virtual
 time until the robot drives, and times the fieldbus and watchdog blocks as their threads run
-them: `compute` alone, and the activity's whole step (input refresh and LCSM around it).
+them: `compute` alone, and the activity's whole step (input refresh and LCSM around it), and
+one whole exchange with the simulated ropod (its step, the master's read and write).
 Numbers depend on the machine; use them to compare changes, not as real-time claims.
 """
 
@@ -25,7 +26,7 @@ from hapticop.devices.ropod.plant import RopodPlant
 from hapticop.testing import time_per_call
 
 HALLWAY = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
-FIELDBUS_BLOCKS = ("ethercat", "ropod", "ethercat_watchdog")
+FIELDBUS_BLOCKS = ("ropod_plant", "ethercat", "ropod", "ethercat_watchdog")
 
 
 def library_cases() -> dict[str, Callable[[], object]]:
@@ -49,7 +50,7 @@ def library_cases() -> dict[str, Callable[[], object]]:
 
 def block_cases(run_dir: Path, warm_up_s: float = 4.0) -> tuple[object, dict[str, Callable[[], object]]]:
     """The hallway in virtual time until the robot drives; then each block's cycle, the clock
-    advancing 1 ms per call (the simulated EtherCAT master steps its plant by the elapsed time)."""
+    advancing 1 ms per call (the simulated ropod steps by the elapsed time)."""
     from hapticop.runtime.system import RunOptions, System
     from hapticop.validation import validate_path
 
@@ -78,6 +79,14 @@ def block_cases(run_dir: Path, warm_up_s: float = 4.0) -> tuple[object, dict[str
         runner = system.built.runners[name]
         cases[f"{name}: compute"] = stepping(runner.block.compute)
         cases[f"{name}: activity step"] = stepping(runner.step)
+    plant, master = system.built.runners["ropod_plant"].block, system.built.runners["ethercat"].block
+
+    def exchange() -> None:
+        plant.compute()
+        master.compute()
+        master.flush()
+
+    cases["exchange (plant, master r+w)"] = stepping(exchange)
     return system, cases
 
 

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 import textwrap
+from types import SimpleNamespace
+
+import numpy as np
 
 from hapticop.runtime.system import RunOptions, RunResult, run_system
 from hapticop.composition.units import parse_duration_ns
@@ -19,6 +23,20 @@ def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name
                          run_dir=tmp_path / f"run-{name}", shutdown_timeout_ns=parse_duration_ns(shutdown_timeout),
                          echo=False, control=control)
     return run_system(validated, options, on_start=on_start)
+
+
+def standalone(block_class, name: str, params: dict, run_dir, clock, seed: int = 0):
+    """One block outside any system, as its hooks see the runtime: its ports unconnected,
+    its flags in a dict, `clock` its clock (a VirtualClock a test advances)."""
+    from hapticop.runtime.context import ActivityContext, InputPort, OutputPort
+
+    params = block_class.Params(**params)
+    interface = block_class.declare(params)
+    inputs = SimpleNamespace(**{n: InputPort(n, p, clock.now_ns) for n, p in interface.inputs.items()})
+    outputs = SimpleNamespace(**{n: OutputPort(n, p, clock.now_ns) for n, p in interface.outputs.items()})
+    context = ActivityContext(name, params, inputs, outputs, dict.fromkeys(interface.flags_written, False), clock,
+                              logging.getLogger(f"test.{name}"), np.random.default_rng(seed), run_dir)
+    return block_class(context)
 
 
 PIPELINE = """

@@ -67,6 +67,12 @@ CASES = [
      "'falcon' needs an activity 'falcon_sm' that provides 'falcon_device'", "did you mean 'falcon_sim'?"),
     ("invalid-falcon-sim-not-a-falcon.yaml", "missing-need", 13,
      "'falcon' needs 'lidar' to provide 'falcon_device'", None),
+    ("invalid-lidar-sim-no-simulator.yaml", "missing-need", 16,
+     "'lidar' needs an activity 'lidar_sim' that provides 'tim561'", "built-in: tim561_simulator"),
+    ("invalid-tim561-no-world.yaml", "missing-need", 17,
+     "'lidar_sim' needs an activity 'hallway' that provides 'hallway'", "built-in: hallway_world"),
+    ("invalid-ethercat-sim-no-plant.yaml", "missing-need", 19,
+     "'ethercat' needs an activity 'ropod_plnt' that provides 'ropod_wheels'", "did you mean 'ropod_plant'?"),
     # schema: streams
     ("invalid-bad-name.yaml", "bad-name", 17, "'Pos' is not a valid name", None),
     ("invalid-stream-from-list.yaml", "stream-writers", 17, "exactly one writer port, got 2", None),

@@ -83,3 +83,53 @@ def test_the_simulated_falcon_operator_and_world_allocate_nothing_that_stays(tmp
         system.writer.stop()
         system.built = system.main = None
         system.region.close()
+
+
+SIMULATED_WHEELS = """
+version: 1
+name: wheels
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, drive, ropod_plant, ethercat, ropod]}}
+activities:
+  mediator: {block: mediator}
+  drive: {block: "tests.blocks:ConstantTwist", params: {twist: [0.3, 0.0, 0.0]}}
+  ropod_plant: {block: ropod_plant}
+  ethercat: {block: ethercat_master, params: {driver: sim, simulator: ropod_plant}}
+  ropod: {block: ropod_controller}
+streams:
+  velocity_setpoint: {from: drive.velocity_setpoint, to: ropod.velocity_setpoint}
+  wheel_sensors: {from: ethercat.wheel_sensors, to: ropod.wheel_sensors}
+  wheel_commands: {from: ropod.wheel_commands, to: ethercat.wheel_commands}
+"""
+
+
+def test_the_simulated_wheels_exchange_without_allocating(tmp_path):
+    """The master and the simulated ropod talk over their datagram link every cycle."""
+    validated = validate_text(SIMULATED_WHEELS, "wheels.yaml")
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    try:
+        main = system.built.threads["main"]
+
+        def cycles(start, count):
+            for i in range(start, start + count):
+                system.clock.advance_to(i * 1_000_000)
+                main.cycle()
+
+        cycles(0, 2_000)
+        assert system.state("ethercat").flag_name == "running" and system.state("ropod_plant").flag_name == "running"
+        assert system.flag("ethercat.operational")  # the plant answers every frame
+        while not system.writer.queue.empty():
+            time.sleep(0.01)
+        only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
+        tracemalloc.start()
+        before = tracemalloc.take_snapshot().filter_traces(only_cycle)
+        cycles(2_000, 5_000)
+        after = tracemalloc.take_snapshot().filter_traces(only_cycle)
+        tracemalloc.stop()
+        grown = sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
+        assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
+    finally:
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()

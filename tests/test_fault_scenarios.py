@@ -39,8 +39,8 @@ def faults_run(tmp_path_factory):
 
 def test_every_scripted_fault_is_found(faults_run):
     _, _, found = faults_run
-    assert set(found) == {("falcon_sim", "silent"), ("falcon_sim", "corrupt"), ("lidar", "stall"),
-                          ("lidar", "unplugged"), ("lidar", "garbage")}
+    assert set(found) == {("falcon_sim", "silent"), ("falcon_sim", "corrupt"), ("lidar_sim", "stall"),
+                          ("lidar_sim", "unplugged"), ("lidar_sim", "garbage")}
 
 
 @pytest.mark.parametrize("fault", ["silent", "corrupt"])
@@ -55,7 +55,7 @@ def test_lost_falcon_frames_stop_the_robot_within_100_ms_and_driving_resumes(fau
 @pytest.mark.parametrize("fault", ["stall", "unplugged"])
 def test_a_blind_robot_stops_and_drives_again_once_scans_return(faults_run, fault):
     _, _, found = faults_run
-    reaction = found[("lidar", fault)]
+    reaction = found[("lidar_sim", fault)]
     assert reaction.to_zero_setpoint_s <= 0.200 + 1 / 15  # stale after three periods from the last scan
     assert reaction.to_rest_s < 1.0
     assert reaction.resumed_after_s < 2.5  # reconnection backoff at most 2 s
@@ -63,7 +63,7 @@ def test_a_blind_robot_stops_and_drives_again_once_scans_return(faults_run, faul
 
 def test_garbage_is_skipped_without_stopping(faults_run):
     _, run, found = faults_run
-    assert math.isnan(found[("lidar", "garbage")].to_zero_setpoint_s)  # resynchronised: the scan stayed fresh
+    assert math.isnan(found[("lidar_sim", "garbage")].to_zero_setpoint_s)  # resynchronised: the scan stayed fresh
     during = [line for line in (run / "haptic.log").read_text().splitlines() if 18.0 <= float(line.split()[0]) < 19.5]
     assert not any("scan stale" in line for line in during)
 
@@ -74,7 +74,7 @@ def test_the_run_still_ends_at_the_wall(faults_run):
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["ended_by"] == "stopped" and not metrics["crash"] and metrics["n_collisions"] == 0
     log = (run / "falcon.log").read_text() + (run / "haptic.log").read_text() + (run / "lidar.log").read_text()
-    for activity in ("falcon_sim", "falcon", "lidar"):  # a running parameter: no reconfiguration, no re-homing
+    for activity in ("falcon_sim", "falcon", "lidar", "lidar_sim"):  # a running parameter: no reconfiguration, no re-homing
         assert (run / f"{activity}.log").read_text().count("-> running") == 1
     for said in ("no good frame for 100 ms", "frames are back", "handle position stale", "driving resumes",
                  "scan stale: blind", "scan fresh again", "stream stalled"):

@@ -166,18 +166,24 @@ def test_a_data_woken_thread_cycles_when_its_device_sends(tmp_path, wake, least,
     assert most is None or round_trips <= most  # one per cycle: the reply waits for the deadline
 
 
-def test_the_hallway_in_real_time_scans_through_a_scanner_process_and_leaves_nothing_behind(tmp_path):
-    """The LIDAR thread in its own process, its simulated scanner a program of its own that
-    sees the robot through the world's shared memory; all of it gone after the run."""
-    import os
+def test_the_hallway_in_real_time_scans_from_a_simulation_process_and_leaves_nothing_behind(tmp_path):
+    """The simulated scanner on the simulation thread, in a process of its own outside the
+    real-time loops, scans for the LIDAR thread in another; all of it gone after the run."""
+    import re
     from pathlib import Path
 
     text = (ROOT / "systems" / "hallway.yaml").read_text()
     result = compose(tmp_path, text, clock="realtime", duration="2s", name="hallway")
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    run = tmp_path / "run-hallway"
     assert result.timing["activities"]["lidar"]["steps"] > 5
-    assert "LIDAR streaming" in (tmp_path / "run-hallway" / "lidar.log").read_text()
+    assert result.timing["activities"]["lidar_sim"]["steps"] > 5
+    assert "LIDAR streaming" in (run / "lidar.log").read_text()
     assert result.timing["activities"]["haptic"]["steps"] > 500
+    pids = {thread: int(re.search(r"loop ended after \d+ cycles \(pid (\d+)\)",
+                                  (run / f"thread-{thread}.log").read_text()).group(1))
+            for thread in ("simulation", "lidar")}
+    assert len({os.getpid(), *pids.values()}) == 3  # neither in the main process, nor together
+    assert "lcsm cleaning -> done" in (run / "lidar_sim.log").read_text()
+    assert not list((run / "links").glob("*")) and not list((run / "worlds").glob("*"))  # withdrawn
     assert not list(Path("/dev/shm").glob(f"hapticop-scene-{os.getpid()}-*"))
-    scanners = subprocess.run(["pgrep", "-f", "hapticop.sim.scanner_process"], capture_output=True, text=True)
-    assert scanners.stdout.strip() == ""

@@ -16,16 +16,18 @@ def test_system_validates_clean(path):
 def test_hallway_is_the_thesis_layout():
     composition = validate_path(SYSTEMS / "hallway.yaml").composition
     threads = composition.threads
-    assert list(threads) == ["main", "lidar", "fieldbus", "watchdog"]
-    assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 1_000_000, 1_000_000]
+    # the thesis's four threads, and one for the simulated scanner just before the LIDAR's
+    assert list(threads) == ["main", "simulation", "lidar", "fieldbus", "watchdog"]
+    assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 66_666_667, 1_000_000, 1_000_000]
     assert threads["fieldbus"].priority == 39 and threads["watchdog"].priority == 40
+    assert threads["simulation"].priority is None and threads["simulation"].deploy == "process"
     # the thesis's thread 0, plus the simulation that stands in for the real world: the world, the
     # operator and the simulated Falcon, which answers just before the Falcon reads
     assert threads["main"].schedules == {
         0: ["mediator"], 1: ["mediator", "world", "operator", "falcon_sim", "falcon", "haptic"]}
-    assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
+    assert all(threads[t].schedules[0] == [] for t in ("simulation", "lidar", "fieldbus", "watchdog"))
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
-    assert set(composition.activities) == thesis | {"world", "operator", "falcon_sim"}
+    assert set(composition.activities) == thesis | {"world", "operator", "falcon_sim", "lidar_sim", "ropod_plant"}
     assert composition.activities["falcon"].params["simulator"] == "falcon_sim"
     haptic = composition.activities["haptic"].params
     centring, driving = haptic["centring"], haptic["driving"]

@@ -2,12 +2,13 @@
 
 The master exchanges the raw process-data images (168 bytes in, 36 bytes out per wheel,
 packed little endian) every cycle; what the bytes mean is the business of the block that
-reads them. Driver `sim` exchanges them with a simulated ropod and publishes where that
-robot truly is, for the simulated world. Driver `pysoem` is the real master (SOEM): it
-brings the segment up to OP against the expected slaves and exchanges real frames, with
-the ropod or with the emulated segment (hapticop.devices.ethercat.emulator). The watchdog watches
-slave states and working counters, raises flags, and with pysoem runs SOEM's recovery of
-slaves that left OP on the master of its own process.
+reads them. It sends in its flush and receives in the next compute, over one link
+(hapticop.devices.ethercat.link): driver `pysoem` is the real master (SOEM), which brings the
+segment up to OP against the expected slaves and exchanges real frames with the ropod or
+the emulated segment (hapticop.devices.ethercat.emulator); driver `sim` exchanges the images
+with the activity that simulates the wheels. The watchdog watches slave states and working
+counters, raises flags, and with pysoem runs SOEM's recovery of slaves that left OP on the
+master of its own process.
 """
 
 from __future__ import annotations
@@ -15,10 +16,11 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.devices.ethercat.link import DatagramSegment, SegmentLink
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
 
 SMARTWHEEL_INPUT_BYTES = TXPDO_BYTES
@@ -49,8 +51,9 @@ def _ropod_segment() -> dict[str, SlaveSpec]:
 
 
 class EthercatMasterParams(Params):
-    driver: Literal["sim", "pysoem"] = Field("sim", description="'sim': a simulated ropod in the shared world; "
-                                              "'pysoem': the SOEM master on `interface`")
+    driver: Literal["pysoem", "sim"] = Field("pysoem", description="'pysoem': the SOEM master on `interface`; "
+                                              "'sim': the segment the `simulator` activity simulates")
+    simulator: str | None = Field(None, description="driver sim: the activity that simulates the smart wheels")
     interface: str = Field("hapticop-ecat0", description="network interface of the segment (pysoem driver)")
     slaves: dict[str, SlaveSpec] = Field(
         default_factory=_ropod_segment, description="expected slaves in bus order"
@@ -60,6 +63,12 @@ class EthercatMasterParams(Params):
                                   "may take at bring-up and recovery (SOEM's EC_TIMEOUTRET)")
     start_timeout_s: float = Field(5.0, gt=0, description="bring-up to OP and the wheels' encoders ready, at most")
 
+    @model_validator(mode="after")
+    def _simulator_for_sim(self) -> EthercatMasterParams:
+        if self.driver == "sim" and self.simulator is None:
+            raise ValueError("driver 'sim' needs 'simulator': the activity that simulates the smart wheels")
+        return self
+
     @property
     def wheels(self) -> int:
         return sum(1 for s in self.slaves.values() if s.wheel is not None)
@@ -67,155 +76,88 @@ class EthercatMasterParams(Params):
 
 class EthercatMaster(Block):
     Params = EthercatMasterParams
+    needs = {"simulator": "ropod_wheels"}
     flags_written = {"operational": "every expected slave is in OP and exchanging process data"}
 
     @classmethod
     def interface(cls, params: EthercatMasterParams) -> Interface:
         wheels, slaves = params.wheels, len(params.slaves)
-        outputs = {
-            "wheel_sensors": Port("uint8", (wheels, SMARTWHEEL_INPUT_BYTES), "1", "TxPDO image per wheel"),
-            "slave_states": Port("uint8", (slaves,), "1", "AL state per slave, bus order"),
-            "working_counter": Port("int32", (), "1", "working counter of the last exchange"),
-        }
-        if params.driver == "sim":  # the simulated robot's true motion, for the simulated world
-            outputs["robot_pose"] = Port("float64", (3,), "m, m, rad", "pose from where it started [x, y, theta]")
-            outputs["robot_twist"] = Port("float64", (3,), "m/s, m/s, rad/s", "true twist [vx, vy, wz]")
         return Interface(
             inputs={"wheel_commands": Port("uint8", (wheels, SMARTWHEEL_OUTPUT_BYTES), "1", "RxPDO image per wheel")},
-            outputs=outputs,
+            outputs={
+                "wheel_sensors": Port("uint8", (wheels, SMARTWHEEL_INPUT_BYTES), "1", "TxPDO image per wheel"),
+                "slave_states": Port("uint8", (slaves,), "1", "AL state per slave, bus order"),
+                "working_counter": Port("int32", (), "1", "working counter of the last exchange"),
+            },
             flags_written=dict(cls.flags_written),
             rate=RateRange(100.0, 4000.0, "smart-wheel drives expect a steady cycle near 1 kHz"),
         )
 
+    def create(self) -> None:
+        self.link: SegmentLink | None = None
+
     def configure_resources(self) -> bool:
-        if self.params.driver == "pysoem":
-            return self._start_pysoem()
-        from hapticop.devices.ropod.plant import PlantParams, RopodPlant
-
-        self.plant = RopodPlant(PlantParams(), rng=self.rng)  # its pose counts from where it starts
-        self.rx = self.inputs.wheel_commands.value
-        self.tx = self.outputs.wheel_sensors.value
-        self.plant.write_sensors(self.tx)
-        self.last_ns = self.clock.now_ns()
-        self.outputs.slave_states.value[:] = AL_OP
-        # Each wheel's process data counts 3 (read and write); the junctions count none.
-        self.outputs.working_counter.value[...] = 3 * self.params.wheels
-        return True
-
-    # -- pysoem ---------------------------------------------------------------------------
-    def _start_pysoem(self) -> bool:
-        """First call: open and bring up to OP (blocking, about 0.1 s). Then, exchanging every
-        cycle so no drive's watchdog fires, wait until every wheel reports its encoders ready."""
-        if getattr(self, "master", None) is None:
-            from hapticop.devices.ethercat.master import ExpectedSlave, SoemMaster
-
-            p = self.params
-            expected = [ExpectedSlave(name, spec.product, *((SMARTWHEEL_OUTPUT_BYTES, SMARTWHEEL_INPUT_BYTES)
-                                                             if spec.wheel is not None else (0, 0)))
-                        for name, spec in p.slaves.items()]
-            self.positions = [(spec.wheel, i) for i, spec in enumerate(p.slaves.values()) if spec.wheel is not None]
+        """Bring the segment up; the wheels get disabled drives and zero setpoints until the
+        controller runs."""
+        if self.link is None:
             self.rx = self.inputs.wheel_commands.value
-            self.tx = self.outputs.wheel_sensors.value
-            self.rx.fill(0)  # drives disabled, zero setpoints: what the wheels get until the controller runs
-            self.master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s,
-                                     p.frame_timeout_us)
-            self.in_flight = False  # a frame was sent and not yet received
-            self.started_ns = self.clock.now_ns()
-            self.master.open()
-            try:
-                self.master.bring_up(on_safeop=self._write_outputs)
-            except Exception:
-                self.master.close()
-                raise
-            self.log.info("EtherCAT segment on %s in OP: %s; IOmap working counter %d", p.interface,
-                          ", ".join(s.name for s in self.master.slaves), self.master.expected_wkc)
-        self._exchange_pysoem()
-        if self._wheels_ready():
-            self.log.info("all %d wheels report their encoders ready", len(self.positions))
-            return True
-        if self.clock.now_ns() - self.started_ns > self.params.start_timeout_s * 1e9:
-            raise RuntimeError("the smart wheels did not report their encoders ready (ENC_1_OK, ENC_2_OK, "
-                               f"ENC_PIVOT_OK) within {self.params.start_timeout_s} s")
-        return False
+            self.rx.fill(0)
+            self.link = self._connect()
+        try:
+            return self.link.start(self.rx, self.outputs.wheel_sensors.value)
+        except Exception:
+            self.link.close(self.rx)  # a failed bring-up starts over when configured again
+            self.link = None
+            raise
 
-    def _wheels_ready(self) -> bool:
-        from hapticop.devices.ropod.pdo import Stat1, txpdo_view
+    def _connect(self) -> SegmentLink:
+        p = self.params
+        if p.driver == "sim":
+            from hapticop.devices.link import DatagramLink
 
-        status = txpdo_view(self.tx)["status1"]
-        return bool(np.all((status & int(Stat1.ENCODERS_OK)) == int(Stat1.ENCODERS_OK)))
+            return DatagramSegment(DatagramLink.host(self.run_dir, p.simulator), p.wheels, SMARTWHEEL_INPUT_BYTES,
+                                   len(p.slaves))
+        from hapticop.devices.ethercat.master import ExpectedSlave, SoemLink, SoemMaster
 
-    def _write_outputs(self) -> None:
-        for wheel, position in self.positions:
-            self.master.write_outputs(position, self.rx[wheel])
+        expected = [ExpectedSlave(name, spec.product, *((SMARTWHEEL_OUTPUT_BYTES, SMARTWHEEL_INPUT_BYTES)
+                                                         if spec.wheel is not None else (0, 0)))
+                    for name, spec in p.slaves.items()]
+        wheels = [(spec.wheel, i) for i, spec in enumerate(p.slaves.values()) if spec.wheel is not None]
+        master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s, p.frame_timeout_us)
+        return SoemLink(master, wheels, _encoders_ready, self.clock.now_ns, self.log)
 
-    def _exchange_pysoem(self) -> None:
-        """Send and receive at once (bring-up, or a cycle with no frame in flight)."""
-        self._send_pysoem()
-        self._receive_pysoem()
-
-    def _send_pysoem(self) -> None:
-        self._write_outputs()
-        self.master.send()
-        self.in_flight = True
-
-    def _receive_pysoem(self) -> None:
-        m, out = self.master, self.outputs
-        wkc = m.receive()
-        self.in_flight = False
-        for wheel, position in self.positions:
-            m.read_inputs(position, self.tx[wheel])
-        m.states(out.slave_states.value)
+    def compute(self) -> None:
+        """Read: the inputs the frame sent at the end of the last cycle brought back. Commands
+        go out in `flush`."""
+        out = self.outputs
+        wkc = self.link.receive(out.wheel_sensors.value, out.slave_states.value)
+        if wkc < 0:  # no frame came back: nothing new to say
+            self.flags["operational"] = False
+            return
         out.working_counter.value[...] = wkc
         out.wheel_sensors.publish()
         out.slave_states.publish()
         out.working_counter.publish()
-        self.flags["operational"] = bool(wkc == m.expected_wkc and np.all(out.slave_states.value == AL_OP))
-
-    def compute(self) -> None:
-        """Read: the inputs the frame sent at the end of the last cycle brought back (the
-        simulated robot: its sensors after the last step). Commands go out in `flush`."""
-        if self.params.driver == "pysoem":
-            if self.in_flight:
-                self._receive_pysoem()
-            else:  # nothing sent yet (the first cycle): one whole exchange
-                self._exchange_pysoem()
-            return
-        out = self.outputs
-        pose, twist = out.robot_pose, out.robot_twist
-        np.copyto(pose.value, self.plant.pose)
-        np.copyto(twist.value, self.plant.twist)
-        pose.publish()
-        twist.publish()
-        out.wheel_sensors.publish()
-        out.slave_states.publish()
-        out.working_counter.publish()
-        self.flags["operational"] = True
+        self.flags["operational"] = bool(wkc == self.link.expected_wkc and np.all(out.slave_states.value == AL_OP))
 
     def flush(self) -> None:
-        """Write: the wheel commands this cycle computed, sent now (the simulated robot moves
-        under them for one step)."""
-        if self.params.driver == "pysoem":
-            self._send_pysoem()
-            return
-        now = self.clock.now_ns()
-        dt = min(max(now - self.last_ns, 0), 5_000_000) / 1e9  # a late cycle is not a leap in time
-        self.last_ns = now
-        if dt > 0:
-            with self.context.simulation:
-                self.plant.step(self.rx, dt, self.tx)
+        """Write: the wheel commands this cycle computed, sent now."""
+        self.link.send(self.rx)
 
     def clean(self) -> None:
         self.flags["operational"] = False
-        master = getattr(self, "master", None)
-        if master is not None:
-            if self.in_flight:
-                master.receive()
-            self.rx.fill(0)
-            self._write_outputs()  # drives disabled before the slaves leave OP
-            master.exchange()
-            master.close()
-            self.master = None
-            self.log.info("EtherCAT segment back in INIT, %s closed", self.params.interface)
+        if self.link is not None:
+            self.rx.fill(0)  # drives disabled before the segment is let go
+            self.link.close(self.rx)
+            self.link = None
+
+
+def _encoders_ready(sensors: np.ndarray) -> bool:
+    """Every wheel reports its encoders ready (the drives may be enabled)."""
+    from hapticop.devices.ropod.pdo import Stat1, txpdo_view
+
+    status = txpdo_view(sensors)["status1"]
+    return bool(np.all((status & int(Stat1.ENCODERS_OK)) == int(Stat1.ENCODERS_OK)))
 
 
 class EthercatWatchdogParams(Params):

@@ -1,7 +1,9 @@
 """The SICK TiM5xx LIDAR over CoLa A: ranges and angles of each 15 Hz scan.
 
-The scan size is a parameter (811 points over 270 degrees on a TiM561), so the port
-shapes follow it.
+The block is a CoLa A client and nothing else: `driver: tcp` reaches the scanner at
+host:port; `driver: sim` reaches a simulated one at the address its activity (`simulator`)
+publishes. The scan size is a parameter (811 points over 270 degrees on a TiM561), so the
+port shapes follow it.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
@@ -24,10 +26,11 @@ class MountPose(Params):
 
 
 class LidarParams(Params):
-    driver: Literal["sim", "tcp"] = Field("sim", description="'sim': a CoLa A server on loopback")
-    scene: str = Field("hallway", description="the simulated world to scan (sim driver)")
+    driver: Literal["tcp", "sim"] = Field("tcp", description="'tcp': the scanner at host:port; 'sim': the "
+                                          "simulated scanner the `simulator` activity serves")
+    simulator: str | None = Field(None, description="driver sim: the activity that simulates the TiM561")
     host: str = Field("127.0.0.1", description="scanner address (the TiM's factory default is 192.168.0.1)")
-    port: int = Field(2112, ge=0, le=65535, description="CoLa port; 0 lets the simulator pick a free one")
+    port: int = Field(2112, ge=1, le=65535, description="CoLa A port of the scanner")
     points: int = Field(811, ge=2, le=10_000, description="points per scan")
     scan_rate_hz: float = Field(15.0, gt=0, le=100)
     angle_min_deg: float = -135.0
@@ -36,15 +39,17 @@ class LidarParams(Params):
     max_range_m: float = Field(10.0, gt=0)
     reconnect_backoff_s: tuple[float, float] = Field((0.1, 2.0), description="first and longest retry delay")
     mount: MountPose = Field(default_factory=MountPose)
-    sim_fault: Literal["none", "unplugged", "stall", "garbage"] = Field(
-        "none", description="sim driver: a fault of the simulated scanner, for fault scenarios (set it by a patch): "
-        "'unplugged' drops the connection and refuses new ones, 'stall' keeps it open but sends no scans, "
-        "'garbage' sends noise between telegrams")
+
+    @model_validator(mode="after")
+    def _simulator_for_sim(self) -> LidarParams:
+        if self.driver == "sim" and self.simulator is None:
+            raise ValueError("driver 'sim' needs 'simulator': the activity that simulates the TiM561")
+        return self
 
 
 class Lidar(Block):
     Params = LidarParams
-    running_params = frozenset({"sim_fault"})
+    needs = {"simulator": "tim561"}
     flags_written = {"new_scan": "a complete scan was written to the ranges and angles ports"}
 
     @classmethod
@@ -60,107 +65,57 @@ class Lidar(Block):
         )
 
     # -- life cycle -------------------------------------------------------------------------
-    def configure_resources(self) -> bool:
-        """Connect a CoLa A client; with the sim driver, first start a TiM561 simulator on loopback."""
-        from hapticop.devices.sick.client import ColaClient
+    def create(self) -> None:
+        self.client = None
+        self.connected = False
 
-        p = self.params
-        host, port = p.host, p.port
-        if p.driver == "sim":
-            if getattr(self, "scanner", None) is None:
-                self.scanner = self._simulator()
-                if self.scanner is None:
-                    return False  # the world activity has not opened the simulated world yet
-            if not self.clock.virtual and not self.scanner.ready():
-                return False  # its process is starting
-            host, port = "127.0.0.1", self.scanner.port
-        else:
-            self.scanner = None
+    def configure_resources(self) -> bool:
+        """A CoLa A client for the scanner at host:port, or where the simulator says it listens."""
+        from hapticop.devices.link import published_address
+        from hapticop.devices.sick.client import ColaClient
         from hapticop.devices.sick.cola import OutputRange, startup_sequence
 
+        p = self.params
+        address = (p.host, p.port) if p.driver == "tcp" else published_address(self.run_dir, p.simulator)
+        if address is None:
+            return False  # the simulated scanner is not listening yet
+        if self.client is not None:  # configured again (a patch): a new connection
+            self.client.close()
         # The SICK frame counts from the sensor's right side: robot-frame -135 deg is SICK -45 deg.
         output_range = OutputRange(start=round((p.angle_min_deg + 90.0) * 10_000),
                                    stop=round((p.angle_max_deg + 90.0) * 10_000))
-        self.client = ColaClient(host, port, backoff=p.reconnect_backoff_s, clock_ns=self.clock.now_ns,
+        self.client = ColaClient(*address, backoff=p.reconnect_backoff_s, clock_ns=self.clock.now_ns,
                                  points=p.points, min_range_m=p.min_range_m,
                                  startup=startup_sequence(output_range=output_range))
         self.ranges = np.zeros(p.points, dtype=np.float32)
         self.angles = np.zeros(p.points, dtype=np.float32)
         self.yaw = np.radians(p.mount.yaw_deg)
         self.connected = False
-        self.fault = "none"
         return True
 
-    def _simulator(self):
-        """The simulated scanner: stepped here under the virtual clock, a process of its own in
-        real time (hapticop.sim.scanner_process says why); None until the world is open."""
-        from hapticop.sim.scanner_process import ScannerProcess, scan_of
-        from hapticop.sim.scene import find_scene, find_shared_scene
-
-        if not self.clock.virtual:  # this thread may run in a child process of the world's
-            scene = find_shared_scene(self.params.scene)
-            if scene is None:
-                return None
-            seed = int(self.rng.integers(1 << 31))
-            return ScannerProcess(scene.shared_pose.name, self.params.scan_rate_hz, seed)
-        from hapticop.devices.sick.simulator import TiMSimulator
-
-        scene = find_scene(self.params.scene)
-        if scene is None:
-            return None
-        return TiMSimulator("127.0.0.1", 0, ranges_m=scan_of(scene.world, scene.geometry, scene.pose),
-                            noise_std_m=scene.geometry.lidar.noise_sigma_m, rng=self.rng,
-                            clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
-
     def compute(self) -> None:
-        now = self.clock.now_ns()
-        if self.scanner is not None:
-            if self.params.sim_fault != self.fault:
-                self._inject(self.params.sim_fault)
-            if self.clock.virtual:
-                if self.fault == "garbage":
-                    self.scanner.inject_garbage()
-                with self.context.simulation:
-                    self.scanner.step(now)
-        if self.client.poll(now) and self.client.latest_scan(self.ranges, self.angles):
+        client = self.client
+        if client.poll(self.clock.now_ns()) and client.latest_scan(self.ranges, self.angles):
             out = self.outputs
             np.copyto(out.ranges.value, self.ranges)
             np.add(self.angles, self.yaw, out=out.angles.value)  # sensor frame to robot frame
-            out.ranges.origin_ns = out.angles.origin_ns = self.client.scan_host_ns  # when its last byte was read
+            out.ranges.origin_ns = out.angles.origin_ns = client.scan_host_ns  # when its last byte was read
             out.ranges.publish()
             out.angles.publish()
             self.flags["new_scan"] = True
-        connected = self.client.scans > 0 and self.client.state.name == "STREAMING"
+        connected = client.scans > 0 and client.state.name == "STREAMING"
         if connected != self.connected:
             (self.log.info if connected else self.log.warning)(
                 "LIDAR %s%s", "streaming" if connected else "not streaming",
-                "" if connected else f" ({self.client.last_error or 'starting'})")
+                "" if connected else f" ({client.last_error or 'starting'})")
             self.connected = connected
 
     def wakeup_fds(self) -> tuple[int, ...]:
         """The scanner's socket: a `wake: data` thread parses a telegram as its last byte arrives."""
-        fd = self.client.fileno()
+        fd = self.client.fileno() if self.client is not None else -1
         return (fd,) if fd >= 0 else ()
 
-    def _inject(self, fault: str) -> None:
-        """Switch the simulated scanner's fault (a patch changed `sim_fault`)."""
-        scanner = self.scanner
-        if not self.clock.virtual:
-            scanner.fault(fault)  # the process keeps it up (garbage: between its telegrams)
-        else:
-            scanner.set_fault(fault)
-        if fault == "none":
-            self.log.info("simulated scanner fault cleared")
-        else:
-            self.log.warning("simulated scanner fault: %s", fault)
-        self.fault = fault
-
     def clean(self) -> None:
-        if getattr(self, "client", None) is not None:
+        if self.client is not None:
             self.client.close()
-        if getattr(self, "scanner", None) is not None:
-            if self.clock.virtual:
-                self.scanner.close()
-            else:
-                self.scanner.stop()
-            self.scanner = None
+            self.client = None

@@ -25,6 +25,8 @@ BUILTIN: dict[str, str] = {
     "hallway_world": "hapticop.sim.world:HallwayWorld",
     "blind_operator": "hapticop.sim.blind_operator:Operator",
     "falcon_simulator": "hapticop.sim.devices.falcon:FalconSimulator",
+    "tim561_simulator": "hapticop.sim.devices.tim561:Tim561Simulator",
+    "ropod_plant": "hapticop.sim.devices.ropod_plant:RopodPlantSimulator",
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
 }

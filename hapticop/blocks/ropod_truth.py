@@ -4,7 +4,9 @@ With the pysoem driver the simulated robot is behind the smart wheels of the Eth
 emulator, in the emulator's own process; the master only sees wheel sensors, as on the
 real robot. The simulated world still needs the true pose to judge the run and to place
 the simulated LIDAR, so the emulator publishes it (hapticop.devices.ethercat.emulator.truth) and
-this block reads it: ground truth of a simulation, never an input to a controller.
+this block reads it: ground truth of a simulation, never an input to a controller. (With the
+sim driver, the simulated ropod is an activity, hapticop.sim.devices.ropod_plant, that
+publishes the same two streams itself.)
 """
 
 from __future__ import annotations
@@ -33,6 +35,9 @@ class RopodTruth(Block):
             rate=RateRange(1.0, 4000.0),
         )
 
+    def create(self) -> None:
+        self.reader = None
+
     def configure_resources(self) -> None:
         from hapticop.devices.ethercat.emulator.truth import TruthReader, truth_path
 
@@ -49,7 +54,6 @@ class RopodTruth(Block):
             out.robot_twist.publish()
 
     def clean(self) -> None:
-        reader = getattr(self, "reader", None)
-        if reader is not None:
-            reader.close()
+        if self.reader is not None:
+            self.reader.close()
             self.reader = None

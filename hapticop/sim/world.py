@@ -62,11 +62,6 @@ class HallwayWorld(Block):
         self.geometry = HallwayGeometry.named(p.hallway)
         self.world = World.from_geometry(self.geometry)
         publish_world(self.run_dir, self.name, self.geometry)
-        from hapticop.sim.scene import Scene, open_scene
-
-        # The lidar block's own simulator still scans the scene named "hallway" (until a LIDAR
-        # simulator reads `pose_in_hallway`): the robot's pose is kept there too.
-        self.scene = open_scene(Scene("hallway", self.geometry, self.world))
         self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": p.hallway})
         self.pose = self.outputs.pose_in_hallway.value
         self.pose[:] = self.geometry.start
@@ -83,7 +78,6 @@ class HallwayWorld(Block):
         if inputs.robot_pose.seq:  # the robot where it is, for the LIDAR, even before the operator drives
             place(self.geometry.start, inputs.robot_pose.value, self.pose)
         self.outputs.pose_in_hallway.publish()
-        np.copyto(self.scene.pose, self.pose)
         driven = inputs.operator_time
         if not driven.seq or self.ended:
             return
@@ -121,9 +115,6 @@ class HallwayWorld(Block):
         from hapticop.sim.world_share import find_operator, withdraw_world
 
         withdraw_world(self.run_dir, self.name)
-        from hapticop.sim.scene import close_scene
-
-        close_scene("hallway")
         if self.recorder.n < 2:
             return
         operator = find_operator(self.run_dir, self.params.operator) or {}

@@ -17,11 +17,12 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["ExpectedSlave", "SoemMaster", "BringUpError", "find_master", "AL_OP", "AL_SAFEOP", "AL_INIT", "state_name"]
+__all__ = ["ExpectedSlave", "SoemMaster", "SoemLink", "BringUpError", "find_master", "AL_OP", "AL_SAFEOP", "AL_INIT",
+           "state_name"]
 
 AL_NONE, AL_INIT, AL_PREOP, AL_BOOT, AL_SAFEOP, AL_OP, AL_ERROR = 0x00, 0x01, 0x02, 0x03, 0x04, 0x08, 0x10
 _NAMES = {AL_NONE: "NONE", AL_INIT: "INIT", AL_PREOP: "PRE-OP", AL_BOOT: "BOOT", AL_SAFEOP: "SAFE-OP", AL_OP: "OP"}
@@ -189,3 +190,78 @@ class SoemMaster:
             finally:
                 self.master.close()
                 self.opened = False
+
+
+class SoemLink:
+    """The master block's segment through SOEM (the ropod's, or the emulated one): a
+    `hapticop.devices.ethercat.link.SegmentLink`. `wheels` pairs each wheel's row of the
+    images with its slave's position on the bus."""
+
+    def __init__(self, master: SoemMaster, wheels: Sequence[tuple[int, int]], ready: Callable[[np.ndarray], bool],
+                 clock_ns: Callable[[], int], log):
+        self.master, self.wheels, self.ready, self.clock_ns, self.log = master, list(wheels), ready, clock_ns, log
+        self.states = np.zeros(len(master.expected), np.uint8)  # bring-up's, not published
+        self.started_ns: int | None = None
+        self.in_flight = False  # a frame was sent and not yet received
+
+    @property
+    def expected_wkc(self) -> int:
+        return self.master.expected_wkc
+
+    def start(self, outputs: np.ndarray, inputs: np.ndarray) -> bool:
+        """First call: open and bring up to OP (blocking, about 0.1 s). Then, exchanging every
+        cycle so no drive's watchdog fires, wait until `ready(inputs)` (the wheels' encoders)."""
+        m = self.master
+        if self.started_ns is None:
+            self.started_ns = self.clock_ns()
+            m.open()
+            try:
+                m.bring_up(on_safeop=lambda: self._write(outputs))
+            except Exception:
+                m.close()
+                raise
+            self.log.info("EtherCAT segment on %s in OP: %s; IOmap working counter %d", m.interface,
+                          ", ".join(s.name for s in m.slaves), m.expected_wkc)
+        self.receive(inputs, self.states)
+        self.send(outputs)  # in flight: the first cycle receives it
+        if self.ready(inputs):
+            self.log.info("all %d wheels report their encoders ready", len(self.wheels))
+            return True
+        if self.clock_ns() - self.started_ns > m.state_timeout_s * 1e9:
+            raise RuntimeError("the smart wheels did not report their encoders ready (ENC_1_OK, ENC_2_OK, "
+                               f"ENC_PIVOT_OK) within {m.state_timeout_s} s")
+        return False
+
+    def _write(self, outputs: np.ndarray) -> None:
+        for wheel, position in self.wheels:
+            self.master.write_outputs(position, outputs[wheel])
+
+    def send(self, outputs: np.ndarray) -> None:
+        self._write(outputs)
+        self.master.send()
+        self.in_flight = True
+
+    def receive(self, inputs: np.ndarray, states: np.ndarray) -> int:
+        if not self.in_flight:
+            return -1
+        m = self.master
+        wkc = m.receive()
+        self.in_flight = False
+        for wheel, position in self.wheels:
+            m.read_inputs(position, inputs[wheel])
+        m.states(states)
+        return wkc
+
+    def close(self, outputs: np.ndarray) -> None:
+        """Drives disabled (these outputs) before the slaves leave OP, then INIT and closed."""
+        m = self.master
+        if not m.opened:  # never opened, or closed when its bring-up failed
+            return
+        if self.in_flight:
+            m.receive()
+            self.in_flight = False
+        if m.up:
+            self._write(outputs)
+            m.exchange()
+        m.close()
+        self.log.info("EtherCAT segment back in INIT, %s closed", m.interface)

@@ -473,6 +473,12 @@ class TiMSimulator:
     def connected(self) -> bool:
         return self._conn is not None
 
+    def filenos(self) -> tuple[int, ...]:
+        """The sockets a stepped simulator has work on when they are readable: a client
+        connecting, a command arriving."""
+        conn = self._conn
+        return (self._listener.fileno(),) if conn is None else (self._listener.fileno(), conn.fileno())
+
     # -- threaded mode ---------------------------------------------------------------------
 
     def start(self) -> "TiMSimulator":
