@@ -61,8 +61,10 @@ CASES = [
     ("invalid-falcon-usb-no-firmware.yaml", "bad-value", 14, "driver 'usb' needs 'firmware'", None),
     ("invalid-block-param-key.yaml", "unknown-key", 19, "unknown key 'pionts'", "did you mean 'points'?"),
     # needs: a simulated device and its simulator
-    ("invalid-falcon-sim-no-simulator.yaml", "missing-need", 13,
-     "'falcon' needs an activity 'falcon_sim' that provides 'falcon_device'", "built-in: falcon_simulator"),
+    ("invalid-falcon-sim-no-simulator.yaml", "bad-value", 13,
+     "driver 'sim' needs 'simulator': the activity that simulates the device (a falcon_simulator)", None),
+    ("invalid-lidar-simulator-real-driver.yaml", "bad-value", 14,
+     "'simulator' goes with driver 'sim' only (the driver is 'tcp')", None),
     ("invalid-falcon-sim-misspelt.yaml", "missing-need", 13,
      "'falcon' needs an activity 'falcon_sm' that provides 'falcon_device'", "did you mean 'falcon_sim'?"),
     ("invalid-falcon-sim-not-a-falcon.yaml", "missing-need", 13,

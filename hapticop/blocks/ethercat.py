@@ -16,10 +16,10 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.blocks.interface import DeviceParams, Interface, Params, Port, RateRange
 from hapticop.devices.ethercat.link import DatagramSegment, SegmentLink
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
 
@@ -50,10 +50,10 @@ def _ropod_segment() -> dict[str, SlaveSpec]:
     }
 
 
-class EthercatMasterParams(Params):
+class EthercatMasterParams(DeviceParams):
+    simulated_by = "a ropod_plant"
     driver: Literal["pysoem", "sim"] = Field("pysoem", description="'pysoem': the SOEM master on `interface`; "
                                               "'sim': the segment the `simulator` activity simulates")
-    simulator: str | None = Field(None, description="driver sim: the activity that simulates the smart wheels")
     interface: str = Field("hapticop-ecat0", description="network interface of the segment (pysoem driver)")
     slaves: dict[str, SlaveSpec] = Field(
         default_factory=_ropod_segment, description="expected slaves in bus order"
@@ -63,11 +63,6 @@ class EthercatMasterParams(Params):
                                   "may take at bring-up and recovery (SOEM's EC_TIMEOUTRET)")
     start_timeout_s: float = Field(5.0, gt=0, description="bring-up to OP and the wheels' encoders ready, at most")
 
-    @model_validator(mode="after")
-    def _simulator_for_sim(self) -> EthercatMasterParams:
-        if self.driver == "sim" and self.simulator is None:
-            raise ValueError("driver 'sim' needs 'simulator': the activity that simulates the smart wheels")
-        return self
 
     @property
     def wheels(self) -> int:

@@ -16,18 +16,17 @@ from pydantic import Field, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Need, Params, Port, RateRange
+from hapticop.blocks.interface import DeviceParams, Params, Port, RateRange
 from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Homing, Status, new_frame
 from hapticop.devices.falcon.kinematics import Geometry
 from hapticop.devices.falcon.link import DatagramFalconLink, FalconLink
 from hapticop.devices.link import DatagramLink
 
 
-class FalconParams(Params):
-    driver: Literal["sim", "usb"] = Field("sim", description="'usb': a Falcon on USB; 'sim': the activity "
+class FalconParams(DeviceParams):
+    simulated_by = "a falcon_simulator"
+    driver: Literal["usb", "sim"] = Field("usb", description="'usb': a Falcon on USB; 'sim': the activity "
                                           "named by 'simulator', over the real frame codec")
-    simulator: str = Field("falcon_sim", description="sim driver: the activity that simulates the Falcon, "
-                           "a falcon_simulator")
     device_index: int = Field(0, ge=0, description="which Falcon, when several are on USB")
     firmware: str | None = Field(None, description="path to Novint's firmware image (usb driver); never shipped")
     firmware_sha256: str | None = Field(
@@ -64,10 +63,6 @@ class Falcon(Block):
     flags_written = {"frames_ok": "frames arrive and decode (false after 100 ms without one)"}
     rate = RateRange(900.0, 1100.0, "the Falcon firmware exchanges frames at about 1 kHz and holds a force only 100 ms")
     needs = {"simulator": "falcon_device"}
-
-    @classmethod
-    def needs_of(cls, params: FalconParams) -> tuple[Need, ...]:
-        return super().needs_of(params) if params.driver == "sim" else ()  # a real Falcon needs no simulator
 
     # -- life cycle -------------------------------------------------------------------------
     def create(self) -> None:

@@ -9,9 +9,11 @@ declarations before anything runs.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic_core import PydanticCustomError
 
 
 @dataclass(frozen=True)
@@ -92,3 +94,28 @@ class Params(BaseModel):
     """Base of every block's parameter model: unknown keys are mistakes, not extensions."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DeviceParams(Params):
+    """A device block's parameters: the `driver` that reaches the device (each block declares its
+    own, the real one first and its default) and, with driver 'sim', the activity simulating it.
+
+    The simulator is named, never implied, so a composition for real hardware differs from the
+    simulated one only by its simulation activities and its `driver:` fields.
+    """
+
+    simulated_by: ClassVar[str] = "a simulator"  # the built-in block that simulates it, for messages
+    simulator: str | None = Field(None, description="with driver 'sim': the activity that simulates the device")
+
+    @model_validator(mode="after")
+    def _simulator_goes_with_sim(self) -> DeviceParams:
+        driver = getattr(self, "driver", None)
+        if driver == "sim" and self.simulator is None:
+            raise PydanticCustomError(
+                "sim_needs_simulator", "driver 'sim' needs 'simulator': the activity that simulates the device "
+                "({block})", {"block": self.simulated_by})
+        if driver != "sim" and self.simulator is not None:
+            raise PydanticCustomError(
+                "simulator_without_sim", "'simulator' goes with driver 'sim' only (the driver is '{driver}')",
+                {"driver": driver})
+        return self

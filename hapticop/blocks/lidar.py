@@ -11,10 +11,10 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.blocks.interface import DeviceParams, Interface, Params, Port, RateRange
 
 
 class MountPose(Params):
@@ -25,10 +25,10 @@ class MountPose(Params):
     yaw_deg: float = 0.0
 
 
-class LidarParams(Params):
+class LidarParams(DeviceParams):
+    simulated_by = "a tim561_simulator"
     driver: Literal["tcp", "sim"] = Field("tcp", description="'tcp': the scanner at host:port; 'sim': the "
                                           "simulated scanner the `simulator` activity serves")
-    simulator: str | None = Field(None, description="driver sim: the activity that simulates the TiM561")
     host: str = Field("127.0.0.1", description="scanner address (the TiM's factory default is 192.168.0.1)")
     port: int = Field(2112, ge=1, le=65535, description="CoLa A port of the scanner")
     points: int = Field(811, ge=2, le=10_000, description="points per scan")
@@ -40,11 +40,6 @@ class LidarParams(Params):
     reconnect_backoff_s: tuple[float, float] = Field((0.1, 2.0), description="first and longest retry delay")
     mount: MountPose = Field(default_factory=MountPose)
 
-    @model_validator(mode="after")
-    def _simulator_for_sim(self) -> LidarParams:
-        if self.driver == "sim" and self.simulator is None:
-            raise ValueError("driver 'sim' needs 'simulator': the activity that simulates the TiM561")
-        return self
 
 
 class Lidar(Block):
