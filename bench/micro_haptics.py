@@ -23,10 +23,10 @@ from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import govern_cycle, govern_scan, govern_twist
 from hapticop.haptics.handle import CentringPD, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
-from hapticop.testing import allocation_stats, time_per_call
 from hapticop.sim.hallway import HallwayGeometry, World
 from hapticop.sim.metrics import TrajectoryRecorder
 from hapticop.sim.operator import BlindOperator
+from hapticop.testing import allocation_stats, time_per_call
 
 
 def cases() -> dict[str, Callable[[], object]]:
@@ -96,8 +96,8 @@ def world_cases() -> dict[str, Callable[[], object]]:
 def block_computes(seconds: float) -> dict[str, np.ndarray]:
     """Run systems/hallway.yaml on the virtual clock; µs of every haptic and world compute, by kind of cycle."""
     from hapticop.blocks.haptic import HapticController
-    from hapticop.sim.world import HallwayWorld
     from hapticop.runtime.system import RunOptions, run_system
+    from hapticop.sim.world import HallwayWorld
     from hapticop.validation import validate_path
 
     samples: dict[str, list[int]] = {"haptic block, no new scan": [], "haptic block, new scan": [],

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hapticop.devices.ropod.velocity_controller import PlatformVelocityController
 from hapticop.devices.ropod.pdo import new_rx_image, new_tx_image
 from hapticop.devices.ropod.plant import RopodPlant
+from hapticop.devices.ropod.velocity_controller import PlatformVelocityController
 from hapticop.testing import time_per_call
 
 HALLWAY = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"

@@ -10,8 +10,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from hapticop.runtime.system import RunOptions, run_system
 from hapticop.composition.units import parse_duration_ns
+from hapticop.runtime.system import RunOptions, run_system
 from hapticop.validation import validate_path
 
 

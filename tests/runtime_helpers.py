@@ -8,8 +8,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hapticop.runtime.system import RunOptions, RunResult, run_system
 from hapticop.composition.units import parse_duration_ns
+from hapticop.runtime.system import RunOptions, RunResult, run_system
 from hapticop.validation import validate_path
 
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from hapticop.composition.description import Coordination
-from hapticop.coordination.petri import Livelock
 from hapticop.coordination.coordinator import Coordinator
+from hapticop.coordination.petri import Livelock
 
 FLAGS = ["a.event", "a.level", "b.request", "b.ready"]
 

@@ -48,7 +48,7 @@ class _OneShotServer:
                 conn.recv(1024)
                 conn.sendall(self.reply)
 
-    def __enter__(self) -> "_OneShotServer":
+    def __enter__(self) -> _OneShotServer:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -18,8 +18,8 @@ from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_proble
 PROBLEM = namespace_problem()
 pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"EtherCAT over veth: {PROBLEM}")
 
-from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC  # noqa: E402
+from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES  # noqa: E402
 
 NAMES = ["ek1100", "ek1122_front", "wheel_1", "wheel_2", "ek1122_rear", "wheel_3", "wheel_4"]

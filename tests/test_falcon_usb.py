@@ -18,7 +18,13 @@ from hapticop.devices.falcon import ftdi
 from hapticop.devices.falcon.codec import MOTOR_LIMIT, Button, Flag, FrameCodec, Status, new_frame
 from hapticop.devices.falcon.homing import Homing
 from hapticop.devices.falcon.usb_driver import (
-    FalconDisconnected, FalconLoaderError, FalconUsb, FalconUsbError, connect, describe_falcons, find_falcons,
+    FalconDisconnected,
+    FalconLoaderError,
+    FalconUsb,
+    FalconUsbError,
+    connect,
+    describe_falcons,
+    find_falcons,
 )
 from hapticop.devices.falcon.virtual_usb import HomingHand, Phase, VirtualClock, VirtualFalcon, VirtualUsbBackend
 

@@ -19,7 +19,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hapticop.devices.falcon.codec import (
-    FRAME_SIZE, Command, FrameCodec, FrameError, FrameReader, Status, is_valid_frame, new_frame,
+    FRAME_SIZE,
+    Command,
+    FrameCodec,
+    FrameError,
+    FrameReader,
+    Status,
+    is_valid_frame,
+    new_frame,
 )
 from hapticop.devices.sick import cola
 from hapticop.devices.sick.cola import ColaError, Reply

@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.testing import allocation_stats
 from hapticop.haptics.handle import (
     HANDLE_Z,
     TWIST_VX,
@@ -18,6 +17,7 @@ from hapticop.haptics.handle import (
     handle_to_twist,
     saturate,
 )
+from hapticop.testing import allocation_stats
 
 
 def test_pd_pulls_the_handle_back_to_its_origin_with_the_thesis_gains():

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import pytest
 
 from hapticop.runtime.deadlines import START_MARGIN_NS, first_deadline, phases

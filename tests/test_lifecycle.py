@@ -5,7 +5,15 @@ import pytest
 
 from hapticop.composition import lcsm
 from hapticop.composition.lcsm import State
-from hapticop.runtime.lifecycle import CAPABILITY_FAILED, CREATION_FAILED, OK, RESOURCE_FAILED, RUNNING_FAILED, Hooks, Lifecycle
+from hapticop.runtime.lifecycle import (
+    CAPABILITY_FAILED,
+    CREATION_FAILED,
+    OK,
+    RESOURCE_FAILED,
+    RUNNING_FAILED,
+    Hooks,
+    Lifecycle,
+)
 from hapticop.runtime.logs import Level, Logger
 
 

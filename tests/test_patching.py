@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 
 from hapticop.composition import documents
+from hapticop.composition.yamlsource import read_file
+from hapticop.validation import validate_source
 from hapticop.validation.patches import (
     ChangePlan,
     PatchError,
@@ -17,8 +19,6 @@ from hapticop.validation.patches import (
     prepare,
     validate_patched,
 )
-from hapticop.validation import validate_source
-from hapticop.composition.yamlsource import read_file
 
 HALLWAY = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
 

@@ -3,7 +3,7 @@
 import pytest
 
 from hapticop.composition.description import PetriNet
-from hapticop.coordination.petri import Net, Livelock
+from hapticop.coordination.petri import Livelock, Net
 from hapticop.validation.reachability import Environment, explore
 
 

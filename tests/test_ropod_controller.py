@@ -7,11 +7,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.velocity_controller import (
-    THESIS_PIVOT_OFFSETS_RAD,
-    PlatformControllerParams,
-    PlatformVelocityController,
-)
 from hapticop.devices.ropod.linear_bank import LinearControllerParams
 from hapticop.devices.ropod.pdo import (
     Com1,
@@ -20,6 +15,11 @@ from hapticop.devices.ropod.pdo import (
     new_tx_image,
     rxpdo_view,
     txpdo_view,
+)
+from hapticop.devices.ropod.velocity_controller import (
+    THESIS_PIVOT_OFFSETS_RAD,
+    PlatformControllerParams,
+    PlatformVelocityController,
 )
 from hapticop.testing import allocation_stats
 

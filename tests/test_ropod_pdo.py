@@ -8,8 +8,18 @@ import numpy as np
 import pytest
 
 from hapticop.devices.ropod.pdo import (
-    RXPDO_BYTES, RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, Com1, Stat1, new_rx_image, new_tx_image, pdo_image,
-    record_struct, rxpdo_view, txpdo_view,
+    RXPDO_BYTES,
+    RXPDO_DTYPE,
+    TXPDO_BYTES,
+    TXPDO_DTYPE,
+    Com1,
+    Stat1,
+    new_rx_image,
+    new_tx_image,
+    pdo_image,
+    record_struct,
+    rxpdo_view,
+    txpdo_view,
 )
 
 from .test_ropod_data import load

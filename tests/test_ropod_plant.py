@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.velocity_controller import PlatformVelocityController
 from hapticop.devices.ropod.pdo import (
     Com1,
     Stat1,
@@ -17,6 +16,7 @@ from hapticop.devices.ropod.pdo import (
     txpdo_view,
 )
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
+from hapticop.devices.ropod.velocity_controller import PlatformVelocityController
 from hapticop.testing import allocation_stats
 
 from .test_ropod_data import load

@@ -6,7 +6,6 @@ import time
 import numpy as np
 import pytest
 
-from hapticop.testing import grown_bytes
 from hapticop.sim.hallway import (
     Footprint,
     HallwayGeometry,
@@ -14,6 +13,7 @@ from hapticop.sim.hallway import (
     RangeNoise,
     World,
 )
+from hapticop.testing import grown_bytes
 
 BOX = World([[[0, -1], [4, -1]], [[4, -1], [4, 1]], [[4, 1], [0, 1]], [[0, 1], [0, -1]]])
 """A closed 4 m x 2 m rectangle, x in [0, 4], y in [-1, 1]."""

@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.testing import grown_bytes
 from hapticop.sim.hallway import HallwayGeometry
 from hapticop.sim.metrics import (
     CHANNELS,
@@ -15,6 +14,7 @@ from hapticop.sim.metrics import (
     success_rates,
     targets_met,
 )
+from hapticop.testing import grown_bytes
 
 H1 = HallwayGeometry.named("H1")
 DT = 1e-3

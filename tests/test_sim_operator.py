@@ -5,8 +5,8 @@ import time
 import numpy as np
 import pytest
 
-from hapticop.testing import grown_bytes
 from hapticop.sim.operator import SWEEP_RANGES, BlindOperator, OperatorProfile, Tremor
+from hapticop.testing import grown_bytes
 
 KP, KD, M_DEVICE = 55.0, 0.2, 0.1  # the haptic controller's centring PD and §2's device mass
 

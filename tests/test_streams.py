@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from hapticop.blocks.interface import Port
-from hapticop.testing import allocation_stats
 from hapticop.runtime.streams import (
     MAX_RETRIES,
     SAMPLE_ALIGN,
@@ -21,6 +20,7 @@ from hapticop.runtime.streams import (
     latest_nbytes,
     queue_nbytes,
 )
+from hapticop.testing import allocation_stats
 
 PORTS = {
     "scalar": Port("float64", ()),

@@ -1,7 +1,7 @@
 """YAML-level failures get one clean, located diagnostic; never an exception."""
 
-from hapticop.validation import validate_path, validate_text
 from hapticop.composition.yamlsource import MAX_FILE_BYTES, locate, parse_text
+from hapticop.validation import validate_path, validate_text
 
 
 def only(report):

@@ -34,7 +34,7 @@ class Load:
         self.workers = workers or os.cpu_count() or 1
         self.processes: list = []
 
-    def __enter__(self) -> "Load":
+    def __enter__(self) -> Load:
         context = multiprocessing.get_context("spawn")
         deadline = time.monotonic() + self.seconds
         self.processes = [context.Process(target=_work, args=(deadline,), daemon=True) for _ in range(self.workers)]

@@ -23,7 +23,7 @@ class Distribution:
     max_us: float | None = None
 
     @classmethod
-    def from_sparse(cls, sparse: dict[str, int], max_us: float | None = None) -> "Distribution":
+    def from_sparse(cls, sparse: dict[str, int], max_us: float | None = None) -> Distribution:
         if not sparse:
             return cls(np.zeros(1, dtype=np.int64), max_us)
         bins = np.fromiter((int(k) for k in sparse), dtype=np.int64, count=len(sparse))
@@ -50,7 +50,7 @@ class Distribution:
         return {"p50": self.percentile(50), "p99": self.percentile(99), "p99.9": self.percentile(99.9),
                 "max": self.maximum}
 
-    def __add__(self, other: "Distribution") -> "Distribution":
+    def __add__(self, other: Distribution) -> Distribution:
         size = max(self.counts.size, other.counts.size)
         counts = np.zeros(size, dtype=np.int64)
         counts[: self.counts.size] += self.counts

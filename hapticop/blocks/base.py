@@ -91,7 +91,7 @@ class Block:
                 found.append(Need(param, name, provides, (field_info.description or "") if field_info else ""))
         return tuple(found)
 
-    def __init__(self, context: "ActivityContext"):
+    def __init__(self, context: ActivityContext):
         self.context = context
         self.name = context.name
         self.params = context.params

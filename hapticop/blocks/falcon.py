@@ -16,7 +16,7 @@ from pydantic import Field, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import DeviceParams, Params, Port, RateRange
+from hapticop.blocks.interface import DeviceParams, Port, RateRange
 from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Homing, Status, new_frame
 from hapticop.devices.falcon.kinematics import Geometry
 from hapticop.devices.falcon.link import DatagramFalconLink, FalconLink

@@ -16,7 +16,12 @@ from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.force_models import BrakingFieldParams, ForceModelParams, make_force_model
 from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import (
-    BlindPolicy, GovernorParams, govern_cycle, govern_scan, limit_blind_by, stop_gap,
+    BlindPolicy,
+    GovernorParams,
+    govern_cycle,
+    govern_scan,
+    limit_blind_by,
+    stop_gap,
 )
 from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverageParams, ScanFilterParams, make_scan_filter

@@ -6,7 +6,6 @@ import json
 import os
 import subprocess
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -57,8 +56,8 @@ def sandbox(
 @ethercat.command("emulate")
 def emulate(
     interface: str = typer.Argument(..., help="the interface the master's frames arrive on"),
-    control: Optional[Path] = typer.Option(None, help="Unix socket for faults and status"),
-    truth: Optional[Path] = typer.Option(None, help="file the robot's true pose is published to"),
+    control: Path | None = typer.Option(None, help="Unix socket for faults and status"),
+    truth: Path | None = typer.Option(None, help="file the robot's true pose is published to"),
     seed: int = typer.Option(0),
 ) -> None:
     """Run the emulated segment on an existing interface until Ctrl+C (root)."""
@@ -75,11 +74,11 @@ def emulate(
 @ethercat.command("fault")
 def fault(
     op: str = typer.Argument(..., help="lose, restore, al_error, trip_watchdog, late, status"),
-    slave: Optional[int] = typer.Option(None, help="bus position, 0-based (0 EK1100, 2/3/5/6 the wheels)"),
-    code: Optional[str] = typer.Option(None, help="AL status code for al_error, e.g. 0x001B"),
-    delay_us: Optional[int] = typer.Option(None, help="late: how late each reply is"),
-    frames: Optional[int] = typer.Option(None, help="late: how many replies"),
-    control: Optional[Path] = typer.Option(None, envvar="HAPTICOP_ECAT_CONTROL", help="the emulator's control socket"),
+    slave: int | None = typer.Option(None, help="bus position, 0-based (0 EK1100, 2/3/5/6 the wheels)"),
+    code: str | None = typer.Option(None, help="AL status code for al_error, e.g. 0x001B"),
+    delay_us: int | None = typer.Option(None, help="late: how late each reply is"),
+    frames: int | None = typer.Option(None, help="late: how many replies"),
+    control: Path | None = typer.Option(None, envvar="HAPTICOP_ECAT_CONTROL", help="the emulator's control socket"),
 ) -> None:
     """Inject a fault into a running emulator (or print its status)."""
     from hapticop.devices.ethercat.emulator.server import control as send

@@ -7,7 +7,6 @@ import sys
 import threading
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -52,7 +51,7 @@ def _system_files() -> list[Path]:
 
 @app.command()
 def validate(
-    files: Optional[list[Path]] = typer.Argument(None, help="composition files (default: every file in systems/)"),
+    files: list[Path] | None = typer.Argument(None, help="composition files (default: every file in systems/)"),
     format: OutputFormat = typer.Option(OutputFormat.text, "--format", help="text for people, json for editors and CI"),
     state_limit: int = typer.Option(DEFAULT_STATE_LIMIT, min=100, help="markings to explore per Petri net"),
     strict: bool = typer.Option(False, help="treat warnings as errors"),
@@ -80,7 +79,7 @@ class ClockKind(str, Enum):
     virtual = "virtual"
 
 
-def _duration(text: Optional[str], option: str) -> Optional[int]:
+def _duration(text: str | None, option: str) -> int | None:
     if text is None:
         return None
     from hapticop.composition.units import parse_duration_ns
@@ -106,11 +105,11 @@ def _valid_or_exit(file: Path, refusal: str):
 def compose(
     file: Path = typer.Argument(..., help="composition file"),
     clock: ClockKind = typer.Option(ClockKind.realtime, "--clock", help="realtime, or virtual: simulated time, as fast as the CPU allows"),
-    duration: Optional[str] = typer.Option(None, help="stop after this long (e.g. 30s); default: until Ctrl+C"),
+    duration: str | None = typer.Option(None, help="stop after this long (e.g. 30s); default: until Ctrl+C"),
     seed: int = typer.Option(0, help="seed of every activity's random generator"),
-    run_dir: Optional[Path] = typer.Option(None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
+    run_dir: Path | None = typer.Option(None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
-    control: Optional[str] = typer.Option(None, help="control socket name or path for patch/status (default: the composition's name)"),
+    control: str | None = typer.Option(None, help="control socket name or path for patch/status (default: the composition's name)"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -213,7 +212,7 @@ def status(
 @app.command()
 def graph(
     file: Path = typer.Argument(..., help="composition file"),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="where to write (default: FILE with the format's suffix)"),
+    output: Path | None = typer.Option(None, "-o", "--output", help="where to write (default: FILE with the format's suffix)"),
     format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
     """Draw a composition: threads with their activities, streams, nets and flag maps."""
@@ -247,7 +246,7 @@ def graph(
 def bench(
     file: Path = typer.Argument(Path("systems/bench.yaml"), help="composition to measure"),
     duration: str = typer.Option("30s", help="how long each condition runs"),
-    out: Optional[Path] = typer.Option(None, help="report directory (default: ./hapticop-bench-DATE)"),
+    out: Path | None = typer.Option(None, help="report directory (default: ./hapticop-bench-DATE)"),
     load: bool = typer.Option(True, help="also run under load on every core"),
 ) -> None:
     """Measure a composition idle and under load beside cyclictest; write report.md and latency.png."""

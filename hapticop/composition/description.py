@@ -7,7 +7,7 @@ forbids unknown keys: a typo is an error, not a silently ignored setting.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
@@ -153,7 +153,7 @@ class QueuePolicy(Strict):
     sync: Literal["lock_free", "none"] = "lock_free"
 
 
-StreamPolicy = Annotated[Union[LatestPolicy, QueuePolicy], Field(discriminator="kind")]
+StreamPolicy = Annotated[LatestPolicy | QueuePolicy, Field(discriminator="kind")]
 
 
 class Stream(Strict):

@@ -7,9 +7,9 @@ reported together, each at `file:line:column` with the field path that names it.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from enum import Enum
-from typing import Iterable
 
 
 class Severity(str, Enum):
@@ -42,7 +42,7 @@ class Diagnostic:
     def dotted_path(self) -> str:
         return ".".join(str(part) for part in self.path) or "<document>"
 
-    def located(self, file: str, line: int, column: int) -> "Diagnostic":
+    def located(self, file: str, line: int, column: int) -> Diagnostic:
         return Diagnostic(**{**asdict(self), "file": file, "line": line, "column": column})
 
     def to_text(self) -> str:

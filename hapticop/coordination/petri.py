@@ -10,8 +10,8 @@ the matrices `pre` and `post`.
 
 from __future__ import annotations
 
+from collections.abc import MutableSequence
 from dataclasses import dataclass
-from typing import MutableSequence
 
 import numpy as np
 
@@ -38,7 +38,7 @@ class Net:
     initial: np.ndarray  # (places,)
 
     @classmethod
-    def from_spec(cls, spec: PetriNet, name: str = "") -> "Net":
+    def from_spec(cls, spec: PetriNet, name: str = "") -> Net:
         places = tuple(spec.places)
         index = {place: i for i, place in enumerate(places)}
         transitions = tuple(spec.transitions)

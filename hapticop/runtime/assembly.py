@@ -16,8 +16,8 @@ import numpy as np
 
 from hapticop.composition.description import Composition
 from hapticop.composition.loader import Loaded, ResolvedActivity
-from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
+from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.streams import LatestSlot, SpscQueue, latest_nbytes, queue_nbytes

@@ -15,11 +15,11 @@ import time
 from pathlib import Path
 
 from hapticop.composition.loader import load_tree
+from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of
 from hapticop.runtime.clock import RealtimeClock
-from hapticop.runtime import realtime
-from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.deadlines import thread_start
+from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Region
 
 

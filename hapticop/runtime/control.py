@@ -19,8 +19,8 @@ import socket
 import stat
 import struct
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 MAX_REQUEST_BYTES = 1 << 20  # a patch is at most a composition's size (1 MiB)
 MAX_REPLY_BYTES = 16 << 20
@@ -87,7 +87,7 @@ class ControlServer:
 
     # -- life cycle ----------------------------------------------------------------
 
-    def start(self) -> "ControlServer":
+    def start(self) -> ControlServer:
         if self._listener is not None:
             raise ControlError(f"the control server at {self.path} is already started")
         self._prepare_directory()
@@ -130,7 +130,7 @@ class ControlServer:
             pass
         self._listener = self._thread = self._wake_read = self._wake_write = None
 
-    def __enter__(self) -> "ControlServer":
+    def __enter__(self) -> ControlServer:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -227,7 +227,7 @@ class ControlServer:
             _send(connection, {"ok": False, "error": f"the request is larger than {MAX_REQUEST_BYTES} bytes"})
             _drain(connection)
             return
-        except socket.timeout:
+        except TimeoutError:
             _send(connection, {"ok": False, "error": f"no request within {CONNECTION_TIMEOUT:g} s"})
             return
         if not line.strip():
@@ -317,7 +317,7 @@ def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5
         except PermissionError:
             raise ControlError(f"cannot reach the hapticop system {who}: permission denied on {path} "
                                "(it belongs to another user)") from None
-        except socket.timeout:
+        except TimeoutError:
             raise ControlError(f"the hapticop system {who} did not accept a connection within {timeout:g} s") from None
         except OSError as error:
             if error.errno in (errno.ENOTSOCK, errno.ENOTDIR):
@@ -329,7 +329,7 @@ def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5
         try:
             client.sendall(data)
             line = _read_line(client, MAX_REPLY_BYTES)
-        except socket.timeout:
+        except TimeoutError:
             raise ControlError(f"the hapticop system {who} did not answer within {timeout:g} s") from None
         except _TooLarge:
             raise ControlError(f"the reply of the hapticop system {who} is larger than {MAX_REPLY_BYTES} bytes") from None

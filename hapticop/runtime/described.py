@@ -22,7 +22,7 @@ class Description:
     owner_thread: dict[str, str]  # activity -> the thread that schedules it
 
     @classmethod
-    def of(cls, tree: CommentedMap, loaded: Loaded) -> "Description":
+    def of(cls, tree: CommentedMap, loaded: Loaded) -> Description:
         return cls(tree, loaded, thread_of(loaded.composition))
 
     @property
@@ -34,7 +34,7 @@ class Description:
         return self.loaded.activities
 
     def patched(self, tree: CommentedMap, composition: Composition,
-                resolved: dict[str, ResolvedActivity]) -> "Description":
+                resolved: dict[str, ResolvedActivity]) -> Description:
         """The description a patch leaves: its tree and composition, the activities it
         resolved (new parameters, added activities) over the ones kept."""
         return Description.of(tree, Loaded(composition, {**self.loaded.activities, **resolved}))

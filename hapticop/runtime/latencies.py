@@ -10,7 +10,7 @@ includes every hop, queue and cycle phase on the way and the sink's own step.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -14,9 +14,10 @@ import queue
 import sys
 import threading
 import time
+from collections.abc import Callable
 from enum import IntEnum
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import TextIO
 
 
 class Level(IntEnum):
@@ -47,12 +48,12 @@ class LogWriter:
         self._thread = threading.Thread(target=self._drain, name="hapticop-log", daemon=True)
         self._stopped = False
 
-    def start(self) -> "LogWriter":
+    def start(self) -> LogWriter:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self._thread.start()
         return self
 
-    def logger(self, owner: str, level: Level, clock_ns: Callable[[], int]) -> "Logger":
+    def logger(self, owner: str, level: Level, clock_ns: Callable[[], int]) -> Logger:
         return Logger(owner, level, self.queue, clock_ns)
 
     def _file(self, owner: str) -> TextIO:

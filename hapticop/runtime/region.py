@@ -84,7 +84,7 @@ class Layout:
         return offset
 
     @classmethod
-    def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str]) -> "Layout":
+    def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str]) -> Layout:
         layout = cls(list(composition.threads), list(activities), sorted(flags))
         layout.declared_activities, layout.declared_flags = len(layout.activities), len(layout.flags)
         threads = len(layout.threads)
@@ -154,7 +154,7 @@ class Region:
             setattr(self, name, np.ndarray(shape, dtype=dtype, buffer=buffer, offset=offset))
 
     @classmethod
-    def create(cls, layout: Layout) -> "Region":
+    def create(cls, layout: Layout) -> Region:
         memory = shared_memory.SharedMemory(create=True, size=layout.size)
         memory.buf[: layout.size] = bytes(layout.size)
         region = cls(layout, memory, owner=True)
@@ -162,7 +162,7 @@ class Region:
         return region
 
     @classmethod
-    def attach(cls, layout: Layout, name: str) -> "Region":
+    def attach(cls, layout: Layout, name: str) -> Region:
         """Attach from a thread's own process. Children are started with 'spawn', so they
         share the parent's resource tracker: the block stays registered once, and only the
         creating process unlinks it."""

@@ -9,9 +9,9 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from hapticop.composition.units import format_duration
 from hapticop.runtime.region import Region
 from hapticop.runtime.timing import Summary
-from hapticop.composition.units import format_duration
 
 
 def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:

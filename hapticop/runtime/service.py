@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from hapticop.composition.description import Composition
 from hapticop.coordination.coordinator import Coordinator

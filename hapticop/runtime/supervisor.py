@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Callable
 from enum import IntEnum
-from typing import Callable
 
 from hapticop.composition.description import Composition
 from hapticop.composition.lcsm import State

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from hapticop.composition import flags as flagdefs
 from hapticop.composition.description import Composition
@@ -25,8 +25,8 @@ from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of, make_runner, make_transports
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.described import Description
-from hapticop.runtime.logs import Level, LogWriter, default_run_dir
 from hapticop.runtime.live import LiveChanges
+from hapticop.runtime.logs import Level, LogWriter, default_run_dir
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.scheduler import Scheduler

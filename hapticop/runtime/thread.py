@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import select
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from hapticop.blocks.base import Block
 from hapticop.composition.description import Thread

@@ -42,7 +42,7 @@ class Summary:
     max_us: float
 
     @classmethod
-    def of(cls, histogram: np.ndarray, maximum_ns: int) -> "Summary":
+    def of(cls, histogram: np.ndarray, maximum_ns: int) -> Summary:
         return cls(
             count=int(histogram.sum()),
             p50_us=percentile_us(histogram, 50),

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import difflib
 from collections import defaultdict
-from typing import Iterator
+from collections.abc import Iterator
 
 from hapticop.composition import graph as G
 from hapticop.composition.diagnostics import Diagnostic, Severity

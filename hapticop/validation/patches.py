@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import copy
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Iterator
+from typing import Any
 
 import jsonpatch
 from jsonpointer import JsonPointer, JsonPointerException
@@ -29,9 +29,14 @@ from hapticop.composition.description import Composition
 from hapticop.composition.diagnostics import Diagnostic, Path, Severity
 from hapticop.composition.documents import diff, dump, is_flow, key_for, merge, restyle
 from hapticop.composition.loader import Loaded, load_tree
-from hapticop.composition.yamlsource import (Source, SourceError, parse_text, reject_aliases_of_containers,
-                                             round_trip_yaml)
-from hapticop.validation.changes import RESTART, ChangePlan, plan_changes, plain_value, show
+from hapticop.composition.yamlsource import (
+    Source,
+    SourceError,
+    parse_text,
+    reject_aliases_of_containers,
+    round_trip_yaml,
+)
+from hapticop.validation.changes import RESTART, ChangePlan, plain_value, plan_changes, show
 from hapticop.validation.core import Validated, check_source
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 

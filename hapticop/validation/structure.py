@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import difflib
 from collections import defaultdict
-from typing import Iterator
+from collections.abc import Iterator
 
 import networkx as nx
 
@@ -245,7 +245,7 @@ def cpus(cg: G.CompositionGraph) -> Check:
                                  data["path"] + ("cpus", index), severity=Severity.WARNING)
 
 
-def dataflow(cg: G.CompositionGraph) -> "nx.DiGraph":
+def dataflow(cg: G.CompositionGraph) -> nx.DiGraph:
     """Where samples can travel: output port -> stream -> input port -> its activity -> its outputs."""
     flow = nx.DiGraph()
     for u, v, _ in list(cg.edges_of("writes")) + list(cg.edges_of("reads")):

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -45,11 +45,11 @@ class ExpectedSlave:
     input_bytes: int = 0
 
 
-_masters: dict[str, "SoemMaster"] = {}
+_masters: dict[str, SoemMaster] = {}
 _lock = threading.Lock()
 
 
-def find_master(interface: str) -> "SoemMaster | None":
+def find_master(interface: str) -> SoemMaster | None:
     """The master open on `interface` in this process, if any."""
     return _masters.get(interface)
 

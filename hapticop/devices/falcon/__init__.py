@@ -5,12 +5,25 @@ Falcon block composes these pieces, none of them knows about blocks.
 """
 
 from hapticop.devices.falcon.codec import (
-    FRAME_SIZE, MOTOR_LIMIT, Button, Command, Flag, FrameCodec, FrameError, FrameReader, Status,
-    is_valid_frame, new_frame,
+    FRAME_SIZE,
+    MOTOR_LIMIT,
+    Button,
+    Command,
+    Flag,
+    FrameCodec,
+    FrameError,
+    FrameReader,
+    Status,
+    is_valid_frame,
+    new_frame,
 )
 from hapticop.devices.falcon.homing import Homing
 from hapticop.devices.falcon.kinematics import (
-    WORKSPACE_BOX_M, WORKSPACE_CENTRE_M, Drive, FalconKinematics, Geometry,
+    WORKSPACE_BOX_M,
+    WORKSPACE_CENTRE_M,
+    Drive,
+    FalconKinematics,
+    Geometry,
 )
 from hapticop.devices.falcon.simulated import SimulatedFalcon
 

@@ -71,8 +71,8 @@ def _explain(error: Exception, doing: str) -> FalconUsbError:
 def system_backend(find_library: Callable[[str], str | None] | None = None):
     """The libusb backend pyusb would use, or a FalconUsbError saying what to install."""
     try:
-        import usb.backend.libusb1
         import usb.backend.libusb0
+        import usb.backend.libusb1
     except ImportError:
         raise FalconUsbError("pyusb is not installed: pip install 'hapticop[hw]'") from None
     for module in (usb.backend.libusb1, usb.backend.libusb0):
@@ -177,7 +177,7 @@ class FalconUsb:
 
     # ------------------------------------------------------------ opening
     @classmethod
-    def open(cls, index: int = 0, backend=None, **options) -> "FalconUsb":
+    def open(cls, index: int = 0, backend=None, **options) -> FalconUsb:
         """The `index`-th Falcon on the bus (0 = first)."""
         devices = find_falcons(backend)
         if not devices:
@@ -217,7 +217,7 @@ class FalconUsb:
             pass
         _dispose(self.device)
 
-    def __enter__(self) -> "FalconUsb":
+    def __enter__(self) -> FalconUsb:
         return self
 
     def __exit__(self, *exc: object) -> None:

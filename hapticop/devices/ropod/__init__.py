@@ -4,18 +4,33 @@ Pure numpy libraries with no hapticop runtime dependency; the ropod controller a
 blocks build on them. Sources and conventions: ../shared/reference/ropod-controller.md.
 """
 
-from hapticop.devices.ropod.velocity_controller import (
-    THESIS_PIVOT_OFFSETS_RAD, PlatformControllerParams, PlatformVelocityController,
-)
-from hapticop.devices.ropod.linear_bank import (
-    THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL, ControllerBank, LinearControllerParams,
-)
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp, jacobian
+from hapticop.devices.ropod.linear_bank import (
+    THESIS_PLATFORM_THETA,
+    THESIS_PLATFORM_XY,
+    THESIS_WHEEL,
+    ControllerBank,
+    LinearControllerParams,
+)
 from hapticop.devices.ropod.pdo import (
-    RXPDO_BYTES, RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, Com1, Stat1, new_rx_image, new_tx_image, pdo_image,
-    rxpdo_view, txpdo_view,
+    RXPDO_BYTES,
+    RXPDO_DTYPE,
+    TXPDO_BYTES,
+    TXPDO_DTYPE,
+    Com1,
+    Stat1,
+    new_rx_image,
+    new_tx_image,
+    pdo_image,
+    rxpdo_view,
+    txpdo_view,
 )
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
+from hapticop.devices.ropod.velocity_controller import (
+    THESIS_PIVOT_OFFSETS_RAD,
+    PlatformControllerParams,
+    PlatformVelocityController,
+)
 
 __all__ = [
     "PlatformControllerParams", "PlatformVelocityController", "THESIS_PIVOT_OFFSETS_RAD",

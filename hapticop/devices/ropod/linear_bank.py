@@ -49,7 +49,7 @@ class LinearControllerParams:
     """Clamps the PI's output (the thesis's "I saturation", ropod's `i_sat`), in the gain's output unit."""
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> "LinearControllerParams":
+    def from_mapping(cls, values: Mapping[str, Any]) -> LinearControllerParams:
         """Accept both the block's `i_saturation` and reference.json's `i_sat`."""
         data = {k: v for k, v in values.items() if k in {f.name for f in fields(cls)}}
         if "i_sat" in values and "i_saturation" not in data:

@@ -33,7 +33,14 @@ from numpy.typing import NDArray
 
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, inverse_sym3
 from hapticop.devices.ropod.pdo import (
-    RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, Com1, Stat1, record_struct, rxpdo_view, txpdo_view,
+    RXPDO_DTYPE,
+    TXPDO_BYTES,
+    TXPDO_DTYPE,
+    Com1,
+    Stat1,
+    record_struct,
+    rxpdo_view,
+    txpdo_view,
 )
 
 __all__ = ["PlantParams", "RopodPlant"]

@@ -22,12 +22,23 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.ropod.linear_bank import (
-    THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL, ControllerBank, LinearControllerParams,
-)
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp
+from hapticop.devices.ropod.linear_bank import (
+    THESIS_PLATFORM_THETA,
+    THESIS_PLATFORM_XY,
+    THESIS_WHEEL,
+    ControllerBank,
+    LinearControllerParams,
+)
 from hapticop.devices.ropod.pdo import (
-    RXPDO_BYTES, RXPDO_DTYPE, TXPDO_DTYPE, Com1, Stat1, record_struct, rxpdo_view, txpdo_view,
+    RXPDO_BYTES,
+    RXPDO_DTYPE,
+    TXPDO_DTYPE,
+    Com1,
+    Stat1,
+    record_struct,
+    rxpdo_view,
+    txpdo_view,
 )
 
 __all__ = ["PlatformControllerParams", "PlatformVelocityController", "THESIS_PIVOT_OFFSETS_RAD"]

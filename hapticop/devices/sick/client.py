@@ -195,7 +195,7 @@ class ColaClient:
         self._close_socket()
         self.state = ClientState.CLOSED
 
-    def __enter__(self) -> "ColaClient":
+    def __enter__(self) -> ColaClient:
         return self
 
     def __exit__(self, *exc: object) -> None:

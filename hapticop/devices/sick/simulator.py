@@ -481,7 +481,7 @@ class TiMSimulator:
 
     # -- threaded mode ---------------------------------------------------------------------
 
-    def start(self) -> "TiMSimulator":
+    def start(self) -> TiMSimulator:
         """Serve in real time on a daemon thread, using `clock_ns` for the scan schedule."""
         if self._thread is not None:
             raise RuntimeError("already started")
@@ -544,7 +544,7 @@ class TiMSimulator:
             self._wake_r.close()
             self._wake_w.close()
 
-    def __enter__(self) -> "TiMSimulator":
+    def __enter__(self) -> TiMSimulator:
         return self
 
     def __exit__(self, *exc: object) -> None:

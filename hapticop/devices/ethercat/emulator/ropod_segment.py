@@ -15,8 +15,16 @@ import numpy as np
 
 from hapticop.devices.ethercat.emulator.esc import Esc
 from hapticop.devices.ethercat.emulator.segment import Segment
-from hapticop.devices.ethercat.emulator.sii import (FMMU_INPUTS, FMMU_OUTPUTS, SM_INPUTS, SM_OUTPUTS, Pdo, PdoEntry,
-                                           SlaveIdentity, SyncManagerSpec)
+from hapticop.devices.ethercat.emulator.sii import (
+    FMMU_INPUTS,
+    FMMU_OUTPUTS,
+    SM_INPUTS,
+    SM_OUTPUTS,
+    Pdo,
+    PdoEntry,
+    SlaveIdentity,
+    SyncManagerSpec,
+)
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, RXPDO_DTYPE, TXPDO_BYTES, TXPDO_DTYPE, new_rx_image, new_tx_image
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
 

@@ -84,7 +84,7 @@ class Sandbox:
         self.process: subprocess.Popen | None = None
         self._home: int | None = None
 
-    def __enter__(self) -> "Sandbox":
+    def __enter__(self) -> Sandbox:
         self._home = os.open("/proc/thread-self/ns/net", os.O_RDONLY)
         try:
             _unshare_net()

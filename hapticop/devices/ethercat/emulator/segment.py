@@ -10,7 +10,7 @@ where a powered-off slave's port is closed.
 from __future__ import annotations
 
 import struct
-from typing import Sequence
+from collections.abc import Sequence
 
 from hapticop.devices.ethercat.emulator.esc import Esc
 
