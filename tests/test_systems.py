@@ -1,5 +1,7 @@
 """Every shipped composition validates clean, and the hallway one is the thesis's layout."""
 
+import copy
+
 import pytest
 
 from hapticop.validation import validate_path
@@ -25,7 +27,9 @@ def test_hallway_is_the_thesis_layout():
     # operator and the simulated Falcon, which answers just before the Falcon reads
     assert threads["main"].schedules == {
         0: ["mediator"], 1: ["mediator", "world", "operator", "falcon_sim", "falcon", "haptic"]}
-    assert all(threads[t].schedules[0] == [] for t in ("simulation", "lidar", "fieldbus", "watchdog"))
+    assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
+    # the simulated world is not the application's to coordinate: its thread runs from the start
+    assert threads["simulation"].start == "auto" and threads["simulation"].schedules == {0: ["lidar_sim"]}
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
     assert set(composition.activities) == thesis | {"world", "operator", "falcon_sim", "lidar_sim", "ropod_plant"}
     assert composition.activities["falcon"].params["simulator"] == "falcon_sim"
@@ -39,3 +43,88 @@ def test_hallway_is_the_thesis_layout():
     ropod = composition.activities["ropod"].params
     assert ropod["platform_theta"]["p_gain"] == 755 and ropod["wheel"]["i_saturation"] == 7
     assert set(composition.coordination.nets) == {"mediator", "thread_lcsm", "thread_scheduler"}
+
+
+# -- the same application on the real devices -------------------------------------------------------
+# What a device block's driver brings with it: the only parameters the hardware file may set otherwise.
+DRIVER_KEYS = {"driver", "simulator", "firmware", "firmware_sha256", "usb_backend", "device_index", "host", "port",
+               "interface"}
+
+
+def _without_simulation(tree: dict) -> dict:
+    """A composition with its simulation taken out, by rule: the activities whose block simulates, their
+    places in schedules, a thread left with nothing to run, the streams they write and their ends of the
+    streams they read, the flag-map entries of their flags, a place left unbound (always empty, so a
+    transition that consumes from it is dead and goes too; one that marks it stops doing so), and the
+    device blocks' driver parameters."""
+    from hapticop.blocks.registry import resolve
+
+    tree = copy.deepcopy(tree)
+    simulated = {name for name, spec in tree["activities"].items() if resolve(spec["block"]).simulator}
+    for name in simulated:
+        del tree["activities"][name]
+    for name, thread in list(tree["threads"].items()):
+        schedules = {sid: [a for a in members if a not in simulated] for sid, members in thread["schedules"].items()}
+        if any(set(members) & simulated for members in thread["schedules"].values()) and not any(schedules.values()):
+            del tree["threads"][name]
+        else:
+            thread["schedules"] = schedules
+    for name, stream in list(tree["streams"].items()):
+        readers = stream["to"] if isinstance(stream["to"], list) else [stream["to"]]
+        stream["to"] = [r for r in readers if r.split(".")[0] not in simulated]
+        if stream["from"].split(".")[0] in simulated or not stream["to"]:
+            del tree["streams"][name]
+    bound = set()
+    for fmap in tree["coordination"]["flag_maps"].values():
+        for kind in ("converting_sources", "tracking_sources", "converting_sinks", "tracking_sinks"):
+            entries = fmap.get(kind, {})
+            for flag in [f for f in entries if f.split(".")[0] in simulated]:
+                del entries[flag]
+            bound |= {(fmap["net"], place) for place in entries.values()}
+    for net_name, net in tree["coordination"]["nets"].items():
+        unbound = {p for p in net["places"] if (net_name, p) not in bound and not net.get("marking", {}).get(p)
+                   and p not in net.get("terminal", []) and not any(p in t["out"] for t in net["transitions"].values())}
+        for place in unbound:
+            del net["places"][place]
+        for name, transition in list(net["transitions"].items()):
+            if set(transition["in"]) & unbound:
+                del net["transitions"][name]
+    for spec in tree["activities"].values():
+        for key in DRIVER_KEYS & set(spec.get("params") or {}):
+            del spec["params"][key]
+    for key in ("name", "doc"):
+        tree.pop(key, None)
+    return tree
+
+
+def test_the_hardware_file_is_the_hallway_without_its_simulation():
+    """Composing the hallway for the real Falcon, TiM561 and ropod is taking the simulation out and
+    changing the device blocks' drivers, nothing else."""
+    from hapticop.composition.yamlsource import plain, read_file
+
+    hallway = plain(read_file(SYSTEMS / "hallway.yaml").tree)
+    hardware = plain(read_file(SYSTEMS / "hardware.yaml").tree)
+    assert _without_simulation(hardware) == _without_simulation(hallway)
+    drivers = {name: spec["params"]["driver"] for name, spec in hardware["activities"].items()
+               if "driver" in (spec.get("params") or {})}
+    assert drivers == {"falcon": "usb", "lidar": "tcp", "ethercat": "pysoem"}
+    assert not any(resolve_simulates(spec["block"]) for spec in hardware["activities"].values())
+
+
+def resolve_simulates(block: str) -> bool:
+    from hapticop.blocks.registry import resolve
+
+    return resolve(block).simulator
+
+
+def test_taking_the_simulation_out_is_not_a_no_op():
+    """The rule above does remove what it says (so the comparison cannot pass by accident)."""
+    from hapticop.composition.yamlsource import plain, read_file
+
+    hallway = _without_simulation(plain(read_file(SYSTEMS / "hallway.yaml").tree))
+    assert {"world", "operator", "falcon_sim", "lidar_sim", "ropod_plant"}.isdisjoint(hallway["activities"])
+    assert "simulation" not in hallway["threads"] and "pose_in_hallway" not in hallway["streams"]
+    mediator = hallway["coordination"]["nets"]["mediator"]
+    assert "FINISHED" not in mediator["places"] and "finished" not in mediator["transitions"]
+    assert "HAPTIC_RUNNING" in mediator["places"]  # still bound to haptic.lcsm.running
+    assert "driver" not in hallway["activities"]["falcon"]["params"]

@@ -92,7 +92,17 @@ class Supervisor:
             self.log.info("the coordination asked to stop")
             self.request_shutdown()
         if self.exit_by_flag and self.region.flag("system.exit"):
-            self.finish()  # the nets ended the run (after a shutdown request, or on their own)
+            # The nets ended the run (after a shutdown request, or on their own). What they do not
+            # coordinate (a simulation's thread running from the start) the runtime cleans itself.
+            if self.shutdown_at is None:
+                self.shutdown_at = now
+            if now - self.shutdown_at > self.shutdown_timeout_ns:
+                self.reasons.append("what the coordination left running did not clean within "
+                                    f"{format_duration(self.shutdown_timeout_ns)}")
+                self.log.error(self.reasons[-1])
+                self.finish()
+            else:
+                self._walk_down(description)
             return
         if self.shutdown_at is None:
             return
