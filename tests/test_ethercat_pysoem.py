@@ -223,7 +223,7 @@ def recovery_run(tmp_path_factory):
                         box.fault("restore", slave=5)
                     _until(lambda: all_op() and not system.flag("ropod.stop"), f"{fault}: every slave back in OP")
                     _until(lambda: speed() > 0.1, f"{fault}: the robot drives again")
-            except Exception as error:  # reported by the tests, not lost in a thread
+            except Exception as error:  # noqa: BLE001 - reported by the tests, not lost in a thread
                 seen["errors"].append(str(error))
             finally:
                 system.request_shutdown()

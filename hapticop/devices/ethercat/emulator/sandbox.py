@@ -153,7 +153,7 @@ class Sandbox:
                 with IPRoute() as ip:
                     for index in ip.link_lookup(ifname=self.interface):
                         ip.link("del", index=index)
-            except Exception:  # the namespace takes the pair with it anyway
+            except Exception:  # noqa: BLE001 - best-effort cleanup: the namespace takes the pair with it anyway
                 pass
         finally:
             if self._home is not None:
