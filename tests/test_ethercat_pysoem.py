@@ -28,7 +28,8 @@ WHEELS = [2, 3, 5, 6]
 
 
 def expected(products=PRODUCTS, names=NAMES):
-    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0))) for n, p in zip(names, products)]
+    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
+            for n, p in zip(names, products)]
 
 
 def _interface_here(name: str) -> bool:

@@ -110,8 +110,9 @@ class Sandbox:
                 ip.link("set", index=ip.link_lookup(ifname=name)[0], state="up")
 
     def _emulator(self) -> None:
-        command = [sys.executable, "-m", "hapticop.devices.ethercat.emulator", self.peer, "--control", str(self.control),
-                   "--truth", str(self.truth), "--seed", str(self.seed), "--priority", str(self.priority)]
+        command = [sys.executable, "-m", "hapticop.devices.ethercat.emulator", self.peer,
+                   "--control", str(self.control), "--truth", str(self.truth), "--seed", str(self.seed),
+                   "--priority", str(self.priority)]
         with open(self.log, "wb") as log:
             self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
         from hapticop.devices.ethercat.emulator.server import control
