@@ -190,7 +190,8 @@ def _table(result: dict) -> str:
         f"pysoem 1 kHz against the emulated ropod segment, {result['cycles']} cycles in {result['seconds']:.1f} s "
         f"(SCHED_FIFO: {'yes' if result['realtime_priority'] else 'no'})",
         "",
-        "| round trip p50 | p99 | p99.9 | max | WKC errors (no frame) | missed cycles | CPU master process | CPU emulator |",
+        "| round trip p50 | p99 | p99.9 | max | WKC errors (no frame) | missed cycles "
+        "| CPU master process | CPU emulator |",
         "|---|---|---|---|---|---|---|---|",
         f"| {r['p50']:.0f} us | {r['p99']:.0f} us | {r['p99.9']:.0f} us | {r['max']:.0f} us | "
         f"{result['wkc_errors']} ({result['no_frame']}) | {result['missed_cycles']} | "

@@ -115,7 +115,8 @@ def main() -> None:
                  "|---|---|---|---|---|---|---|---|---|"]
         for label, r in rows:
             lines.append(f"| {label} | {r['frames_per_s']:.0f} | {r['p50']:.0f} | {r['p99']:.0f} | {r['max']:.0f} "
-                         f"| {r['cpu_us']:.0f} | {r['physics_us']:.0f} | {r['resends']} | {r['missed'] if 'paced' in label else '-'} |")
+                         f"| {r['cpu_us']:.0f} | {r['physics_us']:.0f} | {r['resends']} "
+                         f"| {r['missed'] if 'paced' in label else '-'} |")
         lines += ["", f"Firmware load of a 4 kB test image in modelled time (probe, handshake, upload at "
                       f"142.9 kbaud with a 16 ms latency timer, probe): {load_s:.2f} s."]
         args.write.write_text("\n".join(lines) + "\n")

@@ -67,7 +67,8 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
             "completion_time_s": metrics["completion_time_s"], "force_peak_n": metrics["force_peak_n"],
             "force_rms_n": metrics["force_rms_n"], "force_rate_rms_nps": metrics["force_rate_rms_nps"],
             "stop_ok": ok.get("stop error against dist2 = 0.5 m"),
-            "haptic_compute_us": activities["haptic"]["compute_us"], "ropod_compute_us": activities["ropod"]["compute_us"]}
+            "haptic_compute_us": activities["haptic"]["compute_us"],
+            "ropod_compute_us": activities["ropod"]["compute_us"]}
 
 
 def _median(values: list, scale: float = 1.0, digits: int = 1) -> str:
@@ -99,7 +100,8 @@ def summarise(path: Path) -> str:
     lines += ["", "1 kHz step compute time (median over runs of each run's median, virtual clock, one process):"]
     for model in sorted({r["model"] for r in runs}):
         mine = [r for r in runs if r["model"] == model]
-        lines.append(f"- {model}: haptic controller {_median([r['haptic_compute_us']['p50'] for r in mine], digits=0)} us, "
+        lines.append(f"- {model}: haptic controller "
+                     f"{_median([r['haptic_compute_us']['p50'] for r in mine], digits=0)} us, "
                      f"ropod controller {_median([r['ropod_compute_us']['p50'] for r in mine], digits=0)} us")
     return "\n".join(lines) + "\n"
 

@@ -31,7 +31,8 @@ def cases() -> dict[str, Callable[[], object]]:
     """The per-cycle calls to measure, each with its inputs already prepared."""
     kin, codec = FalconKinematics(), FrameCodec()
     position, theta, J, M = np.array([0.01, -0.02, 0.13]), np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3))
-    tau, force, motor, counts = np.zeros(3), np.array([1.0, -2.0, 0.5]), np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64)
+    tau, force, motor, counts = (np.zeros(3), np.array([1.0, -2.0, 0.5]), np.zeros(3, dtype=np.int64),
+                                 np.zeros(3, dtype=np.int64))
     kin.inverse(position, theta)
     kin.counts_from_angles(theta, counts)
     enc = counts.copy()

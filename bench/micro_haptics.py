@@ -83,7 +83,8 @@ def world_cases() -> dict[str, Callable[[], object]]:
     for variant in ("nominal", "tremor"):
         operator = BlindOperator.variant(variant)
         clock = [0.0]
-        felt, position, velocity, out = np.array([0.1, 0.0, 0.5]), np.array([0.001, 0.0, -0.01]), np.zeros(3), np.zeros(3)
+        felt, position, velocity, out = (np.array([0.1, 0.0, 0.5]), np.array([0.001, 0.0, -0.01]), np.zeros(3),
+                                         np.zeros(3))
 
         def step(operator=operator, clock=clock, felt=felt, position=position, velocity=velocity, out=out):
             clock[0] += 0.001
@@ -123,7 +124,8 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
         path = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
         validated = validate_path(path)
         with tempfile.TemporaryDirectory() as run_dir:
-            run_system(validated, RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir), echo=False))
+            run_system(validated, RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir),
+                                             echo=False))
     finally:
         HapticController.compute, HallwayWorld.compute = originals  # type: ignore[method-assign]
     return {k: np.array(v, dtype=np.float64) / 1e3 for k, v in samples.items()}

@@ -42,7 +42,8 @@ def raw(path: Path, data: bytes) -> dict:
 def test_round_trip(sock):
     with ControlServer(sock, echo) as server:
         assert server.running
-        assert request(sock, {"command": "status", "n": [1, 2]}) == {"ok": True, "echo": {"command": "status", "n": [1, 2]}}
+        assert request(sock, {"command": "status", "n": [1, 2]}) == {
+            "ok": True, "echo": {"command": "status", "n": [1, 2]}}
         assert request(str(sock), {"command": "again"})["echo"] == {"command": "again"}  # one request per connection
     assert not sock.exists()
 

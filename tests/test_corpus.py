@@ -97,7 +97,8 @@ CASES = [
     ("invalid-start-never-requested.yaml", "start-never-requested", 11,
      "'threads.sensors' starts on request, but no flag map writes", None),
     # streams and ports
-    ("invalid-stream-unknown-port.yaml", "unknown-port", 17, "has no output port 'positon'", "did you mean 'position'?"),
+    ("invalid-stream-unknown-port.yaml", "unknown-port", 17, "has no output port 'positon'",
+     "did you mean 'position'?"),
     ("invalid-stream-unknown-activity.yaml", "unknown-activity", 17, "unknown activity 'falcn' in port reference",
      "did you mean 'falcon'?"),
     ("invalid-stream-direction.yaml", "port-direction", 21, "'lidar.angles' is an output port", None),
@@ -105,8 +106,8 @@ CASES = [
     ("invalid-stream-shape.yaml", "stream-shape", 21,
      "shape mismatch: 'lidar_400.ranges' writes float32[400] [m], 'haptic.ranges' reads float32[811]", None),
     ("invalid-stream-unit.yaml", "stream-unit", 19, "unit mismatch: 'haptic.velocity_setpoint'", None),
-    ("invalid-port-two-writers.yaml", "port-writers", 19, "'haptic.handle_position' is written by 2 streams (pos, pos_2)",
-     None),
+    ("invalid-port-two-writers.yaml", "port-writers", 19,
+     "'haptic.handle_position' is written by 2 streams (pos, pos_2)", None),
     ("invalid-input-unconnected.yaml", "input-unconnected", 15, "required input 'haptic.handle_velocity'", None),
     ("invalid-stream-sync-none.yaml", "stream-thread-safety", 20, "with 'sync: none'", None),
     ("invalid-block-flag-never-written.yaml", "flag-no-writer", 15,
@@ -159,7 +160,8 @@ def test_every_invalid_file_is_pinned():
     on_disk = {p.name for p in INVALID.iterdir()}
     pinned = [c[0] for c in CASES]
     assert len(pinned) == len(set(pinned)), "a file is pinned twice"
-    assert on_disk == set(pinned), {"not pinned": sorted(on_disk - set(pinned)), "missing": sorted(set(pinned) - on_disk)}
+    assert on_disk == set(pinned), {"not pinned": sorted(on_disk - set(pinned)),
+                                    "missing": sorted(set(pinned) - on_disk)}
 
 
 VALID_FILES = sorted(VALID.glob("*.yaml"))

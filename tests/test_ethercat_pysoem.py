@@ -28,7 +28,8 @@ WHEELS = [2, 3, 5, 6]
 
 
 def expected(products=PRODUCTS, names=NAMES):
-    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0))) for n, p in zip(names, products)]
+    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
+            for n, p in zip(names, products)]
 
 
 def _interface_here(name: str) -> bool:
@@ -223,7 +224,7 @@ def recovery_run(tmp_path_factory):
                         box.fault("restore", slave=5)
                     _until(lambda: all_op() and not system.flag("ropod.stop"), f"{fault}: every slave back in OP")
                     _until(lambda: speed() > 0.1, f"{fault}: the robot drives again")
-            except Exception as error:  # reported by the tests, not lost in a thread
+            except Exception as error:  # noqa: BLE001 - reported by the tests, not lost in a thread
                 seen["errors"].append(str(error))
             finally:
                 system.request_shutdown()

@@ -35,7 +35,8 @@ def _load(name: str) -> dict:
 
 
 def _packets() -> dict:
-    return _load("packet_reference.json") if DATA.is_dir() else {"encode_host_to_falcon": [], "decode_falcon_to_host": []}
+    return (_load("packet_reference.json") if DATA.is_dir()
+            else {"encode_host_to_falcon": [], "decode_falcon_to_host": []})
 
 
 def _recorded() -> list[dict]:
@@ -91,7 +92,8 @@ def test_recorded_packets_decode_to_recorded_values_and_reencode(packet):
     codec.encode_command(command.motor, command.flags, out)  # within +-4095: no saturation
     assert out.tobytes() == frame
     if "annotation_values" in packet:  # one annotation in the source is a copy/paste slip
-        assert (packet["annotation_values"] == packet["decoded_values_libnifalcon"]) == packet["annotation_matches_decode"]
+        assert ((packet["annotation_values"] == packet["decoded_values_libnifalcon"])
+                == packet["annotation_matches_decode"])
 
 
 def test_worked_example_is_negative():
@@ -143,7 +145,8 @@ def test_command_round_trip(motor, flags):
     assert command.motor.tolist() == motor and command.flags == flags
 
 
-@pytest.mark.parametrize("index, value", [(0, 0x3D), (15, 0x3C), (1, 0x40), (5, 0x51), (12, 0x00), (14, 0x51), (13, 0xFF)])
+@pytest.mark.parametrize("index, value",
+                         [(0, 0x3D), (15, 0x3C), (1, 0x40), (5, 0x51), (12, 0x00), (14, 0x51), (13, 0xFF)])
 def test_each_byte_is_range_checked(index, value):
     frame = bytearray(b"<AAAAAAAAAAAAAA>")
     frame[index] = value

@@ -74,7 +74,8 @@ def test_the_run_still_ends_at_the_wall(faults_run):
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["ended_by"] == "stopped" and not metrics["crash"] and metrics["n_collisions"] == 0
     log = (run / "falcon.log").read_text() + (run / "haptic.log").read_text() + (run / "lidar.log").read_text()
-    for activity in ("falcon_sim", "falcon", "lidar", "lidar_sim"):  # a running parameter: no reconfiguration, no re-homing
+    # a running parameter: no reconfiguration, no re-homing
+    for activity in ("falcon_sim", "falcon", "lidar", "lidar_sim"):
         assert (run / f"{activity}.log").read_text().count("-> running") == 1
     for said in ("no good frame for 100 ms", "frames are back", "handle position stale", "driving resumes",
                  "scan stale: blind", "scan fresh again", "stream stalled"):

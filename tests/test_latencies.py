@@ -126,6 +126,7 @@ def test_the_report_tells_the_system_from_its_simulators(tmp_path):
     result = compose(tmp_path, SIMULATING, clock="realtime", duration="0.5s", name="simulating")
     cpu = result.timing["cpu"]
     assert cpu["simulators_percent"] > 0
-    assert cpu["without_simulators_percent"] == pytest.approx(cpu["loops_percent"] - cpu["simulators_percent"], abs=0.11)
+    assert cpu["without_simulators_percent"] == pytest.approx(cpu["loops_percent"] - cpu["simulators_percent"],
+                                                              abs=0.11)
     assert result.timing["activities"]["world"]["simulation_us_per_step"] > 0
     assert "simulation_us_per_step" not in result.timing["activities"]["source"]

@@ -95,10 +95,12 @@ def test_patches_on_a_live_realtime_system(tmp_path, deploy):
             deadline = time.monotonic() + 20
             while time.monotonic() < deadline and not (socket.exists() and system.state("relay") is State.RUNNING):
                 time.sleep(0.02)
-            replies["dry"] = request(socket, {"op": "patch", "dry_run": True,
-                                              "text": "- {op: add, path: /activities/relay/params, value: {unit: '1'}}"})
+            replies["dry"] = request(socket, {
+                "op": "patch", "dry_run": True,
+                "text": "- {op: add, path: /activities/relay/params, value: {unit: '1'}}"})
             replies["refused"] = request(socket, {"op": "patch", "text": "threads: {worker: {period: 3ms}}"})
-            replies["invalid"] = request(socket, {"op": "patch", "text": "threads: {main: {schedules: {0: [mediator, source, ghost]}}}"})
+            replies["invalid"] = request(socket, {
+                "op": "patch", "text": "threads: {main: {schedules: {0: [mediator, source, ghost]}}}"})
             replies["disable"] = request(socket, {"op": "patch", "text": "threads: {worker: {schedules: {0: []}}}"})
             replies["status"] = request(socket, {"op": "status"})
         threading.Thread(target=talk, daemon=True).start()

@@ -52,7 +52,8 @@ def test_arbitrary_structures(tree):
     check(validate_text(dump({"version": 1, "data": tree}) if not isinstance(tree, dict) else dump(tree)).report)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_mutated_hallway(hallway_text_cached, data):
     lines = hallway_text_cached.splitlines(keepends=True)

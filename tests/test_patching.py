@@ -154,7 +154,8 @@ def test_replacing_the_whole_document_with_a_list_is_refused(hallway):
 
 def test_merge_patch_changes_a_schedule(hallway):
     tree, _ = hallway
-    patch = load_patch("threads:\n  fieldbus:\n    schedules:\n      1: [ethercat]\n      2: [ethercat, ropod]\n", "p.yaml")
+    patch = load_patch("threads:\n  fieldbus:\n    schedules:\n      1: [ethercat]\n      2: [ethercat, ropod]\n",
+                       "p.yaml")
     _, _, plan, _ = prepare(tree, patch)
     assert plan.schedules == {"fieldbus": {0: [], 1: ["ethercat"], 2: ["ethercat", "ropod"]}}
     lines = plan.describe()
@@ -243,7 +244,8 @@ def test_plan_lists_unsupported_changes_without_refusing(hallway):
 
 def test_doc_changes_are_not_changes(hallway):
     tree, old = hallway
-    new_tree = apply_patch(tree, {"threads": {"lidar": {"doc": "x"}}, "coordination": {"nets": {"mediator": {"doc": "y"}}}})
+    new_tree = apply_patch(tree, {"threads": {"lidar": {"doc": "x"}},
+                                  "coordination": {"nets": {"mediator": {"doc": "y"}}}})
     assert plan_changes(old, validate_patched(new_tree).composition).empty
     assert ChangePlan().empty
 
@@ -319,7 +321,8 @@ def test_removing_an_activity_the_coordination_names_is_refused(hallway):
 def test_patching_a_patched_description_removes_what_was_added(hallway):
     tree, _ = hallway
     added = {
-        "activities": {"spare_watchdog": {"block": "ethercat_watchdog", "params": {"slaves": 7, "expected_working_counter": 12}}},
+        "activities": {"spare_watchdog": {"block": "ethercat_watchdog",
+                                          "params": {"slaves": 7, "expected_working_counter": 12}}},
         "threads": {"watchdog": {"schedules": {1: ["ethercat_watchdog", "spare_watchdog"]}}},
         "streams": {"spare_states": {"from": "ethercat.slave_states", "to": ["spare_watchdog.slave_states"]},
                     "spare_counter": {"from": "ethercat.working_counter", "to": ["spare_watchdog.working_counter"]}},

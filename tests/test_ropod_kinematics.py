@@ -54,8 +54,8 @@ def test_forward_inverts_inverse_and_matches_the_feel_numbers():
         np.testing.assert_allclose(kin.twist(kin.wheel_speeds(v, np.zeros(8)), np.zeros(3)), v, atol=1e-12)
     kin = _kin(np.zeros(4))
     np.testing.assert_allclose(kin.wheel_speeds(np.array([1.0, 0, 0]), np.zeros(8)), 19.047619047619, atol=1e-9)
-    np.testing.assert_allclose(kin.wheel_speeds(np.array([0, 1.0, 0]), np.zeros(8)), [-76.190476190476, 76.190476190476] * 4,
-                               atol=1e-9)
+    np.testing.assert_allclose(kin.wheel_speeds(np.array([0, 1.0, 0]), np.zeros(8)),
+                               [-76.190476190476, 76.190476190476] * 4, atol=1e-9)
     np.testing.assert_allclose(kin.pivot_rates(np.array([0, 1.0, 0]), np.zeros(4)), 100.0)
 
 

@@ -55,7 +55,8 @@ def markdown(bench: BenchRun) -> str:
              f"{bench.seconds:g} s per condition; wake-up latency and end-to-end latency in us.", ""]
     lines += [f"- {note}" for note in bench.notes] + ([""] if bench.notes else [])
     for c in bench.conditions:
-        lines += [f"## {c.name}", "", "| thread | priority | deploy | cycles | p50 | p99 | p99.9 | max | missed | CPU % |",
+        lines += [f"## {c.name}", "",
+                  "| thread | priority | deploy | cycles | p50 | p99 | p99.9 | max | missed | CPU % |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         if c.baseline:
             s = c.baseline.summary()
@@ -74,7 +75,8 @@ def markdown(bench: BenchRun) -> str:
                       f"above: max {_f(below['max'] - above['max'])}, p99.9 {_f(below['p99.9'] - above['p99.9'])}, "
                       f"p99 {_f(below['p99'] - above['p99'])}."]
         if c.timing.get("latencies"):
-            lines += ["", "| end-to-end | from | to | samples | p50 | p99 | p99.9 | max |", "|---|---|---|---|---|---|---|---|"]
+            lines += ["", "| end-to-end | from | to | samples | p50 | p99 | p99.9 | max |",
+                      "|---|---|---|---|---|---|---|---|"]
             for name, e in c.timing["latencies"].items():
                 lat = e["latency_us"]
                 lines.append(f"| {name} | {e['from']} | {e['to']} | {e['samples']} | {_f(lat['p50'])} | "
@@ -91,8 +93,8 @@ def markdown(bench: BenchRun) -> str:
         lines += ["## goals", "", "| goal | value | limit | met |", "|---|---|---|---|"]
         for g in all_goals:
             verdict = "yes" if g.met else ("no value" if math.isnan(g.value) else f"no ({g.by:.2f}x the limit)")
-            lines.append(f"| {g.what} | {_f(g.value, 2 if g.limit < 1 else 0)} | {_f(g.limit, 2 if g.limit < 1 else 0)} "
-                         f"| {verdict} |")
+            lines.append(f"| {g.what} | {_f(g.value, 2 if g.limit < 1 else 0)} "
+                         f"| {_f(g.limit, 2 if g.limit < 1 else 0)} | {verdict} |")
         lines.append("")
     return "\n".join(lines)
 

@@ -83,7 +83,8 @@ class Goal:
         return self.value / self.limit if self.limit else math.inf
 
 
-def thread_goals(name: str, latency: dict[str, float], missed_pct: float, baseline: dict[str, float] | None) -> list[Goal]:
+def thread_goals(name: str, latency: dict[str, float], missed_pct: float,
+                 baseline: dict[str, float] | None) -> list[Goal]:
     """A 1 kHz thread against cyclictest: p99 ≤ 1.5×, p99.9 ≤ 2×, missed ≤ 0.05 %."""
     goals = [Goal(f"{name}: missed deadlines %", missed_pct, 0.05)]
     if baseline:

@@ -104,12 +104,15 @@ def _valid_or_exit(file: Path, refusal: str):
 @app.command()
 def compose(
     file: Path = typer.Argument(..., help="composition file"),
-    clock: ClockKind = typer.Option(ClockKind.realtime, "--clock", help="realtime, or virtual: simulated time, as fast as the CPU allows"),
+    clock: ClockKind = typer.Option(ClockKind.realtime, "--clock",
+                                    help="realtime, or virtual: simulated time, as fast as the CPU allows"),
     duration: str | None = typer.Option(None, help="stop after this long (e.g. 30s); default: until Ctrl+C"),
     seed: int = typer.Option(0, help="seed of every activity's random generator"),
-    run_dir: Path | None = typer.Option(None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
+    run_dir: Path | None = typer.Option(
+        None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
-    control: str | None = typer.Option(None, help="control socket name or path for patch/status (default: the composition's name)"),
+    control: str | None = typer.Option(
+        None, help="control socket name or path for patch/status (default: the composition's name)"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -212,7 +215,8 @@ def status(
 @app.command()
 def graph(
     file: Path = typer.Argument(..., help="composition file"),
-    output: Path | None = typer.Option(None, "-o", "--output", help="where to write (default: FILE with the format's suffix)"),
+    output: Path | None = typer.Option(None, "-o", "--output",
+                                       help="where to write (default: FILE with the format's suffix)"),
     format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
     """Draw a composition: threads with their activities, streams, nets and flag maps."""

@@ -90,7 +90,8 @@ def to_dot(cg: CompositionGraph) -> str:
         for kind in ("converting_sources", "tracking_sources", "converting_sinks", "tracking_sinks"):
             style = "dashed" if kind.startswith("tracking") else "dotted"
             for flag_name, pname in getattr(fmap, kind).items():
-                lines.append(f"  {_id('flag', flag_name)} [shape=note, fontsize=8, color=gray50, label={_q(flag_name)}];")
+                lines.append(f"  {_id('flag', flag_name)} [shape=note, fontsize=8, color=gray50, "
+                             f"label={_q(flag_name)}];")
                 ends = (_id("flag", flag_name), _id("place", fmap.net, pname))
                 if kind.endswith("sinks"):
                     ends = ends[::-1]

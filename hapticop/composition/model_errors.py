@@ -87,7 +87,8 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
                           expected=", ".join(repr(k) for k in kinds))
     if kind == "union_tag_invalid":
         expected = item.get("ctx", {}).get("expected_tags", "")
-        return Diagnostic(rule="bad-value", message=f"unknown kind {item['ctx'].get('tag')!r}", path=path, expected=expected)
+        return Diagnostic(rule="bad-value", message=f"unknown kind {item['ctx'].get('tag')!r}", path=path,
+                          expected=expected)
     if kind == "predicate_failed":
         said = re.search(r"Predicate '?(\w+)'? failed", item["msg"])
         must = f"must be {said.group(1)}" if said else "is not allowed"

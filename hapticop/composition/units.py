@@ -98,7 +98,8 @@ Offset = Annotated[
     WithJsonSchema(
         {
             "anyOf": [
-                {"type": "string", "pattern": r"^\s*([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?\s*(ns|us|µs|ms|s)\s*$"},
+                {"type": "string",
+                 "pattern": r"^\s*([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?\s*(ns|us|µs|ms|s)\s*$"},
                 {"const": 0},
             ],
             "description": "a time with its unit, or 0: '0ms', '250us', 0",

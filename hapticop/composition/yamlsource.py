@@ -85,7 +85,8 @@ def parse_text(text: str, file: str = "<string>") -> Source:
         ) from None
     except MarkedYAMLError as error:
         reason = " ".join(part for part in (error.context, error.problem) if part) or "malformed YAML"
-        raise _mark_error(file, "yaml-syntax", f"malformed YAML: {reason}", error.problem_mark or error.context_mark) from None
+        raise _mark_error(file, "yaml-syntax", f"malformed YAML: {reason}",
+                          error.problem_mark or error.context_mark) from None
     except (YAMLError, RecursionError, ValueError, TypeError) as error:
         # ValueError/TypeError: ruamel rejects some scalars (odd timestamps, huge ints) late.
         raise SourceError(Diagnostic(rule="yaml-syntax", message=f"malformed YAML: {error}", file=file)) from None
@@ -131,7 +132,8 @@ def read_file(path: str | FilePath) -> Source:
             )
         raw = path.read_bytes()
     except OSError as error:
-        raise SourceError(Diagnostic(rule="file-unreadable", message=f"cannot read the file: {error.strerror}", file=str(path))) from None
+        raise SourceError(Diagnostic(rule="file-unreadable", message=f"cannot read the file: {error.strerror}",
+                                     file=str(path))) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -163,7 +165,8 @@ def reject_aliases_of_containers(tree: Any, file: str) -> None:
         if id(node) in stack:
             line, column = (node.lc.line + 1, node.lc.col + 1) if hasattr(node, "lc") else (0, 0)
             raise SourceError(
-                Diagnostic(rule="yaml-recursive", message="a YAML anchor refers to itself", file=file, line=line, column=column)
+                Diagnostic(rule="yaml-recursive", message="a YAML anchor refers to itself", file=file, line=line,
+                           column=column)
             )
         if id(node) in seen:
             return

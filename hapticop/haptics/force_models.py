@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import Annotated, ClassVar, Literal, Union
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from annotated_types import Ge, Gt, Lt
@@ -412,7 +412,7 @@ FORCE_MODELS: dict[str, type[ForceModel]] = {
     BrakingField.name: BrakingField,
 }
 
-ForceModelParams = Union[NoForceParams, ThesisParams, BrakingFieldParams]
+ForceModelParams = NoForceParams | ThesisParams | BrakingFieldParams
 """The parameters of one force model; their ``kind`` names it (a key of ``FORCE_MODELS``)."""
 
 

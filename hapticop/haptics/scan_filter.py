@@ -18,7 +18,7 @@ told apart by ``kind``; ``make_scan_filter`` builds the one they name.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 import numpy as np
 from annotated_types import Ge, Predicate
@@ -55,7 +55,7 @@ class MovingMedianParams:
     kind: Literal["moving_median"] = "moving_median"
 
 
-ScanFilterParams = Union[MovingAverageParams, MovingMedianParams]
+ScanFilterParams = MovingAverageParams | MovingMedianParams
 """The parameters of one scan filter; their ``kind`` says which."""
 
 

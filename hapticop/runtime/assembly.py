@@ -65,8 +65,8 @@ def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer
         mine = {}
         for name in members:
             resolved = loaded.activities[name]
-            mine[name] = runners[name] = make_runner(name, resolved, composition, region, transports, clock, writer, seed,
-                                                      coordination)
+            mine[name] = runners[name] = make_runner(name, resolved, composition, region, transports, clock, writer,
+                                                      seed, coordination)
         log = writer.logger(f"thread-{thread_name}", Level[spec.log.upper()], clock.now_ns)
         threads[thread_name] = CyclicThread(thread_name, spec, region, mine, clock, log, apply_realtime)
     return Built(threads, runners)

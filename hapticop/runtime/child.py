@@ -57,7 +57,7 @@ def process_main(tree: dict, flags: list[str], region_name: str, threads: list[s
             other.join()
     finally:
         writer.stop()
-        del built
+        built = None  # drop the views into the region before it is released (rebound, not deleted: run() reads it)
         region.close()
 
 

@@ -332,9 +332,11 @@ def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5
         except TimeoutError:
             raise ControlError(f"the hapticop system {who} did not answer within {timeout:g} s") from None
         except _TooLarge:
-            raise ControlError(f"the reply of the hapticop system {who} is larger than {MAX_REPLY_BYTES} bytes") from None
+            raise ControlError(
+                f"the reply of the hapticop system {who} is larger than {MAX_REPLY_BYTES} bytes") from None
         except OSError as error:
-            raise ControlError(f"the connection to the hapticop system {who} failed: {error.strerror or error}") from None
+            raise ControlError(
+                f"the connection to the hapticop system {who} failed: {error.strerror or error}") from None
     finally:
         client.close()
     if not line:

@@ -24,8 +24,9 @@ from hapticop.runtime.logs import Logger
 
 # Failure codes in region.failed
 OK, RESOURCE_FAILED, CAPABILITY_FAILED, RUNNING_FAILED, CLEANING_FAILED, CREATION_FAILED = range(6)
-FAILURE_TEXT = {CREATION_FAILED: "creation failed", RESOURCE_FAILED: "resource configuration failed", CAPABILITY_FAILED: "capability configuration failed",
-                RUNNING_FAILED: "running failed", CLEANING_FAILED: "cleaning failed"}
+FAILURE_TEXT = {CREATION_FAILED: "creation failed", RESOURCE_FAILED: "resource configuration failed",
+                CAPABILITY_FAILED: "capability configuration failed", RUNNING_FAILED: "running failed",
+                CLEANING_FAILED: "cleaning failed"}
 
 
 _STATES = tuple(State(value) for value in range(len(State)))  # by value, without an enum call per cycle

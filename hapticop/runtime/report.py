@@ -41,7 +41,8 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
         summary = Summary.of(region.compute[index], int(region.compute_max[index]))
         activities[name] = {"steps": summary.count, "compute_us": _numbers(summary)}
         if region.sim_ns[index]:
-            activities[name]["simulation_us_per_step"] = round(int(region.sim_ns[index]) / 1000 / max(1, summary.count), 1)
+            activities[name]["simulation_us_per_step"] = round(
+                int(region.sim_ns[index]) / 1000 / max(1, summary.count), 1)
     if elapsed_ns:  # the system's own CPU: the loops' CPU less what their blocks spent simulating devices
         simulated = 100.0 * int(region.sim_ns.sum()) / elapsed_ns
         loops = sum(t["cpu_percent"] or 0.0 for t in threads.values())

@@ -70,7 +70,8 @@ _REASONS = {
     ("thread", "cpus"): "the CPU affinity of a running thread cannot change live",
     ("thread", "deploy"): "where a thread is deployed cannot change live",
     ("thread", "start"): "the start policy of a thread only matters at start",
-    ("activity", "block"): "the block of a running activity cannot change live; add an activity with a new name instead",
+    ("activity", "block"): "the block of a running activity cannot change live; "
+                           "add an activity with a new name instead",
     ("activity", "start"): "the start policy of an activity only matters at start",
     ("stream", "writer"): "the endpoints of a running stream cannot change live; add a stream with a new name instead",
     ("stream", "readers"): "the endpoints of a running stream cannot change live; add a stream with a new name instead",
@@ -149,7 +150,8 @@ def _coordination_changes(plan: ChangePlan, old: Composition, new: Composition) 
                                          f"'{name}' {what}; {reason}"))
 
 
-def _unsupported_fields(plan: ChangePlan, kind: str, path: Path, before: BaseModel, after: BaseModel, live: set[str]) -> None:
+def _unsupported_fields(plan: ChangePlan, kind: str, path: Path, before: BaseModel, after: BaseModel,
+                        live: set[str]) -> None:
     for name, info in type(before).model_fields.items():
         if name in live:
             continue

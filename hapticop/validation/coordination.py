@@ -103,8 +103,8 @@ def flags(cg: G.CompositionGraph) -> Check:
                                  "never sees it change", d["path"])
         if sink_writes and not owner_reads and not source_reads and not owner_writes:
             for _, d in sink_writes:
-                yield Diagnostic("flag-no-reader", f"flag '{name}' is read by no one: setting it from a sink has no effect",
-                                 d["path"])
+                yield Diagnostic("flag-no-reader", f"flag '{name}' is read by no one: setting it from a sink "
+                                 "has no effect", d["path"])
         converting = [d for _, d in source_reads if d["mode"] == "converting_sources"]
         for d in converting[1:]:
             yield Diagnostic("flag-consumed-twice", f"flag '{name}' is consumed by two converting sources; only one "
@@ -179,7 +179,8 @@ def reachability(cg: G.CompositionGraph, state_limit: int = DEFAULT_STATE_LIMIT)
                 yield Diagnostic("net-unbounded", f"net '{name}': place '{finding.place}' is unbounded; the steps "
                                  f"[{trace}] reach {marking}, which covers an earlier marking and can repeat",
                                  path + ("places", finding.place),
-                                 hint="consume the token again, or guard the producing transition with a place it empties")
+                                 hint="consume the token again, or guard the producing transition "
+                                      "with a place it empties")
             elif finding.kind == "dead":
                 yield Diagnostic("net-dead-marking", f"net '{name}': dead marking {marking} {after}; no "
                                  "transition can fire again and no terminal place is marked", path,

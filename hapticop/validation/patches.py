@@ -89,7 +89,8 @@ def load_patch(text: str, file: str = "<patch>") -> list | dict:
             found = replace(found, message=found.message.replace("a composition", "a patch"), hint="")
         raise PatchError([found]) from None
     except Exception as error:  # noqa: BLE001 - the contract is "only PatchError"
-        raise PatchError([Diagnostic(rule="patch-syntax", message=f"cannot read the patch: {error}", file=file)]) from None
+        raise PatchError([Diagnostic(rule="patch-syntax", message=f"cannot read the patch: {error}",
+                                     file=file)]) from None
 
 
 def _load_patch(text: str, file: str) -> list | dict:
@@ -122,7 +123,8 @@ def check_patch(patch: Any, file: str = "<patch>") -> None:
             line, column = _item_position(patch, None)
             raise PatchError(
                 [Diagnostic(rule="patch-syntax", message="this mapping looks like one JSON Patch operation, "
-                            "but a mapping is read as a merge patch", hint="write the operation as a list item: '- op: ...'",
+                            "but a mapping is read as a merge patch",
+                            hint="write the operation as a list item: '- op: ...'",
                             file=file, line=line, column=column)]
             )
         return
@@ -276,7 +278,8 @@ def _reread(tree: Any, file: str) -> CommentedMap:
 # --- validating the result and planning the change -------------------------------------
 
 
-def validate_patched(new_tree: CommentedMap, file: str = "<patched>", state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
+def validate_patched(new_tree: CommentedMap, file: str = "<patched>",
+                     state_limit: int = DEFAULT_STATE_LIMIT) -> Validated:
     """Run every check of `hapticop validate` on the patched description.
 
     The checks run on the tree read back from its YAML dump, so every diagnostic's line

@@ -149,7 +149,8 @@ def explore(
             parent[nxt] = marking
             grown = covered_ancestor(nxt, marking)
             if grown is not None:
-                findings.append(Finding("unbounded", {n: v for n, v in zip(names, nxt) if v}, trace_to(nxt), place=names[grown]))
+                findings.append(Finding("unbounded", {n: v for n, v in zip(names, nxt) if v}, trace_to(nxt),
+                                        place=names[grown]))
                 return Analysis(graph.number_of_nodes(), False, findings)
             if graph.number_of_nodes() >= state_limit:
                 complete = False
@@ -173,7 +174,8 @@ def explore(
         return any(node[k] > 0 for k in terminal_positions)
 
     # `graph` was built breadth first, so iteration order is by distance from the start.
-    can_fire_again = backwards_from([n for n in graph if any(d["transition"] for *_, d in graph.out_edges(n, data=True))])
+    can_fire_again = backwards_from([n for n in graph
+                                     if any(d["transition"] for *_, d in graph.out_edges(n, data=True))])
     dead = [n for n in graph if n not in can_fire_again and not is_terminal(n)]
     for node in dead[:3]:
         findings.append(Finding("dead", {n: v for n, v in zip(names, node) if v}, trace_to(node)))

@@ -45,7 +45,8 @@ def needs(cg: G.CompositionGraph) -> Check:
     a declared activity whose block provides that: otherwise it would wait for it forever."""
     for u, v, data in cg.edges_of("needs"):
         need = data["need"]
-        providers = sorted(n[1] for n, d in cg.nodes_of("activity") if need.provides in d["resolved"].interface.provides)
+        providers = sorted(n[1] for n, d in cg.nodes_of("activity")
+                           if need.provides in d["resolved"].interface.provides)
         why = f" ({need.why})" if need.why else ""
         if not cg.g.nodes[v].get("declared", True):
             hint = _suggest(need.activity, providers) or (
@@ -103,7 +104,8 @@ def schedules(cg: G.CompositionGraph) -> Check:
                              second, hint="an activity belongs to one thread; its state is not shared between them")
     for node, data in cg.nodes_of("activity"):
         if node[1] not in placed:
-            yield Diagnostic("activity-unscheduled", f"activity '{node[1]}' is in no thread's schedule, so it never runs",
+            yield Diagnostic("activity-unscheduled",
+                             f"activity '{node[1]}' is in no thread's schedule, so it never runs",
                              data["path"], severity=Severity.WARNING)
 
 
@@ -301,5 +303,5 @@ def busy_waits(cg: G.CompositionGraph) -> Check:
                              hint="a process of its own, or busy_wait: 0")
 
 
-CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus, latencies,
-          busy_waits)
+CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus,
+          latencies, busy_waits)

@@ -102,7 +102,8 @@ class SoemMaster:
         for slave, spec in zip(self.slaves, self.expected):
             if len(slave.output) != spec.output_bytes or len(slave.input) != spec.input_bytes:
                 raise BringUpError(f"slave {spec.name} ({slave.name}) maps {len(slave.output)} output and "
-                                   f"{len(slave.input)} input bytes; expected {spec.output_bytes} and {spec.input_bytes}")
+                                   f"{len(slave.input)} input bytes; expected {spec.output_bytes} and "
+                                   f"{spec.input_bytes}")
         if self.master.state_check(AL_SAFEOP, 50_000) != AL_SAFEOP:
             self.master.read_state()
             raise BringUpError("not every slave reached SAFE-OP: " + self.describe_states())

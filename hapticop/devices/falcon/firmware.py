@@ -92,4 +92,5 @@ def describe(data: bytes) -> str:
     """Which known image these bytes are, for logs."""
     digest = hashlib.sha256(data).hexdigest()
     known = next((image for image in KNOWN_IMAGES if image.sha256 == digest), None)
-    return f"{known.name} ({known.size} bytes)" if known else f"an image accepted by hash ({len(data)} bytes, sha256 {digest[:12]}...)"
+    return (f"{known.name} ({known.size} bytes)" if known
+            else f"an image accepted by hash ({len(data)} bytes, sha256 {digest[:12]}...)")

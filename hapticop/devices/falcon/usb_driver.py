@@ -306,7 +306,8 @@ class FalconUsb:
                 break
         else:
             raise FalconLoaderError(f"the Falcon's boot loader did not answer the handshake in {handshake_tries} "
-                                    "tries: is the Falcon's own power supply plugged in? (USB power alone is not enough)")
+                                    "tries: is the Falcon's own power supply plugged in? "
+                                    "(USB power alone is not enough)")
         self._modem(ftdi.DTR_LOW)
         self.set_baud(ftdi.Baud.UPLOAD)
         self._write(AUTOBAUD)

@@ -669,7 +669,7 @@ def password_hash(password: str) -> str:
     """SICK's login hash: MD5, XOR-fold 16 bytes into 4, little-endian uint32, 8 hex digits."""
     digest = hashlib.md5(password.encode("latin-1")).digest()
     folded = bytes(digest[k] ^ digest[k + 4] ^ digest[k + 8] ^ digest[k + 12] for k in range(4))
-    return "%08X" % struct.unpack("<I", folded)[0]
+    return f"{struct.unpack('<I', folded)[0]:08X}"
 
 
 def request(kind: str, name: str, *params: bytes | str | int) -> bytes:

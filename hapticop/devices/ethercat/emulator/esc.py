@@ -169,7 +169,8 @@ class Esc:
     def _read_fmmus(self) -> list[Fmmu]:
         fmmus = []
         for n in range(8):
-            logical, length, _, _, physical, _, kind, active = struct.unpack_from("<IHBBHBBB", self.mem, REG_FMMU + 16 * n)
+            logical, length, _, _, physical, _, kind, active = struct.unpack_from(
+                "<IHBBHBBB", self.mem, REG_FMMU + 16 * n)
             if active & 1 and length:
                 fmmus.append(Fmmu(logical, length, physical, bool(kind & 1), bool(kind & 2)))
         return fmmus
@@ -182,7 +183,8 @@ class Esc:
         n = next(i for i, s in enumerate(self.identity.sync_managers) if s.kind == SM_OUTPUTS)
         if not self.mem[REG_SM + 8 * n + 4] & 0x40:  # watchdog enable bit of the SM control
             return 0
-        divider, time = struct.unpack_from("<H", self.mem, REG_WD_DIVIDER)[0], struct.unpack_from("<H", self.mem, REG_WD_PD)[0]
+        divider, time = (struct.unpack_from("<H", self.mem, REG_WD_DIVIDER)[0],
+                         struct.unpack_from("<H", self.mem, REG_WD_PD)[0])
         return time * (divider + 2) * 40  # 25 MHz clock: 40 ns per tick
 
     def tick(self, now_ns: int) -> None:

@@ -71,7 +71,8 @@ class RopodSegment:
 
     def __init__(self, plant: PlantParams = PlantParams(), rng: np.random.Generator | None = None):
         wheel = smart_wheel_identity()
-        self.wheels = [Esc(wheel, ports=(0, 1)), Esc(wheel, ports=(0,)), Esc(wheel, ports=(0, 1)), Esc(wheel, ports=(0,))]
+        self.wheels = [Esc(wheel, ports=(0, 1)), Esc(wheel, ports=(0,)), Esc(wheel, ports=(0, 1)),
+                       Esc(wheel, ports=(0,))]
         self.slaves = [Esc(_coupler(), ports=(0, 1)), Esc(_junction(), ports=(0, 1, 3)), self.wheels[0], self.wheels[1],
                        Esc(_junction(), ports=(0, 3)), self.wheels[2], self.wheels[3]]
         self.segment = Segment(self.slaves)

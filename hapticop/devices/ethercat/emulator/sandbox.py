@@ -110,8 +110,9 @@ class Sandbox:
                 ip.link("set", index=ip.link_lookup(ifname=name)[0], state="up")
 
     def _emulator(self) -> None:
-        command = [sys.executable, "-m", "hapticop.devices.ethercat.emulator", self.peer, "--control", str(self.control),
-                   "--truth", str(self.truth), "--seed", str(self.seed), "--priority", str(self.priority)]
+        command = [sys.executable, "-m", "hapticop.devices.ethercat.emulator", self.peer,
+                   "--control", str(self.control), "--truth", str(self.truth), "--seed", str(self.seed),
+                   "--priority", str(self.priority)]
         with open(self.log, "wb") as log:
             self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
         from hapticop.devices.ethercat.emulator.server import control
@@ -153,7 +154,7 @@ class Sandbox:
                 with IPRoute() as ip:
                     for index in ip.link_lookup(ifname=self.interface):
                         ip.link("del", index=index)
-            except Exception:  # the namespace takes the pair with it anyway
+            except Exception:  # noqa: BLE001 - best-effort cleanup: the namespace takes the pair with it anyway
                 pass
         finally:
             if self._home is not None:

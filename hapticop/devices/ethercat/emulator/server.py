@@ -8,9 +8,10 @@ pysoem, which holds the GIL inside several of its calls.
 
 Faults arrive over a Unix socket as JSON lines and run between two frames:
 `{"op": "lose", "slave": 5}` (power off / cable cut), `restore` (back, freshly powered),
-`al_error` with a `code` (and `hold_ms`: the cause persists that long), `trip_watchdog`, `late` (`delay_us` for the next `frames`
-frames), `physics` (`run`: false freezes the robot, so its sensors stay put), `status`
-(states, codes, the wheels' process-data buffers in hex, the robot's pose), `ping`, `stop`.
+`al_error` with a `code` (and `hold_ms`: the cause persists that long), `trip_watchdog`,
+`late` (`delay_us` for the next `frames` frames), `physics` (`run`: false freezes the robot,
+so its sensors stay put), `status` (states, codes, the wheels' process-data buffers in hex,
+the robot's pose), `ping`, `stop`.
 Slaves are named by bus position, 0-based.
 """
 
