@@ -7,7 +7,7 @@ the FT232R's latency timer in wall-clock time: a reply leaves the chip when the 
 expires (or 62 bytes wait). Runs:
 
 - free-running at latency 1 ms and 16 ms: `exchange()` back to back, as libnifalcon's loop
-  does; the rate the latency timer allows (§5 of falcon-protocol.md: ~1 kHz vs ~60 Hz);
+  does; the rate the latency timer allows (§5 of docs/devices/falcon.md: ~1 kHz vs ~60 Hz);
 - paced at 1 kHz by absolute sleeps, as the Falcon block runs on a 1 ms thread;
 - host cost: the same exchanges under a virtual clock that never sleeps, so the time is the
   driver + pyusb + virtual device + simulated physics, with nothing waited for;

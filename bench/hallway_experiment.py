@@ -29,7 +29,7 @@ at 36 s); an operator who never lets go of the handle would otherwise hold the r
 
 def run_one(model: str, profile: str, variation: int, hallway: str, braking_field: dict | None = None) -> dict:
     """One seeded run. ``braking_field+governor`` is the hallway's own tuning; ``braking_field`` alone
-    drops that tuning (a precursor for the governor) and runs M1 with the notes' parameters."""
+    drops that tuning (a precursor for the governor) and runs M1 with docs/hallway-experiment.md's parameters."""
     from hapticop.composition.yamlsource import Source, read_file
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.sim.operator import BlindOperator

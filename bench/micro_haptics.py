@@ -1,7 +1,7 @@
 """Hand micro-benchmark of the haptic control laws and the simulated world: µs per call, and allocations.
 
 Run ``python bench/micro_haptics.py [--calls N] [--blocks SECONDS]``. Not a test: timings depend on the machine.
-The scene is the H2 hallway start (notes §2): 2 m wide, robot 0.3 m off-centre, end wall 9.5 m
+The scene is the H2 hallway start (docs/hallway-experiment.md §2): 2 m wide, robot 0.3 m off-centre, end wall 9.5 m
 ahead (within the 10 m range), moving at 0.5 m/s with the handle pushed forward and sideways.
 With ``--blocks``, systems/hallway.yaml also runs that long on the virtual clock and every
 ``compute`` of the haptic controller (cycles with and without a new scan apart) and of the

@@ -92,7 +92,7 @@ def test_jacobian(kin, case):
 def test_libnifalcon_z_column_error_is_real_and_large():
     worst = max(np.abs(np.array(c["libnifalcon_jacobian"]) - c["independent_jacobian"]).max()
                 / np.abs(c["independent_jacobian"]).max() for c in IK_CASES)
-    assert worst > 0.15  # the notes: up to 18 %
+    assert worst > 0.15  # docs/devices/falcon-kinematics.md: up to 18 %
 
 
 # ---------------------------------------------------------------- forces
@@ -117,7 +117,7 @@ def test_forces_use_the_true_jacobian_transpose(kin, case):
 
 
 def test_documented_example_at_125mm(kin):
-    """falcon-kinematics.md §8: F = (1, 0, 0) N at (0, 0, 0.125) m gives (-178, 605, -427)."""
+    """docs/devices/falcon-kinematics.md §8: F = (1, 0, 0) N at (0, 0, 0.125) m gives (-178, 605, -427)."""
     motor = np.zeros(3, dtype=np.int64)
     assert kin.forces_to_motor([0.0, 0.0, 0.125], [1.0, 0.0, 0.0], motor)
     assert motor.tolist() == [-178, 605, -427]  # libnifalcon sends (-178, 596, -324)
@@ -242,7 +242,7 @@ def test_fk_inverts_ik_in_the_workspace(a, b, c, d, e, f):
 
 
 def test_geometry_is_a_parameter():
-    """The thesis's r = 36.6 mm moves the counts-0 point by 2.4 mm in z (kinematics notes §1)."""
+    """The thesis's r = 36.6 mm moves the counts-0 point by 2.4 mm in z (docs/devices/falcon-kinematics.md §1)."""
     p, q = np.zeros(3), np.zeros(3)
     assert FalconKinematics().forward([0, 0, 0], p)
     assert FalconKinematics(Geometry(r=0.0366)).forward([0, 0, 0], q)

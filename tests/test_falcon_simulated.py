@@ -56,7 +56,7 @@ class Host:
 
 
 def home(host: Host, operator: Operator) -> int:
-    """Pull the grip out, push it in (falcon-protocol.md §6); returns the cycle it homed at."""
+    """Pull the grip out, push it in (docs/devices/falcon.md §6); returns the cycle it homed at."""
     for i in range(2500):
         target = (0.0, 0.0, 0.178) if i < 800 else (0.0, 0.0, 0.075)
         host.cycle(external=operator.force(target))

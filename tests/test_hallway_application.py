@@ -27,7 +27,7 @@ def test_the_run_finishes_by_itself_and_meets_the_targets(hallway_run):
     assert all(state is State.DONE for state in result.states.values())
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["ended_by"] == "stopped" and not metrics["crash"] and metrics["n_collisions"] == 0
-    assert -0.05 <= metrics["e_stop_m"] <= 0.10  # hallway-experiment.md §6, braking field
+    assert -0.05 <= metrics["e_stop_m"] <= 0.10  # docs/hallway-experiment.md §6, braking field
     results = json.loads((run / "results.json").read_text())
     assert all(row["ok"] is not False for row in results["rows"])
     assert (run / "run.png").read_bytes()[:4] == b"\x89PNG"

@@ -1,4 +1,4 @@
-"""M1 (notes §9.1): footprint clearance, braking-ratio risk, predictive lateral clearance."""
+"""M1 (docs/hallway-experiment.md §9.1): footprint clearance, braking-ratio risk, predictive lateral clearance."""
 
 import math
 

@@ -1,4 +1,5 @@
-"""S1 speed governor (notes §10): never adds speed, stops before obstacles, keeps turns off the walls."""
+"""S1 speed governor (docs/hallway-experiment.md §10): never adds speed, stops before obstacles, keeps
+turns off the walls."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""The full 1 kHz controller cycle (ropod-controller.md §7) on model quantities and on PDO images."""
+"""The full 1 kHz controller cycle (docs/devices/ropod.md §7) on model quantities and on PDO images."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The generic G_I_LL_LPF controller bank against reference.json (ropod-controller.md §6)."""
+"""The generic G_I_LL_LPF controller bank against reference.json (docs/devices/ropod.md §6)."""
 
 from __future__ import annotations
 

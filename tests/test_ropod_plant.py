@@ -211,7 +211,7 @@ def test_step_allocates_nothing():
 
 
 def _level1_derivative(y: np.ndarray, tau: np.ndarray, p: PlantParams) -> np.ndarray:
-    """The Level 1 equations (ropod-controller.md §8) written out with numpy's linear algebra."""
+    """The Level 1 equations (docs/devices/ropod.md §8) written out with numpy's linear algebra."""
     g = p.geometry
     theta, v, delta = y[2], y[3:6], y[6:10]
     px, py = np.array(g.pivots_m).T

@@ -1,4 +1,5 @@
-"""The simulated hallway: geometry from the notes, exact ray-cast ranges, clearance and collision, noise."""
+"""The simulated hallway: geometry from docs/hallway-experiment.md, exact ray-cast ranges, clearance and
+collision, noise."""
 
 import math
 import time

@@ -1,4 +1,4 @@
-"""Metrics of hallway-experiment.md §5 on synthetic runs with known answers, §6 targets, and the recorder."""
+"""Metrics of docs/hallway-experiment.md §5 on synthetic runs with known answers, §6 targets, and the recorder."""
 
 import math
 

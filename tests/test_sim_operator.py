@@ -1,4 +1,4 @@
-"""The blind operator of hallway-experiment.md §3: qualitative behaviour, timing of its rules, seeded variation."""
+"""The blind operator of docs/hallway-experiment.md §3: qualitative behaviour, timing of its rules, seeded variation."""
 
 import time
 

@@ -1,7 +1,7 @@
 """The Novint Falcon haptic device: handle position in, motor forces out, at 1 kHz.
 
 Geometry defaults to libnifalcon's values so its reference data applies
-(../shared/reference/falcon-kinematics.md). The block speaks the Falcon's 16-byte frames on a
+(docs/devices/falcon-kinematics.md). The block speaks the Falcon's 16-byte frames on a
 link that `driver` chooses: `usb` is the USB driver on a real Falcon (or, with
 `usb_backend: virtual`, on the virtual USB Falcon the tests use); `sim` sends the same frames
 to the activity named by `simulator`, which simulates the Falcon and whoever holds it.
@@ -112,7 +112,7 @@ class Falcon(Block):
         return UsbLink(image, p.device_index, backend, self.log)
 
     def configure_capabilities(self) -> bool:
-        """Homing: someone pulls the grip out, then pushes it in (falcon-protocol.md §6)."""
+        """Homing: someone pulls the grip out, then pushes it in (docs/devices/falcon.md §6)."""
         self._receive()
         self._send(forces=False)
         if self.homing.homed:

@@ -225,7 +225,7 @@ class PetriNet(Strict):
 
 
 class FlagMap(Strict):
-    """Binds flags to the places of one net (the four kinds of coordination.md)."""
+    """Binds flags to the places of one net (the four kinds of docs/coordination.md)."""
 
     net: Name
     converting_sources: dict[FlagName, PlaceName] = Field(

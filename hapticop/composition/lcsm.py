@@ -1,7 +1,7 @@
 """The Life Cycle State Machine vocabulary shared by activities and threads.
 
 States, super states, the progress flags an owner raises, and the requests the mediator
-may send (see ../shared/reference/coordination.md). The runtime implements the machine;
+may send (see docs/coordination.md). The runtime implements the machine;
 the validator uses the same names to know which flags exist and who writes them.
 """
 

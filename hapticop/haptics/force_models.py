@@ -5,8 +5,8 @@ the haptic controller's ``force_model`` parameter does):
 
 ``none``              F0: zero; the baseline.
 ``thesis``            Thesis eq. 5.5/5.6 exactly as written (see ``ThesisForce`` for what that does).
-``thesis_corrected``  F1 of hallway-experiment.md §1/§4: the same field made restoring on z.
-``braking_field``     M1 of the notes §9.1: footprint clearance, braking-ratio risk, predictive
+``thesis_corrected``  F1 of docs/hallway-experiment.md §1/§4: the same field made restoring on z.
+``braking_field``     M1 of docs/hallway-experiment.md §9.1: footprint clearance, braking-ratio risk, predictive
                       lateral clearance. The recommended model (with the S1 governor).
 
 Every model is configured once with the scan angles (robot frame, rad, 0 ahead, + left) and the
@@ -110,7 +110,7 @@ class NoForce(ForceModel):
 @parameters
 class ThesisParams:
     """Scales of eq. 5.5/5.6, for the field as written (``thesis``) or with its z branch centring
-    (``thesis_corrected``). The thesis tunes them by experiment; defaults are the notes' F1 values."""
+    (``thesis_corrected``). The thesis tunes them by experiment; defaults are docs/hallway-experiment.md's F1 values."""
 
     k3_n_per_m: Annotated[float, Ge(0)] = 100.0
     """z scale: at most k3·|z| of extra force (eq. 5.5)."""
@@ -127,7 +127,7 @@ class ThesisForce(ForceModel):
     ``F_z =  k3·z·M1`` for z ≥ 0, ``−k3·z·M2`` for z < 0; ``F_x = k4·x·M3`` for x ≥ 0, ``−k4·x·M4``
     for x < 0, with ``M_k = max_i h_k(d_i)·(d_i − d_max)/d_max·trig(θ_d,i)`` where ``max`` returns
     the value with the largest absolute value (the thesis says so explicitly; a numeric max of
-    these non-positive or non-negative terms would pick the farthest obstacle, or zero, notes §1).
+    these non-positive or non-negative terms would pick the farthest obstacle, or zero, docs/hallway-experiment.md §1).
     Regions: h1 sin θ_d < 0 (behind), h2 sin θ_d > 0 (ahead), h3 cos θ_d > 0 (right),
     h4 cos θ_d < 0 (left), each also requiring d_i < d_max. NaN ranges fail ``d < d_max``.
 
@@ -212,13 +212,13 @@ class ThesisForce(ForceModel):
 
 
 class CorrectedThesisForce(ThesisForce):
-    """F1 of the notes (§1, §4): the thesis field with the intended signs, ``F = −k·ρ·p`` on both axes.
+    """F1 of docs/hallway-experiment.md (§1, §4): the thesis field with the intended signs, ``F = −k·ρ·p`` on both axes.
 
     Same regions, same max-abs choice, same magnitudes as ``ThesisForce``; only the z sign differs,
-    so both axes add centring stiffness (Kp up to Kp + k3) instead of removing it on z. The notes
+    so both axes add centring stiffness (Kp up to Kp + k3) instead of removing it on z. docs/hallway-experiment.md
     write F1's z term for z < 0 only; the thesis's reversing branch (obstacles behind, z ≥ 0) is
     kept, with the same restoring sign.
-    Kept because the notes use it as the source-field reference condition; it still has every
+    Kept because docs/hallway-experiment.md use it as the source-field reference condition; it still has every
     limitation of §1 (cannot stop a pushing operator, no lateral cue with a centred handle,
     point-robot distances, beam switching).
     """
@@ -241,7 +241,7 @@ class CorrectedThesisForce(ThesisForce):
 class BrakingFieldParams:
     """M1, the braking field: footprint clearance, braking-ratio risk, predictive lateral clearance.
 
-    Defaults from hallway-experiment.md §2 and §9.1 unless marked as our choice."""
+    Defaults from docs/hallway-experiment.md §2 and §9.1 unless marked as our choice."""
 
     side_distance_m: Annotated[float, Ge(0)] = 0.40
     """dist1: comfortable side clearance (H1/H2)."""
@@ -250,7 +250,7 @@ class BrakingFieldParams:
     bumper_m: Annotated[float, Ge(0)] = 0.10
     """dist3: virtual bumper; the lateral cue is full here."""
     corridor_margin_m: Annotated[float, Ge(0)] = 0.10
-    """m_c, corridor half-width beyond the body. Not given in the notes; our choice (= dist3) keeps
+    """m_c, corridor half-width beyond the body. Not given in docs/hallway-experiment.md; our choice (= dist3) keeps
     the side walls of the 1.5 m H3 hall (0.45 m beside the body) out of the stop corridor."""
     brake_decel_mps2: Annotated[float, Gt(0)] = 0.5
     """a_b: braking capacity the risk is measured against."""
@@ -259,7 +259,7 @@ class BrakingFieldParams:
     proximity_gap_m: Annotated[float, Gt(0)] = 0.3
     """g_p: proximity risk ramps in over the last 0.3 m before the stop line, even at standstill."""
     longitudinal_risk: Literal["braking", "ttc"] = "braking"
-    """"braking": v/v_allow (the notes' choice); "ttc": the time-to-collision alternative."""
+    """"braking": v/v_allow (docs/hallway-experiment.md's choice); "ttc": the time-to-collision alternative."""
     ttc_horizon_s: Annotated[float, Gt(0)] = 4.0
     """T_h: TTC risk starts below this."""
     ttc_min_s: Annotated[float, Ge(0)] = 1.0
@@ -279,10 +279,10 @@ class BrakingFieldParams:
     fx_max_n: Annotated[float, Ge(0)] = 5.0
     """Lateral cue at full risk on one side."""
     lateral_speed_ref_mps: Annotated[float, Gt(0)] = 0.25
-    """v_ref: lateral cue scales with sat(|v|/v_ref), none at standstill. Not given in the notes;
+    """v_ref: lateral cue scales with sat(|v|/v_ref), none at standstill. Not given in docs/hallway-experiment.md;
     our choice is just below the cautious operator's 0.28 m/s cruise."""
     robust_k: Annotated[int, Ge(1)] = 3
-    """Robust minimum: the k-th smallest clearance (the notes' "3rd smallest")."""
+    """Robust minimum: the k-th smallest clearance (docs/hallway-experiment.md's "3rd smallest")."""
     risk_rate_per_s: Annotated[float, Gt(0)] = 3.0
     """|dρ/dt| limit on the risk state (ρ_z, e_L, e_R): bounds the force step at scan arrival."""
     period_s: Annotated[float, Gt(0)] = 0.001
@@ -301,7 +301,7 @@ def _sat01(u: float) -> float:
 
 
 class BrakingField(ForceModel):
-    """M1: footprint + braking-ratio risk + predictive lateral clearance (notes §9.1).
+    """M1: footprint + braking-ratio risk + predictive lateral clearance (docs/hallway-experiment.md §9.1).
 
     Longitudinal, a resisting force while pushing forward::
 
@@ -317,7 +317,7 @@ class BrakingField(ForceModel):
         e_S      = sat((dist1 + m_l − c_S)/(dist1 + m_l − dist3))
         F_x      = F_x,max·(e_L − e_R)·sat(|v|/v_ref)                         towards the freer side
 
-    Translating by v·T_p equals the notes' c + T_p·ċ for a straight wall; ċ comes from the
+    Translating by v·T_p equals docs/hallway-experiment.md's c + T_p·ċ for a straight wall; ċ comes from the
     measured robot velocity, not from ω, so no handle-proportional term crosses the network
     (§7.3). ρ_z, e_L, e_R are rate-limited. Diagnostics of the last call: ``gap_m``,
     ``rho_brake``, ``rho_prox``, ``c_left_m``, ``c_right_m`` and the rate-limited ``risk``.

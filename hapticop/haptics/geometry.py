@@ -1,6 +1,6 @@
 """The fixed beam geometry of a scan seen from the robot's body, shared by the M1 field and the governor.
 
-The thesis models the robot as a point at the LIDAR; the notes (hallway-experiment.md §1 item 4,
+The thesis models the robot as a point at the LIDAR; docs/hallway-experiment.md (docs/hallway-experiment.md §1 item 4,
 §9) measure clearance from the robot's rectangular body instead: for a 0.6 m wide robot a wall
 0.3 m beside the scanner is touching. The body (footprint and LIDAR mount) is the robot's one
 description in ``hapticop.devices.ropod.body``. Beam directions depend only on the scan angles,
@@ -21,7 +21,7 @@ from hapticop.devices.ropod.body import Body
 def kth_smallest(work: NDArray[np.float64], k: int) -> float:
     """k-th smallest value of ``work`` (``inf`` if fewer than k finite ones); destroys ``work``.
 
-    A robust minimum (notes §9: "never take a bare max over raw beams"): up to k − 1 outlier
+    A robust minimum (docs/hallway-experiment.md §9: "never take a bare max over raw beams"): up to k − 1 outlier
     beams cannot set it. Non-members must already be ``inf`` in ``work``. k passes of argmin:
     for the small k used here this beats ``ndarray.partition``, which allocates per call.
     """
@@ -104,7 +104,7 @@ class BeamGeometry:
     def corridor_gap(self, margin_m: float, k: int) -> float:
         """Robust distance from the footprint's front to the obstacles in the driving corridor.
 
-        Corridor (notes §9.1): ``|p_y| ≤ W/2 + margin`` and ``p_x > L/2``; the gap is the k-th
+        Corridor (docs/hallway-experiment.md §9.1): ``|p_y| ≤ W/2 + margin`` and ``p_x > L/2``; the gap is the k-th
         smallest ``p_x − L/2`` there, ``inf`` if fewer than k beams hit it. Kept per scan: the
         braking field and the governor usually ask for the same corridor.
         """
@@ -128,7 +128,7 @@ class BeamGeometry:
         """Choose the side points for ``side_clearances``: beside or diagonal to the body now.
 
         Left: ``p_y > W/2``, right: ``p_y < −W/2``, both inside the window
-        ``−L/2 − rear ≤ p_x ≤ L/2 + ahead`` (notes §9.1). Stored as additive penalties
+        ``−L/2 − rear ≤ p_x ≤ L/2 + ahead`` (docs/hallway-experiment.md §9.1). Stored as additive penalties
         (0 selected, inf not), so the per-cycle selection is one addition.
         """
         win, side, px, py = self._m1, self._m2, self.px, self.py
@@ -150,7 +150,7 @@ class BeamGeometry:
 
         The clearance ``‖max(|p − s| − h, 0)‖`` of each selected point is evaluated with the
         points moved by ``−s``: the body's clearance after it translates by ``s``. ``s = v·T_p``
-        gives the notes' predicted clearance ``c + T_p·ċ`` exactly for a straight wall (and for a
+        gives docs/hallway-experiment.md's predicted clearance ``c + T_p·ċ`` exactly for a straight wall (and for a
         parallel wall it stays constant, where a linearisation would not). Returns
         ``(c_left, c_right)``, ``inf`` where fewer than k points are selected.
         """

@@ -1,6 +1,6 @@
 """S1, the robot-side speed governor: limit the commanded twist so the robot stops before obstacles.
 
-hallway-experiment.md §1 item 2 and §10: no handle force can stop an operator who keeps pushing,
+docs/hallway-experiment.md §1 item 2 and §10: no handle force can stop an operator who keeps pushing,
 so safety needs a robot-side limit on the robot's own undelayed scan:
 
     v_exec = min(v_cmd, √(2·a_b·g⁺))        g = front-of-footprint gap to obstacles − dist2
@@ -39,7 +39,8 @@ from hapticop.parameters import parameters
 
 @parameters
 class GovernorParams:
-    """S1, the robot-side speed governor (notes §2, §10): the robot stops before obstacles however hard it is pushed."""
+    """S1, the robot-side speed governor (docs/hallway-experiment.md §2, §10): the robot stops before
+    obstacles however hard it is pushed."""
 
     brake_decel_mps2: Annotated[float, Gt(0)] = 0.5
     """a_b: planned deceleration; tune to the robot's real limits (§10)."""

@@ -1,6 +1,6 @@
 """The handle side: the PD that holds the handle at its origin, and the car-driving map to a twist.
 
-Thesis §5.2 (eq. 5.1, 5.2) and §5.3.1 (eq. 5.3, 5.4); hallway-experiment.md (notation, §1, §11).
+Thesis §5.2 (eq. 5.1, 5.2) and §5.3.1 (eq. 5.3, 5.4); docs/hallway-experiment.md (notation, §1, §11).
 
 Axis conventions (the single place they are defined; every other module imports them)
 ----------------------------------------------------------------------------------
@@ -11,7 +11,7 @@ negative (thesis §5.3.1), and ``x > 0`` means "turn right" (thesis fig. 5.5). F
 same axes: a positive ``F_z`` pushes the hand back towards the operator.
 
 Platform twist ``[vx, vy, wz]``: the ropod robot frame (REP 103, as the ropod block and
-ropod-controller.md use it): x forward, y left, ``wz`` counter-clockwise positive, so a
+docs/devices/ropod.md use it): x forward, y left, ``wz`` counter-clockwise positive, so a
 left turn is ``wz > 0`` and the thesis's right turn for ``x > 0`` is ``wz < 0``.
 
 Hence ``vx = k1·dz(−z)``, ``vy = 0``, ``wz = −k2·dz(x)``.
@@ -69,11 +69,11 @@ class CentringPD:
     after adding the environmental force (eq. 5.1: the operator feels the sum, and the device
     limit applies to the sum).
 
-    Eq. 5.2 literally reads ``Kd·(e_k − e_(k−1))`` with Kd = 0.2, i.e. per sample. The notes, the
-    block and the stability analysis (hallway-experiment.md §7.2) use Kd = 0.2 N·s/m on a velocity;
+    Eq. 5.2 literally reads ``Kd·(e_k − e_(k−1))`` with Kd = 0.2, i.e. per sample. docs/hallway-experiment.md, the
+    block and the stability analysis (docs/hallway-experiment.md §7.2) use Kd = 0.2 N·s/m on a velocity;
     we follow them (the per-sample reading would be 1000× less damping at 1 kHz).
     The velocity is the Falcon block's differentiated velocity when given, otherwise the backward
-    difference of successive positions (the same signal, per notes §2).
+    difference of successive positions (the same signal, per docs/hallway-experiment.md §2).
     """
 
     def __init__(self, params: CentringParams = CentringParams(), origin: ArrayLike = (0.0, 0.0, 0.0)) -> None:
@@ -140,7 +140,7 @@ def _clip(f: float, limit: float) -> float:
 def dead_zone(u: float, width: float, subtractive: bool = True) -> float:
     """Ignore small displacements so the robot does not creep (thesis §5.3.1).
 
-    ``subtractive`` (default, the notes' recommendation): ``sign(u)·max(|u| − width, 0)``, continuous.
+    ``subtractive`` (default, docs/hallway-experiment.md's recommendation): ``sign(u)·max(|u| − width, 0)``, continuous.
     Otherwise the thesis's literal q: ``u`` if ``|u| > width`` else 0, which jumps by ``width`` at
     the edge (0.14 m/s of forward speed with k1 = 28 and a 5 mm zone).
     """

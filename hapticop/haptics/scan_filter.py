@@ -48,7 +48,7 @@ class MovingAverageParams:
 
 @parameters
 class MovingMedianParams:
-    """A running median that keeps the scan length and rejects single-beam outliers (notes §9)."""
+    """A running median that keeps the scan length and rejects single-beam outliers (docs/hallway-experiment.md §9)."""
 
     window: Annotated[int, Ge(1), Predicate(odd)] = 5
     """Beams per window, odd; the window // 2 beams at each end pass through."""
@@ -132,7 +132,7 @@ class MovingAverage:
 class MovingMedian:
     """5-beam (odd ``window``) running median that keeps the scan length: rejects single-beam outliers.
 
-    hallway-experiment.md §9 "common preprocessing". The ``window // 2`` beams at each end are
+    docs/hallway-experiment.md §9 "common preprocessing". The ``window // 2`` beams at each end are
     passed through. NaN sorts last, so a window is NaN when most of it is invalid; with a
     minority of NaN the result is an upper median of the valid beams.
     """

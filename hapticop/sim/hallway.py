@@ -1,13 +1,13 @@
 """The simulated dead-end hallway: walls as segments, a vectorised LIDAR ray-cast, footprint clearance.
 
-Why: the hallway experiment (hallway-experiment.md §2) needs one deterministic world that the simulated
+Why: the hallway experiment (docs/hallway-experiment.md §2) needs one deterministic world that the simulated
 TiM561, the force models and the metrics all agree on. Robot motion is not modelled here: callers pass the
 pose that the ropod plant produced.
 
 Frames. World: x along the hallway towards the end wall, y to the left, theta counter-clockwise from +x
 (ROS REP 103). Robot: x forward, y left, origin at the footprint's centre; its footprint and LIDAR mount are
 the robot's body (hapticop.devices.ropod.body). LIDAR: mounted at (x, y, yaw) in the robot frame; beam
-angles are in its sensor frame (x forward, y left, counter-clockwise; sick-cola-a.md §5),
+angles are in its sensor frame (x forward, y left, counter-clockwise; docs/devices/sick-tim561.md §5),
 so a TiM561 covers -135 deg ... +134.973 deg in 811 steps of 0.3333 deg and index 405 looks about straight ahead.
 """
 
@@ -40,7 +40,8 @@ class Pillar:
 
 @dataclass(frozen=True)
 class LidarModel:
-    """The TiM561 as §2 and sick-cola-a.md §5 describe it: where it sits, its beams, range limits and noise."""
+    """The TiM561 as §2 and docs/devices/sick-tim561.md §5 describe it: where it sits, its beams, range
+    limits and noise."""
 
     mount: SensorMount = Body().lidar  # x, y [m], yaw [rad] in the robot frame
     beams: int = 811
@@ -92,7 +93,7 @@ class HallwayGeometry:
 
     @classmethod
     def named(cls, name: str) -> HallwayGeometry:
-        """H1 ... H6 of §2's table (H5 is H2 with the noisy sensor; H6 is optional in the notes)."""
+        """H1 ... H6 of §2's table (H5 is H2 with the noisy sensor; H6 is optional in docs/hallway-experiment.md)."""
         wide = dict(width_m=2.0, length_m=10.0, dist1_m=0.40)
         table: dict[str, dict] = {
             "H1": dict(wide, start=(0.5, 0.0, 0.0)),

@@ -1,4 +1,4 @@
-"""The hallway experiment's log, its metrics (hallway-experiment.md §5) and the targets they are judged by (§6).
+"""The hallway experiment's log, its metrics (docs/hallway-experiment.md §5) and the targets they are judged by (§6).
 
 Why: every condition of §4 is compared on the same deterministic numbers, computed after the run from what a
 1 kHz loop recorded. `TrajectoryRecorder` is that record: preallocated, appended to without allocating, saved

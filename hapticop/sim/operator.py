@@ -1,8 +1,8 @@
 """A deterministic blind operator: the felt force in, the force of the hand on the Falcon handle out.
 
 Why: closed-loop runs of the hallway experiment need a repeatable stand-in for a person who cannot see the
-robot and only feels the handle (hallway-experiment.md §3; hand models after Hasser & Cutkosky and
-Fu & Cavusoglu, reaction delay after McRuer, haptics-literature.md §3.5). Three layers:
+robot and only feels the handle (docs/hallway-experiment.md §3; hand models after Hasser & Cutkosky and
+Fu & Cavusoglu, reaction delay after McRuer, docs/hallway-experiment.md §3). Three layers:
 
 1. Perception: the operator feels the environmental force F_env(t - tau_h). The centring spring is learned and
    not felt as information, so pass only the environmental part (the rendered force minus the centring PD).

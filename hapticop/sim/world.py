@@ -5,7 +5,7 @@ every cycle, the robot's pose in the hallway (its start composed with the motion
 plant reports), which the simulated LIDAR scans from. Once the operator drives it records the
 run (robot pose and velocity, handle, forces, clearance) and raises `finished` when the
 operator is done and the robot still, the robot crashes, or time is up, so the mediator can
-end the run. When it is cleaned it leaves the trajectory, the metrics of hallway-experiment.md
+end the run. When it is cleaned it leaves the trajectory, the metrics of docs/hallway-experiment.md
 section 5 and a picture of the run in the run directory.
 """
 
@@ -25,7 +25,7 @@ from hapticop.blocks.interface import Params, Port
 
 class HallwayWorldParams(Params):
     hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] = Field(
-        "H1", description="hallway of hallway-experiment.md §2")
+        "H1", description="hallway of docs/hallway-experiment.md §2")
     operator: str = Field("operator", description="the activity whose run this world judges (block blind_operator): "
                           "its variant sets the targets")
     time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")

@@ -1,6 +1,6 @@
 """Novint Falcon device library: frame codec, kinematics, homing and a simulator.
 
-Facts come from ../shared/reference/falcon-protocol.md and falcon-kinematics.md; the
+Facts come from docs/devices/falcon.md and docs/devices/falcon-kinematics.md; the
 Falcon block composes these pieces, none of them knows about blocks.
 """
 

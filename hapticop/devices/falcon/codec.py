@@ -1,4 +1,4 @@
-"""The Falcon's 16-byte normal-mode frames (falcon-protocol.md §4), both directions.
+"""The Falcon's 16-byte normal-mode frames (docs/devices/falcon.md §4), both directions.
 
 A frame is `<`, twelve nibble characters carrying three int16 values (least-significant
 nibble first, each byte 0x41 + nibble), a flags/status byte, a spare byte and `>`. Host to
@@ -7,7 +7,7 @@ host they are encoder counts and byte 13 holds buttons (low nibble) and per-axis
 flags (bits 4-6), so it may exceed 'P' (0xB1 = all homed).
 
 `FrameReader` turns USB reads of any size into frames. libnifalcon walks its buffer in
-16-byte steps and never recovers from a lost byte (§4.3); following the notes we scan for
+16-byte steps and never recovers from a lost byte (§4.3); following docs/devices/falcon.md, we scan for
 `<`, check `>` 15 bytes later and the range of every byte between (`<` and `>` can never
 occur inside a valid frame, so this resynchronises within one frame), and count what we
 drop. Byte 14's meaning is unknown (0x41 in every observed frame): it is accepted in
@@ -40,7 +40,7 @@ FRAME_SIZE = 16
 START = 0x3C  # '<'
 END = 0x3E  # '>'
 _BASE = 0x41  # 'A' = nibble 0
-#: Motor command saturation the notes recommend (Novint's driver was seen sending 4095).
+#: Motor command saturation docs/devices/falcon.md recommend (Novint's driver was seen sending 4095).
 MOTOR_LIMIT = 4095
 
 U8 = NDArray[np.uint8]

@@ -2,7 +2,7 @@
 
 The image is Novint's (Noncommercial SDK licence): hapticop never ships, embeds or fetches
 it. The user gives its path; we load it only if its size and SHA-256 are those of a known
-image (falcon-protocol.md §3), because uploading arbitrary bytes to the DSP's boot loader
+image (docs/devices/falcon.md §3), because uploading arbitrary bytes to the DSP's boot loader
 is not something to do by accident. Another image is accepted only when its hash is given
 explicitly (`accept_sha256`, the Falcon block's `firmware_sha256` param): the user then
 vouches for it, and it still has to look like a C2000 boot table.
@@ -25,7 +25,7 @@ class KnownImage:
     origin: str
 
 
-#: The four images in libnifalcon's `firmware/` (commit f7c727aa), as the notes list them.
+#: The four images in libnifalcon's `firmware/` (commit f7c727aa), as docs/devices/falcon.md list them.
 KNOWN_IMAGES: tuple[KnownImage, ...] = (
     KnownImage("nvent_firmware.bin", 8492, "1119e39c39fab1f37678ea62dfc715b23dd86ee7f13d78f88f707d9f09b896a1",
                "Novint's nVent software; libnifalcon's release firmware"),

@@ -1,4 +1,4 @@
-"""The Falcon's FTDI USB bridge as its host side sees it (falcon-protocol.md §1).
+"""The Falcon's FTDI USB bridge as its host side sees it (docs/devices/falcon.md §1).
 
 The driver and the virtual device share these numbers, so both speak the same vendor
 requests: a request's meaning is written once. Only what libnifalcon uses is here: purges,

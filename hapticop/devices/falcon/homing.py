@@ -1,4 +1,4 @@
-"""What the host must do to home a Falcon (falcon-protocol.md §6), as a tiny state holder.
+"""What the host must do to home a Falcon (docs/devices/falcon.md §6), as a tiny state holder.
 
 Until homed, encoder counts are relative to power-on and any position-dependent force is
 meaningless or violent, so the Falcon block runs this in capability configuration:
@@ -73,7 +73,7 @@ class Homing:
 
 
 class HomingHand:
-    """A person homing the grip (falcon-protocol.md §6): out, then straight in, again until homed.
+    """A person homing the grip (docs/devices/falcon.md §6): out, then straight in, again until homed.
 
     A spring-damper hand pulls the handle to `out_z` for `out_s`, then pushes it to `in_z` for
     the rest of each `period_s` (absolute device frame, metres).

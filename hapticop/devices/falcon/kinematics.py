@@ -1,7 +1,7 @@
 """Novint Falcon kinematics: encoder counts, handle position, forces and motor commands.
 
 The Falcon is Stamper's 3-DOF translational parallel mechanism with libnifalcon's extra
-offsets (falcon-kinematics.md). Per leg: an actuated thigh angle theta1, the parallelogram
+offsets (docs/devices/falcon-kinematics.md). Per leg: an actuated thigh angle theta1, the parallelogram
 direction theta2 and the parallelogram tilt theta3. Inverse kinematics is analytic; forward
 kinematics is Newton-Raphson on it, warm-started from the previous answer, solved to
 1e-12 rad / 1e-10 m so the position does not lag the encoders the way libnifalcon's
@@ -50,10 +50,10 @@ WORKSPACE_BOX_M: tuple[tuple[float, float, float], tuple[float, float, float]] =
 
 @parameters
 class Geometry:
-    """Mechanism dimensions in metres, libnifalcon's values and signs (falcon-kinematics.md §1).
+    """Mechanism dimensions in metres, libnifalcon's values and signs (docs/devices/falcon-kinematics.md §1).
 
     The thesis (appendix B) lists r = 36.60, s = 23.09, f = 25.00 mm unsigned plus an unused
-    g; following the notes we default to libnifalcon's r = 40.00, s = -23.09, f = -25.00 mm,
+    g; following docs/devices/falcon-kinematics.md, we default to libnifalcon's r = 40.00, s = -23.09, f = -25.00 mm,
     the values all reference data was produced with. With r = 36.6 mm the same counts land
     up to ~4 mm elsewhere, so keep the geometry a parameter: the Falcon block and its
     simulator take this class as their `geometry` parameter as it is.
@@ -81,7 +81,7 @@ class Geometry:
 
 @dataclass(frozen=True)
 class Drive:
-    """Encoder and motor conversions of one leg (falcon-kinematics.md §7, §8).
+    """Encoder and motor conversions of one leg (docs/devices/falcon-kinematics.md §7, §8).
 
     An encoder of 320 slots read in quadrature gives 1280 counts per motor turn; a 14.25 mm
     capstan drives a 110 mm arm sector, so one count is 6.359e-4 rad of thigh; count 0
@@ -90,8 +90,8 @@ class Drive:
 
     `motor_per_nm` is libnifalcon's empirical torque-to-command factor and sign
     (motor = trunc(-10000 tau)), a starting point, not a calibration: Novint's own driver
-    was seen using a different scale. `motor_limit` is the +-4095 the notes recommend
-    (protocol §4.1) until hardware says otherwise; `torque_limit_nm` is libnifalcon's 30 N m.
+    was seen using a different scale. `motor_limit` is the +-4095 docs/devices/falcon-kinematics.md recommend
+    (docs/devices/falcon.md §4.1) until hardware says otherwise; `torque_limit_nm` is libnifalcon's 30 N m.
     """
 
     counts_per_turn: int = 320 * 4
@@ -292,7 +292,7 @@ class FalconKinematics:
         q10, q11, q12 = a21 * a02 - a22 * a01, a22 * a00 - a20 * a02, a20 * a01 - a21 * a00
         q20, q21, q22 = a01 * a12 - a02 * a11, a02 * a10 - a00 * a12, a00 * a11 - a01 * a10
         det = a00 * q00 + a01 * q01 + a02 * q02
-        # Frobenius condition number ||M|| ||M^-1|| guards the inversion, as the notes ask.
+        # Frobenius condition number ||M|| ||M^-1|| guards the inversion, as docs/devices/falcon-kinematics.md ask.
         norm_m = (a00 * a00 + a01 * a01 + a02 * a02 + a10 * a10 + a11 * a11 + a12 * a12
                   + a20 * a20 + a21 * a21 + a22 * a22)
         norm_q = (q00 * q00 + q01 * q01 + q02 * q02 + q10 * q10 + q11 * q11 + q12 * q12

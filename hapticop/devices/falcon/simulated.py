@@ -1,13 +1,13 @@
 """A simulated Falcon that answers command frames with status frames, through the real codec.
 
-It sits at the byte stream after the FTDI chip (falcon-protocol.md §7): one 16-byte status
+It sits at the byte stream after the FTDI chip (docs/devices/falcon.md §7): one 16-byte status
 frame per valid command frame, no reply to a malformed one. Inside, the motor commands
 become thigh torques (tau = command / -10000 N m, libnifalcon's scale inverted), the
 torques a handle force (F = J^-T tau, the same kinematics the host uses), and a point-mass
 handle with viscous damping moves under that force plus the operator's. Its position goes
 back through IK and the encoder model to counts.
 
-What the notes say the firmware does, and the sim therefore does:
+What docs/devices/falcon.md say the firmware does, and the sim therefore does:
 - motor commands saturate at +-4095 and are held 100 ms, then dropped to zero;
 - counts are int16, relative to power-on until the axis is homed, then absolute
   (count 0 = 35 deg), with the jump that implies;

@@ -1,6 +1,6 @@
 """The Falcon on USB: FTDI set-up, firmware loading and the 1 kHz frame exchange, over pyusb.
 
-The sequence is libnifalcon's libusb backend as falcon-protocol.md §2 describes it, with
+The sequence is libnifalcon's libusb backend as docs/devices/falcon.md §2 describes it, with
 three deliberate differences:
 - the loader's replies are collected over several USB packets (a 4-byte reply at 9600 baud
   can straddle two), and the reply to `A` may carry a leading 0x13 (§2.3 step 8);

@@ -2,7 +2,7 @@
 
 The USB driver (`usb_driver`) runs unchanged against it: it enumerates, opens, sends FTDI
 vendor requests and bulk transfers through pyusb, and this backend answers as the hardware
-would (falcon-protocol.md §7), in three layers:
+would (docs/devices/falcon.md §7), in three layers:
 
 - USB: 0403:CB48 "FALCON HAPTIC", one interface, bulk OUT 0x02 / IN 0x81, 64-byte packets,
   string descriptors, kernel-driver and claim state; faults: no permission, busy, unplugged.

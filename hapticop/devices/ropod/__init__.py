@@ -1,7 +1,7 @@
 """The ropod platform: smart-wheel process data, kinematics, the velocity controller and a simulator.
 
 Pure numpy libraries with no hapticop runtime dependency; the ropod controller and EtherCAT
-blocks build on them. Sources and conventions: ../shared/reference/ropod-controller.md.
+blocks build on them. Sources and conventions: docs/devices/ropod.md.
 """
 
 from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp, jacobian

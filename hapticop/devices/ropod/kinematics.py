@@ -1,4 +1,4 @@
-"""Smart-wheel kinematics, statics and torque distribution for the ropod (ropod-controller.md §4, §5).
+"""Smart-wheel kinematics, statics and torque distribution for the ropod (docs/devices/ropod.md §4, §5).
 
 Each of the 4 units is a trailing caster: a pivot at p_i, an axle s behind it, two wheels
 d apart. With `U_i = [c, s, x_i s - y_i c]` and `Q_i = [-s, c, x_i c + y_i s]` (c, s of the
@@ -47,7 +47,7 @@ def inverse_sym3(n00: float, n01: float, n02: float, n11: float, n12: float, n22
 
 @parameters
 class Geometry:
-    """Ropod geometry as compiled in the June-2019 controller (ropod-controller.md §2.2), in metres.
+    """Ropod geometry as compiled in the June-2019 controller (docs/devices/ropod.md §2.2), in metres.
 
     Pivots SW1..SW4 counter-clockwise from front-left; the order is a known open question (§10 Q1).
     """

@@ -3,7 +3,7 @@
 One chain per channel: gain -> PI whose *output* is clamped to +-S with clamping
 anti-windup -> lead-lag -> first-order low-pass, each the Tustin (bilinear, no prewarp)
 discretisation at Ts. The order and the integrator update follow the Simulink-generated
-code (ropod-controller.md §6.2), so the saturated and reset behaviour match the ropod,
+code (docs/devices/ropod.md §6.2), so the saturated and reset behaviour match the ropod,
 not just the linear transfer function. The ropod runs eleven of these (x, y, theta and
 eight wheels); a bank steps them all on Python floats with no allocation.
 """
@@ -58,7 +58,7 @@ class LinearControllerParams:
 
 
 
-# Parameter sets of ropod-controller.md §6.3 (platform K in N/(m/s) or Nm/(rad/s), wheel K in Nm/(rad/s)).
+# Parameter sets of docs/devices/ropod.md §6.3 (platform K in N/(m/s) or Nm/(rad/s), wheel K in Nm/(rad/s)).
 THESIS_PLATFORM_XY = LinearControllerParams(100.0, 0.25, 20.0, 20.0, 100.0, 100.0)
 THESIS_PLATFORM_THETA = LinearControllerParams(755.0, 0.3, 20.0, 20.0, 100.0, 100.0)
 THESIS_WHEEL = LinearControllerParams(0.05, 0.0, 2.0, 10.0, 50.0, 7.0)

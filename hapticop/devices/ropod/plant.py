@@ -1,6 +1,6 @@
 """A simulated ropod: rigid platform on four trailing-caster smart wheels, driven by wheel currents.
 
-The model is ropod-controller.md §8 "Level 1": the platform is a rigid body (36.5 kg, yaw
+The model is docs/devices/ropod.md §8 "Level 1": the platform is a rigid body (36.5 kg, yaw
 inertia I_z) and each smart-wheel unit adds its yaw inertia I_c about the pivot; the
 wheels roll without slip and the axles do not skid sideways. A unit's yaw rate is then
 tied to the platform twist (Omega_i = q_i/s), which makes the mass matrix depend on the
@@ -68,7 +68,7 @@ _SENSORS = record_struct(TXPDO_DTYPE, (
 
 @dataclass(frozen=True)
 class PlantParams:
-    """Physical parameters; the inertias and losses are the notes' guesses (§8), not measurements."""
+    """Physical parameters; the inertias and losses are docs/devices/ropod.md's guesses (§8), not measurements."""
 
     geometry: Geometry = field(default_factory=Geometry)
     mass_kg: float = 36.5
@@ -195,7 +195,7 @@ class RopodPlant:
 
     # --- dynamics -----------------------------------------------------------------------
     def _derivative(self, y: list[float], dy: list[float]) -> None:
-        """dy = f(y) for the held wheel torques (Level 1 equations, ropod-controller.md §8).
+        """dy = f(y) for the held wheel torques (Level 1 equations, docs/devices/ropod.md §8).
 
         Per unit, with U_i and Q_i of its pivot angle: the yaw rate Omega_i = Q_i v / s, the pivot
         rate Omega_i - wz, the wheel speeds (U_i v -+ k Q_i v) / r, and its share of the wrench

@@ -1,7 +1,7 @@
 """The ropod platform velocity controller: one 1 kHz cycle from sensor image to command image.
 
 The "kinematic controller with torque distribution" of the thesis (§5.1, §7.3), in the
-order of ropod-controller.md §7: read the smart wheels, condition the setpoint, estimate
+order of docs/devices/ropod.md §7: read the smart wheels, condition the setpoint, estimate
 the twist (forward kinematics), three platform controllers -> wrench, distribute it over
 the wheels, add the eight damping wheel controllers on the inverse-kinematics speed error,
 convert torque to current and write the drive commands. The platform loop tracks; the wheel

@@ -8,7 +8,7 @@ Everything that decodes bytes from the wire raises `ColaError` and nothing else,
 bytes are: a scanner (or a broken network) may send anything, and the caller only has to
 count and skip. A refusal from the device (`sFA <code>`) is the subclass `ColaDeviceError`.
 
-Scans: `parse_scan` walks one `LMDscandata` telegram (§4 of the notes) with a cursor that
+Scans: `parse_scan` walks one `LMDscandata` telegram (docs/devices/sick-tim561.md §4) with a cursor that
 uses the counts the telegram carries, and converts the value block of each channel in one
 vectorised numpy pass into arrays the caller owns. `build_scan` is its exact inverse, so the
 simulator sends what the device sends, byte for byte.
@@ -209,7 +209,7 @@ class TokenReader:
     """A cursor over a body: one token, one number or one length-prefixed string at a time.
 
     Never splits the whole body on spaces, because strings may contain spaces; uses the counts
-    the telegram carries instead (the notes' parser advice, §4).
+    the telegram carries instead (docs/devices/sick-tim561.md's parser advice, §4).
     """
 
     __slots__ = ("body", "pos", "end", "_spaces", "_codes")
@@ -825,7 +825,7 @@ def subscribe_scans(on: bool = True) -> Command:
 def startup_sequence(*, configure: bool = True, level: int = 3, hash_hex: str = LEVEL3_HASH,
                      output_range: OutputRange | None = OutputRange(),
                      scan_config: ScanDataConfig | None = None) -> tuple[Command, ...]:
-    """The order of sick_scan_xd and the notes: login, CoLa A, state, range, (content), start,
+    """The order of sick_scan_xd and docs/devices/sick-tim561.md: login, CoLa A, state, range, (content), start,
     Run, subscribe last (so no scan arrives between configuration replies). With
     `configure=False` only the subscription: a powered TiM measures on its own.
     """

@@ -1,6 +1,6 @@
 """Is there a TiM5xx at this address? One blocking CoLa A conversation, for `hapticop devices`.
 
-It asks what needs no login (sick-cola-a.md §3): `sRI 0` (identity: device type and
+It asks what needs no login (docs/devices/sick-tim561.md §3): `sRI 0` (identity: device type and
 firmware), `sRN SerialNumber` and `sRN SCdevicestate`, each answered before the next goes
 out. Anything that goes wrong becomes a `ProbeError` that says which layer failed (name
 resolution, routing, nobody listening, silence, not CoLa A) and what to check. Not for a

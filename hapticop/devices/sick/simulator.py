@@ -58,7 +58,7 @@ def room_ranges(angles_rad: NDArray[np.float64] = ANGLES_RAD, *, front: float = 
 
 
 class TiMSimulator:
-    """One client at a time, like the notes advise (a second connection is closed at once)."""
+    """One client at a time, like docs/devices/sick-tim561.md advise (a second connection is closed at once)."""
 
     def __init__(
         self,

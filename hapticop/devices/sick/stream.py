@@ -2,7 +2,7 @@
 
 TCP gives no message boundaries: one 3.4 kB scan arrives in several segments, and one
 `recv` may hold several telegrams. STX and ETX never occur inside a body, so they alone
-delimit frames (§8 of the notes):
+delimit frames (docs/devices/sick-tim561.md §8):
 
 1. drop bytes until an STX (counted in `discarded_bytes`);
 2. collect until an ETX, which ends the frame;
