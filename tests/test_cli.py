@@ -67,6 +67,19 @@ def test_graph_dot_and_png(tmp_path):
     assert "<svg" in svg.read_text()
 
 
+def test_graph_draws_the_simulators_and_what_they_stand_behind():
+    """Every simulated device is an activity of its own in the picture, joined to the device block
+    it serves and to the world it lives in; the hardware file has none."""
+    hallway = runner.invoke(app, ["graph", str(SYSTEMS / "hallway.yaml"), "--format", "dot"]).output
+    for device, simulator, kind in (("falcon", "falcon_sim", "falcon_device"), ("lidar", "lidar_sim", "tim561"),
+                                    ("ethercat", "ropod_plant", "ropod_wheels"), ("lidar_sim", "world", "hallway")):
+        assert f'"activity:{device}" -> "activity:{simulator}" [style=dashed, color=darkorange, ' \
+               f'label="needs {kind}"]' in hallway
+    assert '"activity:lidar_sim" [shape=box' in hallway  # drawn in its thread's box
+    hardware = runner.invoke(app, ["graph", str(SYSTEMS / "hardware.yaml"), "--format", "dot"]).output
+    assert "needs " not in hardware and "_sim" not in hardware
+
+
 def test_graph_of_unloadable_file_fails_cleanly():
     result = runner.invoke(app, ["graph", str(CORPUS / "invalid" / "invalid-empty-file.yaml")])
     assert result.exit_code == 1 and "cannot draw a file that does not load" in result.output

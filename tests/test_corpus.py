@@ -65,6 +65,9 @@ CASES = [
      "driver 'sim' needs 'simulator': the activity that simulates the device (a falcon_simulator)", None),
     ("invalid-lidar-simulator-real-driver.yaml", "bad-value", 14,
      "'simulator' goes with driver 'sim' only (the driver is 'tcp')", None),
+    ("invalid-falcon-sim-unscheduled.yaml", "missing-need", 13,
+     "'falcon' needs 'falcon_sim' (with driver 'sim': the activity that simulates the device), which is in no "
+     "thread's schedule", "schedule 'falcon_sim' on a thread"),
     ("invalid-falcon-sim-misspelt.yaml", "missing-need", 13,
      "'falcon' needs an activity 'falcon_sm' that provides 'falcon_device'", "did you mean 'falcon_sim'?"),
     ("invalid-falcon-sim-not-a-falcon.yaml", "missing-need", 13,
