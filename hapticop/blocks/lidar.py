@@ -8,21 +8,17 @@ port shapes follow it.
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import DeviceParams, Interface, Params, Port, RateRange
+from hapticop.blocks.interface import DeviceParams, Interface, Port, RateRange
+from hapticop.devices.ropod.body import Body
 
-
-class MountPose(Params):
-    """Where the scanner sits in the robot frame (x forward, y left)."""
-
-    x_m: float = 0.0
-    y_m: float = 0.0
-    yaw_deg: float = 0.0
+ROPOD_BODY = Body()
 
 
 class LidarParams(DeviceParams):
@@ -38,7 +34,9 @@ class LidarParams(DeviceParams):
     min_range_m: float = Field(0.05, ge=0, description="closer values are invalid")
     max_range_m: float = Field(10.0, gt=0)
     reconnect_backoff_s: tuple[float, float] = Field((0.1, 2.0), description="first and longest retry delay")
-    mount: MountPose = Field(default_factory=MountPose)
+    yaw_deg: float = Field(
+        math.degrees(ROPOD_BODY.lidar.yaw_rad), description="the scanner's heading on the robot: beam angles are "
+        "turned by it into the robot frame (where it sits is the robot body's, hapticop.devices.ropod.body)")
 
 
 
@@ -84,7 +82,7 @@ class Lidar(Block):
                                  startup=startup_sequence(output_range=output_range))
         self.ranges = np.zeros(p.points, dtype=np.float32)
         self.angles = np.zeros(p.points, dtype=np.float32)
-        self.yaw = np.radians(p.mount.yaw_deg)
+        self.yaw = np.radians(p.yaw_deg)
         self.connected = False
         return True
 
