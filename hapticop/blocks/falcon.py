@@ -33,7 +33,6 @@ class FalconParams(DeviceParams):
         None, description="accept this image instead of Novint's known ones (usb driver): you vouch for it")
     usb_backend: Literal["libusb", "virtual"] = Field(
         "libusb", description="usb driver: 'libusb' for a real Falcon, 'virtual' for the simulated USB device")
-    homing: bool = Field(True, description="home the encoders in capability configuration")
     geometry: Geometry = Field(default_factory=Geometry, description="the mechanism's dimensions")
 
     @field_validator("firmware_sha256")
