@@ -196,7 +196,7 @@ def test_patch_making_a_parameter_invalid_is_refused_with_the_validators_diagnos
 
 def test_schedule_naming_an_unknown_activity_is_refused(hallway):
     tree, _ = hallway
-    error = _refused(tree, "threads: {fieldbus: {schedules: {1: [ethercat, nobody]}}}\n")
+    error = _refused(tree, "threads: {fieldbus: {schedules: {1: [ropod_plant, ethercat, nobody]}}}\n")
     (diagnostic,) = error.diagnostics
     assert diagnostic.rule == "unknown-activity"
     assert "nobody" in diagnostic.message

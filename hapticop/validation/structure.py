@@ -59,7 +59,7 @@ def needs(cg: G.CompositionGraph) -> Check:
                 f"declare an activity whose block provides '{need.provides}' ({_builtin_providers(need.provides)})")
             yield Diagnostic("missing-need", f"'{u[1]}' needs '{need.activity}' to provide '{need.provides}'{why}, "
                              f"but its block '{cg.g.nodes[v]['spec'].block}' does not", data["path"], hint=hint)
-        elif not cg.threads_of(need.activity):
+        elif cg.threads_of(u[1]) and not cg.threads_of(need.activity):  # it runs, and would wait forever
             yield Diagnostic("missing-need", f"'{u[1]}' needs '{need.activity}'{why}, which is in no thread's "
                              "schedule: it would wait for it forever", data["path"],
                              hint=f"schedule '{need.activity}' on a thread (beside '{u[1]}' for identical reruns)")
