@@ -3,7 +3,7 @@
 The driver under test talks to it over a real socket, so framing, partial reads, reconnects
 and resynchronisation run the same code paths as against the scanner. Replies copy the real
 device where captures exist (`sRI 0`, `SerialNumber`, `SetAccessMode`, `EIHstCola`) and the
-notes (§3, §7) elsewhere; scans are built by `cola.build_scan`, with counters and device
+notes (§3, §7) elsewhere; scans are built by `scan.build_scan`, with counters and device
 clock advancing as §9 describes: +1 per scan, 66 666/66 667 µs apart, sent 5 ms after the
 scan, wrapping at 16 and 32 bits.
 
@@ -33,8 +33,9 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.sick import cola
-from hapticop.devices.sick.cola import Channel, ColaError, ScanHeader, encode_int32, encode_string, encode_uint
+from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick.cola import ColaError, encode_int32, encode_string, encode_uint
+from hapticop.devices.sick.scan import Channel, ScanHeader
 from hapticop.devices.sick.stream import TelegramReader
 
 FULL_START = -450000  # 1/10000 degree, SICK frame
@@ -273,7 +274,7 @@ class TiMSimulator:
         if self.noise_std_m:
             assert self.rng is not None
             ranges = ranges + self.rng.normal(0.0, self.noise_std_m, POINTS)
-        cola.ranges_to_raw(ranges, self._raw, max_range_m=self.max_range_m)
+        scan.ranges_to_raw(ranges, self._raw, max_range_m=self.max_range_m)
         # A narrowed output range is cut from the fixed grid -45° + i·0.3333° (how the real device
         # aligns it is not documented): the first point at or after start, the last at or before stop.
         first = -((FULL_START - self.output_range[0]) // STEP)  # ceil((start - FULL_START) / STEP)
@@ -307,7 +308,7 @@ class TiMSimulator:
             timestamp,
             None,
         )
-        return cola.build_scan(header, self._raw[first:last + 1], rssi)
+        return scan.build_scan(header, self._raw[first:last + 1], rssi)
 
     # -- commands (§3, §7) -------------------------------------------------------------------
 
