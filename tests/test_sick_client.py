@@ -12,7 +12,8 @@ import pytest
 
 from hapticop.devices.sick import cola, scan
 from hapticop.devices.sick.client import ClientState, ColaClient
-from hapticop.devices.sick.simulator import ANGLES_RAD, POINTS, TiMSimulator, room_ranges
+from hapticop.devices.sick.device_model import ANGLES_RAD, POINTS, room_ranges
+from hapticop.devices.sick.simulator import TiMSimulator
 
 MS = 1_000_000
 LIVE = (ClientState.STARTING, ClientState.STREAMING)

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from hapticop.devices.sick import cola, scan
-from hapticop.devices.sick.simulator import ANGLES_RAD, POINTS, TiMSimulator, room_ranges
+from hapticop.devices.sick.device_model import ANGLES_RAD, POINTS, room_ranges
+from hapticop.devices.sick.simulator import TiMSimulator
 from hapticop.devices.sick.stream import TelegramReader
 
 HERE = Path(__file__).resolve().parent
