@@ -18,6 +18,7 @@ import numpy as np
 
 from hapticop.devices.sick import cola, scan
 from hapticop.devices.sick.client import ColaClient
+from hapticop.devices.sick.device_model import TiMDevice
 from hapticop.devices.sick.simulator import TiMSimulator
 from hapticop.testing import time_per_call
 
@@ -61,9 +62,9 @@ def main(paths: list[str]) -> None:
         for path in paths:
             _parse(Path(path).stem, Path(path).read_bytes())
     else:
-        with TiMSimulator() as sim:
-            sim.epoch_ns = 0
-            _parse("simulated", sim.scan_telegram(1))
+        device = TiMDevice()
+        device.advance(0)
+        _parse("simulated", device.scan_telegram(1))
     _poll_costs()
 
 
