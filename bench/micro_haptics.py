@@ -24,8 +24,8 @@ from hapticop.haptics.governor import govern_cycle, govern_scan, govern_twist
 from hapticop.haptics.handle import CentringPD, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
 from hapticop.sim.hallway import HallwayGeometry, World
-from hapticop.sim.metrics import TrajectoryRecorder
 from hapticop.sim.operator import BlindOperator
+from hapticop.sim.recording import TrajectoryRecorder
 from hapticop.testing import allocation_stats, time_per_call
 
 

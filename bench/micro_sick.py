@@ -16,22 +16,23 @@ from pathlib import Path
 
 import numpy as np
 
-from hapticop.devices.sick import cola
+from hapticop.devices.sick import cola, scan
 from hapticop.devices.sick.client import ColaClient
+from hapticop.devices.sick.device_model import TiMDevice
 from hapticop.devices.sick.simulator import TiMSimulator
 from hapticop.testing import time_per_call
 
 
 def _parse(name: str, telegram: bytes) -> None:
     body = cola.unframe(telegram)
-    header = cola.parse_scan(body, None)
+    header = scan.parse_scan(body, None)
     count = header.dist.count
     ranges, angles = np.empty(count, np.float32), np.empty(count, np.float32)
     rssi = np.empty(header.rssi.count, np.uint16) if header.rssi else None
     for label, call in (
-        ("ranges", lambda: cola.parse_scan(body, ranges)),
-        ("ranges + angles", lambda: cola.parse_scan(body, ranges, angles)),
-        ("ranges + angles + rssi", lambda: cola.parse_scan(body, ranges, angles, out_rssi=rssi)),
+        ("ranges", lambda: scan.parse_scan(body, ranges)),
+        ("ranges + angles", lambda: scan.parse_scan(body, ranges, angles)),
+        ("ranges + angles + rssi", lambda: scan.parse_scan(body, ranges, angles, out_rssi=rssi)),
     ):
         if label.endswith("rssi") and rssi is None:
             continue
@@ -61,9 +62,9 @@ def main(paths: list[str]) -> None:
         for path in paths:
             _parse(Path(path).stem, Path(path).read_bytes())
     else:
-        with TiMSimulator() as sim:
-            sim.epoch_ns = 0
-            _parse("simulated", sim.scan_telegram(1))
+        device = TiMDevice()
+        device.advance(0)
+        _parse("simulated", device.scan_telegram(1))
     _poll_costs()
 
 

@@ -28,7 +28,7 @@ from hapticop.devices.falcon.codec import (
     is_valid_frame,
     new_frame,
 )
-from hapticop.devices.sick import cola
+from hapticop.devices.sick import cola, scan
 from hapticop.devices.sick.cola import ColaError, Reply
 from hapticop.devices.sick.probe import parse_identity
 from hapticop.devices.sick.stream import TelegramReader
@@ -65,15 +65,15 @@ def _cola_input(recipe: bytes) -> bytes:
     return b"\x02" + data + b"\x03" if mode & 0x80 else data
 
 
-_SCAN_OUT = tuple(np.zeros(cola.TIM561_POINTS, dtype=t) for t in (np.float64, np.float64, np.uint32, np.uint32))
+_SCAN_OUT = tuple(np.zeros(scan.TIM561_POINTS, dtype=t) for t in (np.float64, np.float64, np.uint32, np.uint32))
 
 
 def _cola_decoders(data: bytes) -> None:
     ranges, angles, raw, rssi = _SCAN_OUT
     reader = cola.TokenReader(data)
     calls = (
-        lambda: cola.parse_scan(data, ranges, angles, out_raw=raw, out_rssi=rssi),
-        lambda: cola.parse_scan(data, None),
+        lambda: scan.parse_scan(data, ranges, angles, out_raw=raw, out_rssi=rssi),
+        lambda: scan.parse_scan(data, None),
         lambda: cola.parse_reply(data, "sRN LMDscandata"),
         lambda: cola.unframe(data),
         lambda: cola.decode_uint(data, 16),

@@ -10,9 +10,10 @@ import time
 import numpy as np
 import pytest
 
-from hapticop.devices.sick import cola
+from hapticop.devices.sick import cola, scan
 from hapticop.devices.sick.client import ClientState, ColaClient
-from hapticop.devices.sick.simulator import ANGLES_RAD, POINTS, TiMSimulator, room_ranges
+from hapticop.devices.sick.device_model import ANGLES_RAD, POINTS, room_ranges
+from hapticop.devices.sick.simulator import TiMSimulator
 
 MS = 1_000_000
 LIVE = (ClientState.STARTING, ClientState.STREAMING)
@@ -30,7 +31,7 @@ class Lockstep:
         self.t = 0
         self.client_sent = 0
         self.arrivals: list[int] = []  # tick at which each scan was parsed
-        self.scans: list[tuple[int, np.ndarray, cola.ScanHeader]] = []
+        self.scans: list[tuple[int, np.ndarray, scan.ScanHeader]] = []
         self.failures: list[tuple[int, str]] = []  # (tick, last_error) when the client gave up a connection
         self._ranges, self._angles = np.empty(POINTS), np.empty(POINTS)
 

@@ -10,8 +10,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hapticop.devices.sick import cola
-from hapticop.devices.sick.cola import ColaDeviceError, ColaError, SensorMount
+from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick.cola import ColaDeviceError, ColaError
+from hapticop.devices.sick.scan import SensorMount
 from hapticop.devices.sick.stream import TelegramReader
 
 HERE = Path(__file__).resolve().parent
@@ -37,7 +38,7 @@ SIM00 = [p for p in SCANS if p.stem.endswith("sim00")]
 RSSI = [p for p in SCANS if "rssi" in p.stem]
 
 
-def arrays(n: int = cola.TIM561_POINTS):
+def arrays(n: int = scan.TIM561_POINTS):
     return np.empty(n), np.empty(n), np.empty(n, np.uint16), np.empty(n, np.uint16)
 
 
@@ -83,7 +84,7 @@ def test_framing():
 @pytest.mark.parametrize("path", SCANS, ids=ident)
 def test_every_capture_parses_to_811_points(path):
     ranges, angles, raw, rssi = arrays()
-    header = cola.parse_scan(path.read_bytes(), ranges, angles, out_raw=raw, out_rssi=rssi)
+    header = scan.parse_scan(path.read_bytes(), ranges, angles, out_raw=raw, out_rssi=rssi)
     assert header.command_type == "sRA" and header.serial_number == 0x1078AAA
     assert header.dist.count == 811 and header.dist.name == "DIST1"
     assert (header.scan_frequency, header.measurement_frequency) == (1500, 162)
@@ -104,7 +105,7 @@ def test_every_capture_parses_to_811_points(path):
 @pytest.mark.parametrize("path", SIM00, ids=ident)
 def test_worked_example_of_section_10(path):
     ranges, angles, raw, _ = arrays()
-    header = cola.parse_scan(path.read_bytes(), ranges, angles, out_raw=raw)
+    header = scan.parse_scan(path.read_bytes(), ranges, angles, out_raw=raw)
     assert (header.version, header.device_number, header.serial_number) == (1, 1, 17_271_466)
     assert header.device_status == (0, 0) and header.output_status == (1, 0) and header.input_status == (0, 0)
     assert (header.telegram_counter, header.scan_counter) == (15_906, 15_908)
@@ -124,51 +125,51 @@ def test_worked_example_of_section_10(path):
 def test_build_scan_inverts_parse_scan_byte_for_byte(path):
     telegram = path.read_bytes()
     ranges, angles, raw, rssi = arrays()
-    header = cola.parse_scan(telegram, ranges, out_raw=raw, out_rssi=rssi)
-    assert cola.build_scan(header, raw, rssi if header.rssi else None) == telegram
+    header = scan.parse_scan(telegram, ranges, out_raw=raw, out_rssi=rssi)
+    assert scan.build_scan(header, raw, rssi if header.rssi else None) == telegram
     streamed = b"\x02sSN" + telegram[4:]  # the same body as a stream frame
-    header = cola.parse_scan(streamed[1:-1], ranges, out_raw=raw, out_rssi=rssi)
+    header = scan.parse_scan(streamed[1:-1], ranges, out_raw=raw, out_rssi=rssi)
     assert header.command_type == "sSN"
-    assert cola.build_scan(header, raw, rssi if header.rssi else None) == streamed
+    assert scan.build_scan(header, raw, rssi if header.rssi else None) == streamed
 
 
 def test_optional_blocks_round_trip():
     """Blocks the TiM561 captures do not show (8-bit RSSI, position, comment, time, event)."""
     ranges, _, raw, _ = arrays()
-    base = cola.parse_scan(SIM00[0].read_bytes(), ranges, out_raw=raw)
-    rssi_channel = cola.Channel("RSSI1", 1.0, 0.0, -450000, 3333, 811)
-    header = cola.ScanHeader(**{
+    base = scan.parse_scan(SIM00[0].read_bytes(), ranges, out_raw=raw)
+    rssi_channel = scan.Channel("RSSI1", 1.0, 0.0, -450000, 3333, 811)
+    header = scan.ScanHeader(**{
         **{f: getattr(base, f) for f in base.__dataclass_fields__},
         "encoders": ((0x12345678, 3),), "channels8": (rssi_channel,),
         "position": (1.0, -2.5, 0.0, 0.0, 0.0, 3.25, 1), "device_name": b"a name with spaces",
         "comment": b"", "timestamp": (1970, 1, 1, 0, 50, 14, 136000), "event": (b"FDIN", 7, 99, -450000)})
     rssi = np.arange(811) % 256
-    telegram = cola.build_scan(header, raw, rssi)
+    telegram = scan.build_scan(header, raw, rssi)
     out_rssi = np.empty(811, np.uint8)
-    parsed = cola.parse_scan(telegram, ranges, out_raw=raw, out_rssi=out_rssi)
+    parsed = scan.parse_scan(telegram, ranges, out_raw=raw, out_rssi=out_rssi)
     assert parsed == header and (out_rssi == rssi).all()
-    assert cola.build_scan(parsed, raw, out_rssi) == telegram
+    assert scan.build_scan(parsed, raw, out_rssi) == telegram
 
 
 def test_parse_writes_into_float32_ports_and_only_on_success():
     ranges, angles = np.full(811, -1.0, np.float32), np.zeros(811, np.float32)
     body = SIM00[0].read_bytes()[1:-1]
-    cola.parse_scan(body, ranges, angles)
+    scan.parse_scan(body, ranges, angles)
     assert ranges[0] == np.float32(1.598) and angles[405] == pytest.approx(-0.000236, abs=1e-6)
     before = ranges.copy()
     with pytest.raises(ColaError):
-        cola.parse_scan(body.replace(b"7 Daniyal", b"8 Daniyal"), ranges, angles)  # fails in the trailer
+        scan.parse_scan(body.replace(b"7 Daniyal", b"8 Daniyal"), ranges, angles)  # fails in the trailer
     assert (ranges == before).all()
     with pytest.raises(ColaError, match="811 values"):
-        cola.parse_scan(body, np.empty(271))
-    assert cola.parse_scan(body, None).dist.count == 811  # header only: to size the arrays
+        scan.parse_scan(body, np.empty(271))
+    assert scan.parse_scan(body, None).dist.count == 811  # header only: to size the arrays
 
 
 def test_sensor_to_robot_frame():
     ranges = np.array([1.0, 2.0, np.nan])
     angles = np.array([0.0, math.pi / 2, 0.0])
     x, y = np.empty(3), np.empty(3)
-    cola.to_robot_frame(ranges, angles, SensorMount(0.3, -0.1, math.pi / 2), x, y)
+    scan.to_robot_frame(ranges, angles, SensorMount(0.3, -0.1, math.pi / 2), x, y)
     assert x[:2] == pytest.approx([0.3, 0.3 - 2.0]) and y[:2] == pytest.approx([-0.1 + 1.0, -0.1])
     assert math.isnan(x[2]) and math.isnan(y[2])
 
@@ -211,7 +212,7 @@ def test_sfa_is_a_clear_device_error():
         cola.parse_reply(b"\x02sFA 4\x03", "sWN LMPoutputRange 1 D05 0 1B7740")
     assert caught.value.code == 4 and "LMPoutputRange" in str(caught.value)
     with pytest.raises(ColaDeviceError, match="METHODIN_ACCESSDENIED"):
-        cola.parse_scan(b"sFA 1", np.empty(811))
+        scan.parse_scan(b"sFA 1", np.empty(811))
     assert "ComplexArraysNotSupported" in str(ColaDeviceError(0x20))
     with pytest.raises(ColaError):
         cola.parse_reply(b"sXX Foo")
@@ -250,13 +251,13 @@ MALFORMED = {
 def test_malformed_scans_raise_cola_error(name):
     ranges, angles, raw, rssi = arrays()
     with pytest.raises(ColaError):
-        cola.parse_scan(MALFORMED[name], ranges, angles, out_raw=raw, out_rssi=rssi)
+        scan.parse_scan(MALFORMED[name], ranges, angles, out_raw=raw, out_rssi=rssi)
 
 
 def _decode_everything(data: bytes) -> None:
     """Every decoder on untrusted bytes: only ColaError may come out."""
     ranges, angles, raw, rssi = arrays()
-    for call in (lambda d: cola.parse_scan(d, ranges, angles, out_raw=raw, out_rssi=rssi),
+    for call in (lambda d: scan.parse_scan(d, ranges, angles, out_raw=raw, out_rssi=rssi),
                  cola.parse_reply, cola.unframe, lambda d: cola.TokenReader(d).values(3, 4, "v")):
         try:
             call(data)
@@ -265,7 +266,7 @@ def _decode_everything(data: bytes) -> None:
     reader = TelegramReader(max_telegram=4096)
     for body in reader.push(data):
         try:
-            cola.parse_scan(body, ranges, angles)
+            scan.parse_scan(body, ranges, angles)
         except ColaError:
             pass
     assert reader.buffered <= 4096

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hapticop.devices.sick import cola
-from hapticop.devices.sick.simulator import ANGLES_RAD, POINTS, TiMSimulator, room_ranges
+from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick.device_model import ANGLES_RAD, POINTS, room_ranges
+from hapticop.devices.sick.simulator import TiMSimulator
 from hapticop.devices.sick.stream import TelegramReader
 
 HERE = Path(__file__).resolve().parent
@@ -150,7 +151,7 @@ def test_stream_follows_the_section_9_checklist(sim):
         assert tokens[0] == b"sSN" and tokens[1:7] == capture[1:7] and tokens[11:26] == capture[11:26]
         assert tokens[26 + POINTS:] == [b"0", b"0", b"1", b"B", b"not", b"defined", b"0", b"0", b"0"]
         ranges, angles = np.empty(POINTS), np.empty(POINTS)
-        headers.append(cola.parse_scan(body, ranges, angles))
+        headers.append(scan.parse_scan(body, ranges, angles))
         assert np.allclose(angles, ANGLES_RAD) and np.allclose(ranges, room_ranges(), atol=0.0005)
     for before, after in zip(headers, headers[1:]):
         assert after.telegram_counter - before.telegram_counter == 1
@@ -164,7 +165,7 @@ def test_counters_and_clock_wrap():
     with TiMSimulator(uptime_us=(1 << 32) - 100_000, telegram_counter=0xFFFE) as sim:
         peer = Peer(sim)
         peer.ask("sEN LMDscandata 1")
-        headers = [cola.parse_scan(b, np.empty(POINTS)) for b in peer.run_until(300_000_000)]
+        headers = [scan.parse_scan(b, np.empty(POINTS)) for b in peer.run_until(300_000_000)]
         assert [h.telegram_counter for h in headers] == [0xFFFF, 0, 1, 2]
         assert [h.scan_counter for h in headers] == [1, 2, 3, 4]
         assert headers[0].time_of_transmission_us > headers[1].time_of_transmission_us  # wrapped
@@ -179,11 +180,11 @@ def test_configuration_applies_after_run(sim):
     assert peer.ask("sRN LMPoutputRange") == b"\x02sRA LMPoutputRange 1 D05 FFF92230 225510\x03"
     peer.ask("sMN Run")
     assert peer.ask("sRN LMPoutputRange") == b"\x02sRA LMPoutputRange 1 D05 0 1B7740\x03"
-    scan = peer.ask("sRN LMDscandata")
+    telegram = peer.ask("sRN LMDscandata")
     first, last = -(-450000 // 3333), 2250000 // 3333  # the points of the fixed grid inside 0°..180°
     count = last - first + 1
     ranges, rssi = np.empty(count), np.empty(count)
-    header = cola.parse_scan(scan, ranges, out_rssi=rssi)
+    header = scan.parse_scan(telegram, ranges, out_rssi=rssi)
     assert header.command_type == "sRA" and header.dist.count == count == 540
     assert header.dist.start_angle == -450000 + first * 3333 == 3288
     assert header.rssi.name == "RSSI1" and header.device_name is None and header.timestamp[0] == 1970

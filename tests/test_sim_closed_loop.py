@@ -9,8 +9,9 @@ import math
 import numpy as np
 
 from hapticop.sim.hallway import HallwayGeometry, World
-from hapticop.sim.metrics import TrajectoryRecorder, compute_metrics
+from hapticop.sim.metrics import compute_metrics
 from hapticop.sim.operator import BlindOperator, OperatorProfile
+from hapticop.sim.recording import TrajectoryRecorder
 
 KP, KD, M_DEVICE, K1, K2, DZ = 55.0, 0.2, 0.1, 28.0, 10.0, 0.005
 

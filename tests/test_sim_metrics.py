@@ -6,14 +6,9 @@ import numpy as np
 import pytest
 
 from hapticop.sim.hallway import HallwayGeometry
-from hapticop.sim.metrics import (
-    CHANNELS,
-    Targets,
-    TrajectoryRecorder,
-    compute_metrics,
-    success_rates,
-    targets_met,
-)
+from hapticop.sim.metrics import compute_metrics
+from hapticop.sim.recording import CHANNELS, TrajectoryRecorder
+from hapticop.sim.targets import Targets, success_rates, targets_met
 from hapticop.testing import grown_bytes
 
 H1 = HallwayGeometry.named("H1")

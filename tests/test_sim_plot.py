@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 
 from hapticop.sim.hallway import HallwayGeometry
-from hapticop.sim.metrics import TrajectoryRecorder
 from hapticop.sim.plot import plot_run
+from hapticop.sim.recording import TrajectoryRecorder
 
 from .test_sim_metrics import straight_run
 
 
 def test_importing_hapticop_sim_does_not_import_matplotlib():
-    code = ("import sys, hapticop.sim.plot, hapticop.sim.metrics, hapticop.sim.operator; "
+    code = ("import sys, hapticop.sim.plot, hapticop.sim.recording, hapticop.sim.metrics, hapticop.sim.targets, "
+            "hapticop.sim.operator; "
             "print('matplotlib' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

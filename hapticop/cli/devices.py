@@ -32,7 +32,8 @@ def lidar_decode(
     json_output: bool = typer.Option(False, "--json", help="every field and every range as JSON"),
 ) -> None:
     """Print a telegram's header fields and its ranges in metres (NaN: no valid echo)."""
-    from hapticop.devices.sick.cola import ColaError, parse_scan
+    from hapticop.devices.sick.cola import ColaError
+    from hapticop.devices.sick.scan import parse_scan
 
     try:
         body = file.read_bytes()

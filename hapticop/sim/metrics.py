@@ -1,8 +1,7 @@
-"""The hallway experiment's log, its metrics (docs/hallway-experiment.md §5) and the targets they are judged by (§6).
+"""The hallway experiment's metrics (docs/hallway-experiment.md §5), computed from a run's log.
 
-Why: every condition of §4 is compared on the same deterministic numbers, computed after the run from what a
-1 kHz loop recorded. `TrajectoryRecorder` is that record: preallocated, appended to without allocating, saved
-as .npz. `compute_metrics` turns it into `RunMetrics`; `targets_met` checks them against `Targets`.
+Why: every condition of §4 is compared on the same deterministic numbers. `compute_metrics`
+turns a `TrajectoryRecorder` (or a loaded .npz) into `RunMetrics`; `targets.py` judges them.
 
 Metrics that need a channel the run did not record come out NaN (or None) and their target is "not measured".
 Time-weighted quantities weight each sample by the interval to the next one (sample and hold).
@@ -10,163 +9,18 @@ Time-weighted quantities weight each sample by the interval to the next one (sam
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Literal, NamedTuple
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from hapticop.sim.hallway import HallwayGeometry, World
+from hapticop.sim.recording import TrajectoryRecorder, as_channels
 
 F64 = NDArray[np.float64]
-
-CHANNELS: dict[str, tuple[tuple[int, ...], type]] = {
-    "t": ((), np.float64),  # time [s]
-    "pose": ((3,), np.float64),  # robot x, y [m], theta [rad], world frame
-    "robot_velocity": ((2,), np.float64),  # measured v [m/s], omega [rad/s]
-    "cmd": ((2,), np.float64),  # the operator's command u_cmd = (v, omega) from the handle
-    "cmd_exec": ((2,), np.float64),  # the command executed after the safety layer, u_exec
-    "handle_position": ((3,), np.float64),  # Falcon handle p [m], device frame
-    "handle_velocity": ((3,), np.float64),  # dp/dt [m/s]
-    "force_env": ((3,), np.float64),  # environmental force F_env on the handle [N]
-    "force_hand": ((3,), np.float64),  # the hand's force on the handle [N]
-    "force_device": ((3,), np.float64),  # the whole force sent to the device, after saturation [N]
-    "clearance": ((), np.float64),  # footprint clearance to all walls [m]
-    "pc_power": ((), np.float64),  # power the passivity controller dissipates [W]
-    "scan": ((), np.bool_),  # a new scan reached the force model in this cycle
-    "risk_true": ((), np.float64),  # ground-truth risk rho* from the undelayed true state
-}
-"""What a run may log. A channel is logged every cycle or never: only "t" and "pose" are required."""
-
-
-class TrajectoryRecorder:
-    """A run's log in arrays of fixed capacity; `append` copies one cycle in and allocates nothing.
-
-    A full recorder drops further samples and counts them in `dropped` rather than raising in a real-time loop.
-    """
-
-    def __init__(self, capacity: int, meta: Mapping[str, object] | None = None):
-        if capacity < 1:
-            raise ValueError("capacity must be at least one sample")
-        self.capacity = capacity
-        self.meta: dict[str, object] = dict(meta or {})
-        self.n = 0
-        self.dropped = 0
-        self._data = {k: np.zeros((capacity, *shape), dtype) for k, (shape, dtype) in CHANNELS.items()}
-        self._written = {k: k in ("t", "pose") for k in CHANNELS}
-        d = self._data
-        self.t, self.pose, self.robot_velocity = d["t"], d["pose"], d["robot_velocity"]
-        self.cmd, self.cmd_exec = d["cmd"], d["cmd_exec"]
-        self.handle_position, self.handle_velocity = d["handle_position"], d["handle_velocity"]
-        self.force_env, self.force_hand, self.force_device = d["force_env"], d["force_hand"], d["force_device"]
-        self.clearance, self.pc_power, self.scan, self.risk_true = (
-            d["clearance"], d["pc_power"], d["scan"], d["risk_true"])
-
-    def append(
-        self,
-        t: float,
-        pose: ArrayLike,
-        *,
-        robot_velocity: ArrayLike | None = None,
-        cmd: ArrayLike | None = None,
-        cmd_exec: ArrayLike | None = None,
-        handle_position: ArrayLike | None = None,
-        handle_velocity: ArrayLike | None = None,
-        force_env: ArrayLike | None = None,
-        force_hand: ArrayLike | None = None,
-        force_device: ArrayLike | None = None,
-        clearance: float | None = None,
-        pc_power: float | None = None,
-        scan: bool | None = None,
-        risk_true: float | None = None,
-    ) -> bool:
-        """Copy one cycle in; False (and `dropped` + 1) when full."""
-        i = self.n
-        if i >= self.capacity:
-            self.dropped += 1
-            return False
-        w = self._written
-        self.t[i] = t
-        self.pose[i] = pose
-        if robot_velocity is not None:
-            self.robot_velocity[i] = robot_velocity
-            w["robot_velocity"] = True
-        if cmd is not None:
-            self.cmd[i] = cmd
-            w["cmd"] = True
-        if cmd_exec is not None:
-            self.cmd_exec[i] = cmd_exec
-            w["cmd_exec"] = True
-        if handle_position is not None:
-            self.handle_position[i] = handle_position
-            w["handle_position"] = True
-        if handle_velocity is not None:
-            self.handle_velocity[i] = handle_velocity
-            w["handle_velocity"] = True
-        if force_env is not None:
-            self.force_env[i] = force_env
-            w["force_env"] = True
-        if force_hand is not None:
-            self.force_hand[i] = force_hand
-            w["force_hand"] = True
-        if force_device is not None:
-            self.force_device[i] = force_device
-            w["force_device"] = True
-        if clearance is not None:
-            self.clearance[i] = clearance
-            w["clearance"] = True
-        if pc_power is not None:
-            self.pc_power[i] = pc_power
-            w["pc_power"] = True
-        if scan is not None:
-            self.scan[i] = scan
-            w["scan"] = True
-        if risk_true is not None:
-            self.risk_true[i] = risk_true
-            w["risk_true"] = True
-        self.n = i + 1
-        return True
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Views of the recorded part of every channel that was written."""
-        return {k: a[: self.n] for k, a in self._data.items() if self._written[k]}
-
-    def save(self, path: str | Path) -> Path:
-        """Write the recorded channels and `meta` (as JSON) to a compressed .npz."""
-        path = Path(path)
-        if path.suffix != ".npz":
-            path = path.with_name(path.name + ".npz")
-        np.savez_compressed(path, __meta__=np.array(json.dumps(self.meta)), **self.arrays())
-        return path
-
-    @classmethod
-    def load(cls, path: str | Path, capacity: int | None = None) -> TrajectoryRecorder:
-        """Read a saved log back; capacity defaults to the number of samples in it."""
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["__meta__"]))
-            arrays = {k: z[k] for k in z.files if k != "__meta__"}
-        unknown = set(arrays) - set(CHANNELS)
-        if unknown:
-            raise ValueError(f"{path}: unknown channels {sorted(unknown)}")
-        n = len(arrays["t"])
-        rec = cls(max(capacity or n, n, 1), meta)
-        for k, a in arrays.items():
-            rec._data[k][:n] = a
-            rec._written[k] = True
-        rec.n = n
-        return rec
-
-
-def as_channels(data: TrajectoryRecorder | Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The logged channels of a recorder, or of a mapping such as a loaded .npz (other keys are ignored)."""
-    if isinstance(data, TrajectoryRecorder):
-        return data.arrays()
-    return {k: np.asarray(data[k]) for k in data.keys() if k in CHANNELS}
-
 
 EndReason = Literal["stopped", "crash", "timeout", "incomplete"]
 
@@ -481,95 +335,3 @@ def _effort_and_oscillation(
         at_limit |= (np.abs(d["force_device"]) >= limit * (1.0 - 1e-6)).any(axis=1)
     return dict(effort_ns=effort, handle_speed_rms_mps=speed_rms, oscillation_index_mps=osc,
                 sustained_oscillation=bool(osc > 0.02), divergence=_longest_run_s(at_limit, w) > 0.5)
-
-
-@dataclass(frozen=True)
-class Targets:
-    """§6's targets for the recommended configuration; a None threshold is not checked."""
-
-    completed: bool = True  # the run must end by stopping (not crash, not time-out)
-    collision_free: bool = False  # per-run; §6 asks >= 98 % collision-free over the sweep (see success_rates)
-    e_stop_m: tuple[float, float] | None = (-0.05, 0.10)
-    side_below_dist1_m: float | None = 0.10  # c_side,min >= dist1 - this
-    frac_below_dist1_max: float | None = 0.10
-    recover_dist1_max_s: float | None = 3.0  # H2
-    t_norm_max: float | None = 1.2
-    force_peak_max_n: float | None = 8.0
-    saturation_max: float | None = 0.0
-    force_rate_rms_max_nps: float | None = 30.0
-    hf_ratio_max: float | None = 0.05  # not for tremor runs
-    scan_step_max_n: float | None = 0.1
-    dithering_max: int | None = 0
-    e_pc_ratio_max: float | None = 0.20  # zero delay
-    risk_corr_min: float | None = 0.8
-    risk_lag_max_s: float | None = 0.10  # with prediction; 0.15 s + RTT without
-    no_oscillation: bool = True
-
-    @classmethod
-    def for_variant(cls, name: str) -> Targets:
-        """Cautious operators may stop up to 0.25 m early; tremor runs are not held to the HF ratio."""
-        if name.startswith("cautious"):
-            return cls(e_stop_m=(-0.05, 0.25))
-        if name.startswith("tremor"):
-            return cls(hf_ratio_max=None)
-        return cls()
-
-    @classmethod
-    def delay_pass(cls) -> Targets:
-        """§7.7's pass criterion for the delay sweep: no crash, no sustained oscillation, |e_stop| <= 0.10 m."""
-        none = {f: None for f in ("side_below_dist1_m", "frac_below_dist1_max", "recover_dist1_max_s",
-                                  "t_norm_max", "force_peak_max_n", "saturation_max", "force_rate_rms_max_nps",
-                                  "hf_ratio_max", "scan_step_max_n", "dithering_max", "e_pc_ratio_max",
-                                  "risk_corr_min", "risk_lag_max_s")}
-        return replace(cls(), completed=False, e_stop_m=(-0.10, 0.10), **none)
-
-
-class TargetResult(NamedTuple):
-    ok: bool  # no check failed
-    checks: dict[str, bool | None]  # None: not measured in this run
-
-
-def targets_met(m: RunMetrics, targets: Targets) -> TargetResult:
-    """Check one run against §6. Checks whose metric was not measured (NaN) are None and do not fail."""
-    checks: dict[str, bool | None] = {"no_crash": not m.crash}
-
-    def upto(name: str, value: float | int | None, limit: float | None) -> None:
-        if limit is not None:
-            checks[name] = None if value is None or value != value else bool(value <= limit)
-
-    def atleast(name: str, value: float, limit: float | None) -> None:
-        if limit is not None:
-            checks[name] = None if value != value else bool(value >= limit)
-
-    if targets.completed:
-        checks["completed"] = m.ended_by == "stopped"
-    if targets.collision_free:
-        checks["collision_free"] = m.n_collisions == 0
-    if targets.e_stop_m is not None:
-        lo, hi = targets.e_stop_m
-        checks["e_stop"] = None if m.e_stop_m != m.e_stop_m else bool(lo <= m.e_stop_m <= hi)
-    upto("side_clearance", m.side_deficit_m, targets.side_below_dist1_m)
-    upto("time_below_dist1", m.frac_below_dist1, targets.frac_below_dist1_max)
-    upto("recover_dist1", m.t_recover_dist1_s, targets.recover_dist1_max_s)
-    upto("t_norm", m.t_norm, targets.t_norm_max)
-    upto("force_peak", m.force_peak_n, targets.force_peak_max_n)
-    upto("saturation", m.saturation_frac, targets.saturation_max)
-    upto("force_rate", m.force_rate_rms_nps, targets.force_rate_rms_max_nps)
-    upto("hf_ratio", m.hf_ratio, targets.hf_ratio_max)
-    upto("scan_step", m.scan_step_max_n, targets.scan_step_max_n)
-    upto("dithering", m.dithering, targets.dithering_max)
-    upto("e_pc_ratio", m.e_pc_ratio, targets.e_pc_ratio_max)
-    atleast("risk_corr", m.risk_corr, targets.risk_corr_min)
-    upto("risk_lag", m.risk_lag_s, targets.risk_lag_max_s)
-    if targets.no_oscillation:
-        checks["no_oscillation"] = not (m.sustained_oscillation or m.divergence)
-    return TargetResult(all(v is not False for v in checks.values()), checks)
-
-
-def success_rates(runs: Sequence[RunMetrics]) -> dict[str, float]:
-    """Sweep-level numbers of §6: crash rate and collision-free rate (target >= 0.98) over many runs."""
-    n = len(runs)
-    if n == 0:
-        return {"crash_rate": math.nan, "collision_free_rate": math.nan}
-    return {"crash_rate": sum(r.crash for r in runs) / n,
-            "collision_free_rate": sum(r.n_collisions == 0 and not r.crash for r in runs) / n}

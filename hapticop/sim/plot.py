@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from hapticop.sim.hallway import HallwayGeometry
-from hapticop.sim.metrics import TrajectoryRecorder, as_channels
+from hapticop.sim.recording import TrajectoryRecorder, as_channels
 
 
 def plot_run(

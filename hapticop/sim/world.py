@@ -55,7 +55,7 @@ class HallwayWorld(Block):
 
     def create(self) -> None:
         from hapticop.sim.hallway import HallwayGeometry, World
-        from hapticop.sim.metrics import TrajectoryRecorder
+        from hapticop.sim.recording import TrajectoryRecorder
         from hapticop.sim.world_share import publish_world
 
         p = self.params
@@ -135,7 +135,7 @@ class HallwayWorld(Block):
 
     def _results(self, m) -> None:
         """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
-        from hapticop.sim.metrics import Targets, targets_met
+        from hapticop.sim.targets import Targets, targets_met
 
         g = self.geometry
         checks = targets_met(m, Targets.for_variant(self.variant)).checks

@@ -16,7 +16,7 @@ import numpy as np
 from annotated_types import Gt
 from numpy.typing import ArrayLike, NDArray
 
-from hapticop.devices.sick.cola import SensorMount
+from hapticop.devices.sick.scan import SensorMount
 from hapticop.parameters import parameters
 
 __all__ = ["Body", "Footprint", "SensorMount"]

@@ -28,8 +28,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.sick import cola
-from hapticop.devices.sick.cola import ColaDeviceError, ColaError, Command, ScanHeader
+from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick.cola import ColaDeviceError, ColaError, Command
+from hapticop.devices.sick.scan import ScanHeader
 from hapticop.devices.sick.stream import MAX_TELEGRAM, TelegramReader
 
 _SCAN_PREFIXES = (b"sSN LMDscandata ", b"sRA LMDscandata ")
@@ -63,14 +64,14 @@ class ColaClient:
         *,
         backoff: tuple[float, float] = (0.1, 2.0),
         clock_ns: Callable[[], int] = time.monotonic_ns,
-        points: int = cola.TIM561_POINTS,
+        points: int = scan.TIM561_POINTS,
         startup: Sequence[Command] | None = None,
         reply_timeout_s: float = 1.0,
         connect_timeout_s: float = 1.0,
         first_scan_timeout_s: float = 2.0,
         stall_periods: float = 3.0,
         scan_period_s: float = 1.0 / 15.0,
-        min_range_m: float = cola.MIN_RANGE_M,
+        min_range_m: float = scan.MIN_RANGE_M,
         max_read_bytes: int = 256 * 1024,
         max_telegram: int = MAX_TELEGRAM,
     ):
@@ -328,7 +329,7 @@ class ColaClient:
     def _take_scan(self, now: int, body: bytes) -> None:
         back = 1 - self._front
         try:
-            header = cola.parse_scan(body, self._ranges[back], self._angles[back], min_range_m=self.min_range_m)
+            header = scan.parse_scan(body, self._ranges[back], self._angles[back], min_range_m=self.min_range_m)
         except ColaError:
             self.bad_telegrams += 1
             return

@@ -1,12 +1,13 @@
 """The simulated TiM561: CoLa A on a loopback port, scanning the simulated hallway from where the robot is.
 
-It serves the LIDAR block as the scanner would (hapticop.devices.sick.simulator speaks the
-protocol) at an address it publishes in the run directory. The walls come from the world it
-names, the robot's pose in the hallway from a stream of that world. It is stepped in its
-compute: each step answers the client and sends the scans that are due, ray-cast at the
-moment they leave. Under the virtual clock a thread of the same rate just before the LIDAR's
-reproduces every run; in real time its thread belongs outside the real-time loops' processes
-(a scan costs a ray cast and an 811-value telegram, about 0.6 ms of Python).
+It serves the LIDAR block as the scanner would (hapticop.devices.sick.simulator serves the
+device model over TCP) at an address it publishes in the run directory. The walls come from
+the world it names, the robot's pose in the hallway from a stream of that world. It is
+stepped in its compute: each step answers the client and sends the scans that are due,
+ray-cast at the moment they leave. Under the virtual clock a thread of the same rate just
+before the LIDAR's reproduces every run; in real time its thread belongs outside the
+real-time loops' processes (a scan costs a ray cast and an 811-value telegram, about 0.6 ms
+of Python).
 """
 
 from __future__ import annotations
@@ -51,7 +52,8 @@ class Tim561Simulator(Block):
     def configure_resources(self) -> bool:
         """Open the scanner once the world has published its hallway, and say where it listens."""
         from hapticop.devices.link import publish_address
-        from hapticop.devices.sick.simulator import ANGLES_RAD, TiMSimulator
+        from hapticop.devices.sick.device_model import ANGLES_RAD
+        from hapticop.devices.sick.simulator import TiMSimulator
         from hapticop.sim.hallway import World
         from hapticop.sim.world_share import find_world
 
