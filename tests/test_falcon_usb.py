@@ -16,7 +16,7 @@ import pytest
 
 from hapticop.devices.falcon import ftdi
 from hapticop.devices.falcon.codec import MOTOR_LIMIT, Button, Flag, FrameCodec, Status, new_frame
-from hapticop.devices.falcon.homing import Homing
+from hapticop.devices.falcon.homing import Homing, HomingHand
 from hapticop.devices.falcon.usb_driver import (
     FalconDisconnected,
     FalconLoaderError,
@@ -26,7 +26,9 @@ from hapticop.devices.falcon.usb_driver import (
     describe_falcons,
     find_falcons,
 )
-from hapticop.devices.falcon.virtual_usb import HomingHand, Phase, VirtualClock, VirtualFalcon, VirtualUsbBackend
+from hapticop.devices.falcon.virtual_clock import VirtualClock
+from hapticop.devices.falcon.virtual_falcon import Phase, VirtualFalcon
+from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 
 #: A stand-in image: a C2000 boot-table key and bytes that mean nothing (Novint's is never shipped).
 IMAGE = b"\xaa\x08" + bytes((i * 7 + 3) & 0xFF for i in range(4000))

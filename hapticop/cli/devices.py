@@ -146,7 +146,9 @@ def devices(
     if usb:
         try:
             if usb_backend == "virtual":
-                from hapticop.devices.falcon.virtual_usb import VirtualFalcon, VirtualUsbBackend, WallClock
+                from hapticop.devices.falcon.virtual_clock import WallClock
+                from hapticop.devices.falcon.virtual_falcon import VirtualFalcon
+                from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 
                 backend = VirtualUsbBackend(VirtualFalcon(WallClock()))
             else:

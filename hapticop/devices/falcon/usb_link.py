@@ -6,8 +6,9 @@ is done (raising what it raised). The lines it logs are handed over then, on the
 thread. A USB error during the run (unplugged, powered off) is logged once and the frames
 just stop: the block's `frames_ok` tells the rest of the system.
 
-`virtual_falcon` builds the virtual USB Falcon of `virtual_usb` on a run's clock, so the same
-block runs against it in tests (`usb_backend: virtual`).
+`virtual_falcon` builds the virtual Falcon of `virtual_falcon` on a run's clock, reached through
+the pyusb backend of `virtual_usb`, so the same block runs against it in tests
+(`usb_backend: virtual`).
 """
 
 from __future__ import annotations
@@ -109,7 +110,8 @@ def virtual_falcon(geometry: Geometry, now_ns: Callable[[], int], sleeps: bool, 
     pyusb backend that reaches it: (device, backend)."""
     from hapticop.devices.falcon.homing import HomingHand
     from hapticop.devices.falcon.simulated import SimulatedFalcon
-    from hapticop.devices.falcon.virtual_usb import VirtualFalcon, VirtualUsbBackend
+    from hapticop.devices.falcon.virtual_falcon import VirtualFalcon
+    from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 
     device = VirtualFalcon(_RunClock(now_ns, sleeps), falcon=SimulatedFalcon(geometry, rng=rng), hand=HomingHand())
     return device, VirtualUsbBackend(device)
