@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hapticop.devices.falcon.codec import Status
-from hapticop.devices.falcon.kinematics import Geometry
+from hapticop.devices.falcon.mechanism import Geometry
 from hapticop.devices.falcon.usb_driver import FalconUsb, FalconUsbError, connect
 
 __all__ = ["UsbLink", "virtual_falcon"]
