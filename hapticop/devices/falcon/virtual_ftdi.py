@@ -2,8 +2,9 @@
 
 What the host reaches through pyusb (docs/devices/falcon.md §1, §7):
 
-- USB: 0403:CB48 "FALCON HAPTIC", string descriptors, kernel-driver and claim state;
-  faults: no permission, busy, unplugged.
+- USB: 0403:CB48 "FALCON HAPTIC", one interface, bulk OUT 0x02 / IN 0x81, 64-byte packets,
+  string descriptors, kernel-driver and claim state (the interface and endpoint descriptors
+  are the backend's, in `virtual_usb`); faults: no permission, busy, unplugged.
 - FT232R: the vendor requests change baud, latency timer, DTR and RTS; bytes travel at the
   set baud rate, each with its arrival time; an IN packet leaves when 62 bytes wait or the
   latency timer expires, and starts with 2 status bytes (only those when there is no data).
