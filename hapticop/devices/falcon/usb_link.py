@@ -23,7 +23,8 @@ from numpy.typing import NDArray
 
 from hapticop.devices.falcon.codec import Status
 from hapticop.devices.falcon.mechanism import Geometry
-from hapticop.devices.falcon.usb_driver import FalconUsb, FalconUsbError, connect
+from hapticop.devices.falcon.usb_driver import FalconUsb, connect
+from hapticop.devices.falcon.usb_errors import FalconUsbError
 
 __all__ = ["UsbLink", "virtual_falcon"]
 
