@@ -29,7 +29,9 @@ import numpy as np
 
 from hapticop.devices.falcon.codec import FrameCodec, Status, new_frame
 from hapticop.devices.falcon.usb_driver import connect
-from hapticop.devices.falcon.virtual_usb import VirtualClock, VirtualFalcon, VirtualUsbBackend, WallClock
+from hapticop.devices.falcon.virtual_clock import VirtualClock, WallClock
+from hapticop.devices.falcon.virtual_falcon import VirtualFalcon
+from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 from hapticop.runtime.clock import RealtimeClock
 
 

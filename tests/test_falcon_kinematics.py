@@ -10,12 +10,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from hapticop.devices.falcon.kinematics import (
-    WORKSPACE_BOX_M,
-    Drive,
-    FalconKinematics,
-    Geometry,
-)
+from hapticop.devices.falcon.kinematics import FalconKinematics
+from hapticop.devices.falcon.mechanism import WORKSPACE_BOX_M, Drive, Geometry
 from hapticop.testing import grown_bytes
 
 from .conftest import FIXTURES, SHARED_TESTDATA

@@ -16,17 +16,12 @@ import pytest
 
 from hapticop.devices.falcon import ftdi
 from hapticop.devices.falcon.codec import MOTOR_LIMIT, Button, Flag, FrameCodec, Status, new_frame
-from hapticop.devices.falcon.homing import Homing
-from hapticop.devices.falcon.usb_driver import (
-    FalconDisconnected,
-    FalconLoaderError,
-    FalconUsb,
-    FalconUsbError,
-    connect,
-    describe_falcons,
-    find_falcons,
-)
-from hapticop.devices.falcon.virtual_usb import HomingHand, Phase, VirtualClock, VirtualFalcon, VirtualUsbBackend
+from hapticop.devices.falcon.homing import Homing, HomingHand
+from hapticop.devices.falcon.usb_driver import FalconUsb, connect, describe_falcons, find_falcons
+from hapticop.devices.falcon.usb_errors import FalconDisconnected, FalconLoaderError, FalconUsbError
+from hapticop.devices.falcon.virtual_clock import VirtualClock
+from hapticop.devices.falcon.virtual_falcon import Phase, VirtualFalcon
+from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 
 #: A stand-in image: a C2000 boot-table key and bytes that mean nothing (Novint's is never shipped).
 IMAGE = b"\xaa\x08" + bytes((i * 7 + 3) & 0xFF for i in range(4000))
@@ -103,7 +98,8 @@ def test_index_chooses_among_several_falcons_and_bad_indexes_are_explained():
 
 def test_without_libusb_the_error_says_what_to_install():
     # pyusb caches a loaded libusb for the whole process, so ask in a fresh interpreter
-    check = ("from hapticop.devices.falcon.usb_driver import FalconUsbError, system_backend\n"
+    check = ("from hapticop.devices.falcon.usb_driver import system_backend\n"
+             "from hapticop.devices.falcon.usb_errors import FalconUsbError\n"
              "try:\n    system_backend(find_library=lambda name: None)\n"
              "except FalconUsbError as error:\n    print(error)\n")
     done = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, timeout=60)

@@ -18,8 +18,8 @@ from pydantic_core import PydanticCustomError
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import DeviceParams, Port, RateRange
 from hapticop.devices.falcon import WORKSPACE_CENTRE_M, FalconKinematics, FrameCodec, Homing, Status, new_frame
-from hapticop.devices.falcon.kinematics import Geometry
 from hapticop.devices.falcon.link import DatagramFalconLink, FalconLink
+from hapticop.devices.falcon.mechanism import Geometry
 from hapticop.devices.link import DatagramLink
 
 

@@ -139,7 +139,8 @@ def devices(
     usb_backend: str = typer.Option("libusb", hidden=True, help="'virtual': one virtual Falcon (demos, tests)"),
 ) -> None:
     """List the Falcons on USB and probe LIDAR addresses; exit 1 if something cannot be reached."""
-    from hapticop.devices.falcon.usb_driver import FalconUsbError, describe_falcons, system_backend
+    from hapticop.devices.falcon.usb_driver import describe_falcons, system_backend
+    from hapticop.devices.falcon.usb_errors import FalconUsbError
     from hapticop.devices.sick.probe import ProbeError, probe_lidar
 
     report: dict = {}
@@ -147,7 +148,9 @@ def devices(
     if usb:
         try:
             if usb_backend == "virtual":
-                from hapticop.devices.falcon.virtual_usb import VirtualFalcon, VirtualUsbBackend, WallClock
+                from hapticop.devices.falcon.virtual_clock import WallClock
+                from hapticop.devices.falcon.virtual_falcon import VirtualFalcon
+                from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 
                 backend = VirtualUsbBackend(VirtualFalcon(WallClock()))
             else:

@@ -18,13 +18,8 @@ from hapticop.devices.falcon.codec import (
     new_frame,
 )
 from hapticop.devices.falcon.homing import Homing
-from hapticop.devices.falcon.kinematics import (
-    WORKSPACE_BOX_M,
-    WORKSPACE_CENTRE_M,
-    Drive,
-    FalconKinematics,
-    Geometry,
-)
+from hapticop.devices.falcon.kinematics import FalconKinematics
+from hapticop.devices.falcon.mechanism import WORKSPACE_BOX_M, WORKSPACE_CENTRE_M, Drive, Geometry
 from hapticop.devices.falcon.simulated import SimulatedFalcon
 
 __all__ = [

@@ -1,14 +1,13 @@
 """Novint Falcon kinematics: encoder counts, handle position, forces and motor commands.
 
 The Falcon is Stamper's 3-DOF translational parallel mechanism with libnifalcon's extra
-offsets (docs/devices/falcon-kinematics.md). Per leg: an actuated thigh angle theta1, the parallelogram
-direction theta2 and the parallelogram tilt theta3. Inverse kinematics is analytic; forward
-kinematics is Newton-Raphson on it, warm-started from the previous answer, solved to
-1e-12 rad / 1e-10 m so the position does not lag the encoders the way libnifalcon's
-0.01 rad, half-step solver does (§6). Forces map to thigh torques through the true
-Jacobian transpose, tau = J^T F; libnifalcon's `getForces` uses a symmetrised J with a
-wrong z column (§5, §8): over the reference poses its torque vector is off by up to 94 %
-(norm), so the force felt is not the force asked for.
+offsets (docs/devices/falcon-kinematics.md); its numbers are in `mechanism`, one leg's maths
+in `legs`. Inverse kinematics is analytic; forward kinematics is Newton-Raphson on it,
+warm-started from the previous answer, solved to 1e-12 rad / 1e-10 m so the position does
+not lag the encoders the way libnifalcon's 0.01 rad, half-step solver does (§6). Forces
+map to thigh torques through the true Jacobian transpose, tau = J^T F; libnifalcon's
+`getForces` uses a symmetrised J with a wrong z column (§5, §8): over the reference poses
+its torque vector is off by up to 94 % (norm), so the force felt is not the force asked for.
 
 The per-call maths is scalar `math` on Python floats, three legs unrolled: at 3-vectors and
 3x3 matrices numpy's per-call overhead, not arithmetic, would be the cost. Array outputs are
@@ -19,96 +18,17 @@ One `FalconKinematics` per thread.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from hapticop.parameters import parameters
+from hapticop.devices.falcon.legs import LegMaths, Pose
+from hapticop.devices.falcon.mechanism import Drive, Geometry
 
-__all__ = [
-    "Geometry", "Drive", "FalconKinematics", "WORKSPACE_CENTRE_M", "WORKSPACE_BOX_M",
-]
+__all__ = ["FalconKinematics"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
-#: One leg's IK state: (theta1, theta2, theta3, sin theta3, cos theta3, K, n0, n1), where
-#: K = d + e + b sin theta3 and (n0, n1) = K (sin theta2, cos theta2) is the platform joint
-#: seen from the elbow.
-Leg = tuple[float, float, float, float, float, float, float, float]
-#: The three legs' IK states at one handle position (legs 1, 2, 3).
-Pose = tuple[Leg, Leg, Leg]
-
-#: Centre of the sampled reachable box (§9: x, y in +-45 mm, z in 80..170 mm). The device
-#: frame has no agreed origin (libnifalcon 0.150, ros_falcon_interface 0.125 ...): blocks
-#: choose theirs and subtract it after FK.
-WORKSPACE_CENTRE_M: tuple[float, float, float] = (0.0, 0.0, 0.125)
-#: (low, high) corners of that box, metres. Not every corner is reachable.
-WORKSPACE_BOX_M: tuple[tuple[float, float, float], tuple[float, float, float]] = (
-    (-0.045, -0.045, 0.080), (0.045, 0.045, 0.170))
-
-
-@parameters
-class Geometry:
-    """Mechanism dimensions in metres, libnifalcon's values and signs (docs/devices/falcon-kinematics.md §1).
-
-    The thesis (appendix B) lists r = 36.60, s = 23.09, f = 25.00 mm unsigned plus an unused
-    g; following docs/devices/falcon-kinematics.md, we default to libnifalcon's r = 40.00, s = -23.09, f = -25.00 mm,
-    the values all reference data was produced with. With r = 36.6 mm the same counts land
-    up to ~4 mm elsewhere, so keep the geometry a parameter: the Falcon block and its
-    simulator take this class as their `geometry` parameter as it is.
-    """
-
-    a: float = 0.060
-    """Thigh length (m)."""
-    b: float = 0.1025
-    """Parallelogram link length (m)."""
-    c: float = 0.01443
-    """Platform radius (m)."""
-    d: float = 0.01125
-    """Parallelogram to platform joint offset (m)."""
-    e: float = 0.01125
-    """Thigh to parallelogram offset (m)."""
-    f: float = -0.025
-    """Platform-side offset along the joint axis v (m, libnifalcon's sign)."""
-    r: float = 0.0400
-    """Base radius (m)."""
-    s: float = -0.02309
-    """Base-side offset along the joint axis v (m, libnifalcon's sign)."""
-    leg_angles_deg: tuple[float, float, float] = (105.0, -15.0, -135.0)
-    """Leg directions in the x-y plane (deg): legs 1 (top), 2 (right), 3 (left) seen from the front."""
-
-
-@dataclass(frozen=True)
-class Drive:
-    """Encoder and motor conversions of one leg (docs/devices/falcon-kinematics.md §7, §8).
-
-    An encoder of 320 slots read in quadrature gives 1280 counts per motor turn; a 14.25 mm
-    capstan drives a 110 mm arm sector, so one count is 6.359e-4 rad of thigh; count 0
-    (once homed) is taken as 35 deg. Angles use exact degree-to-radian conversion, not
-    libnifalcon's rounded 0.0174532925 (relative difference 1e-9, i.e. < 1e-10 m).
-
-    `motor_per_nm` is libnifalcon's empirical torque-to-command factor and sign
-    (motor = trunc(-10000 tau)), a starting point, not a calibration: Novint's own driver
-    was seen using a different scale. `motor_limit` is the +-4095 docs/devices/falcon-kinematics.md recommend
-    (docs/devices/falcon.md §4.1) until hardware says otherwise; `torque_limit_nm` is libnifalcon's 30 N m.
-    """
-
-    counts_per_turn: int = 320 * 4
-    capstan_diameter_m: float = 0.01425
-    sector_diameter_m: float = 0.110
-    zero_count_deg: float = 35.0
-    motor_per_nm: float = -10000.0
-    motor_limit: int = 4095
-    torque_limit_nm: float = 30.0
-
-    @property
-    def rad_per_count(self) -> float:
-        return 2.0 * math.pi / self.counts_per_turn * self.capstan_diameter_m / self.sector_diameter_m
-
-    @property
-    def zero_count_rad(self) -> float:
-        return math.radians(self.zero_count_deg)
 
 
 def _three(values: ArrayLike) -> tuple[float, float, float]:
@@ -122,58 +42,6 @@ def _put(out: np.ndarray, a: float, b: float, c: float) -> None:
     out[0] = a
     out[1] = b
     out[2] = c
-
-
-class _LegMaths:
-    """One leg's constants (§2) and its per-call IK and Jacobian row, on floats."""
-
-    __slots__ = ("cphi", "sphi", "sphi_b", "cphi_b", "u0", "v0", "a", "a2", "two_a", "b", "de")
-
-    def __init__(self, g: Geometry, phi_deg: float) -> None:
-        phi = math.radians(phi_deg)
-        self.cphi, self.sphi = math.cos(phi), math.sin(phi)
-        # Leg frame: w = z, X = u + c = cphi x + sphi y + (c - r), cos theta3 = (v + f) / b.
-        self.sphi_b, self.cphi_b = self.sphi / g.b, self.cphi / g.b
-        self.u0, self.v0 = g.c - g.r, (g.f - g.s) / g.b
-        self.a, self.a2, self.two_a, self.b, self.de = g.a, g.a * g.a, 2.0 * g.a, g.b, g.d + g.e
-
-    def ik(self, x: float, y: float, z: float) -> Leg | None:
-        """Analytic IK of §4; None if unreachable (an arccos argument leaves [-1, 1])."""
-        X = self.cphi * x + self.sphi * y + self.u0
-        c3 = self.cphi_b * y - self.sphi_b * x + self.v0
-        if not -1.0 <= c3 <= 1.0:  # also False for NaN
-            return None
-        t3 = math.acos(c3)
-        s3 = math.sin(t3)
-        K = s3 * self.b + self.de
-        rho2 = X * X + z * z
-        if not rho2 > 0.0:
-            return None
-        # cosine of the angle between thigh and platform joint
-        cosine = (rho2 - K * K + self.a2) / (math.sqrt(rho2) * self.two_a)
-        if not -1.0 <= cosine <= 1.0:
-            return None
-        t1 = math.atan2(z, X) - math.acos(cosine)  # libnifalcon's elbow branch
-        # theta2 = direction of (X - a cos t1, w - a sin t1). It equals libnifalcon's
-        # acos((X - a cos t1) / K) wherever w - a sin t1 >= 0 (every sampled point).
-        n0 = z - self.a * math.sin(t1)
-        n1 = X - self.a * math.cos(t1)
-        return (t1, math.atan2(n0, n1), t3, s3, c3, K, n0, n1)
-
-    def row(self, leg: Leg) -> tuple[float, float, float] | None:
-        """Row of M = d theta1 / d p for this leg; None if D = -a sin t3 sin(t1 - t2) ~ 0.
-
-        (cos phi cos t2 sin t3 - sin phi cos t3, sin phi cos t2 sin t3 + cos phi cos t3,
-        sin t2 sin t3) / D. libnifalcon's z entry is sin^2 t2 / D (its issue #66); this is
-        the correct one.
-        """
-        t1, t2, _, s3, c3, K, n0, n1 = leg
-        D = -self.a * (math.sin(t1 - t2) * s3)
-        if not abs(D) > 1e-12:  # theta3 at 0 or pi, or thigh along link
-            return None
-        c2s3 = n1 / K * s3
-        return ((self.cphi * c2s3 - self.sphi * c3) / D, (self.sphi * c2s3 + self.cphi * c3) / D,
-                n0 / K * s3 / D)
 
 
 class FalconKinematics:
@@ -205,7 +73,7 @@ class FalconKinematics:
         self.max_condition = float(max_condition)
         x, y, z = np.array(initial_guess_m, dtype=np.float64).reshape(3).tolist()
         self._guess0: tuple[float, float, float] = (x, y, z)
-        self._leg1, self._leg2, self._leg3 = (_LegMaths(g, phi) for phi in g.leg_angles_deg)
+        self._leg1, self._leg2, self._leg3 = (LegMaths(g, phi) for phi in g.leg_angles_deg)
         self._rad_per_count = dr.rad_per_count
         self._zero_rad = dr.zero_count_rad
         self._motor_per_nm = float(dr.motor_per_nm)

@@ -30,7 +30,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hapticop.devices.falcon.codec import MOTOR_LIMIT, Command, Flag, FrameCodec, FrameError, new_frame
-from hapticop.devices.falcon.kinematics import WORKSPACE_CENTRE_M, Drive, FalconKinematics, Geometry, Pose
+from hapticop.devices.falcon.kinematics import FalconKinematics
+from hapticop.devices.falcon.legs import Pose
+from hapticop.devices.falcon.mechanism import WORKSPACE_CENTRE_M, Drive, Geometry
 
 __all__ = ["SimulatedFalcon"]
 

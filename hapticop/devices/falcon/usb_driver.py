@@ -13,7 +13,8 @@ then writes the next one. If nothing came back it does not write again (the firm
 each command exactly once) until `resend_after` empty reads, then assumes the reply lost.
 
 The driver talks only pyusb's API; which backend is beneath (libusb, or the project's virtual
-Falcon in `virtual_usb`) is the caller's choice, and the driver cannot tell them apart.
+Falcon in `virtual_usb`) is the caller's choice, and the driver cannot tell them apart. What
+it raises, and the advice its messages carry, is in `usb_errors`.
 """
 
 from __future__ import annotations
@@ -28,44 +29,14 @@ from numpy.typing import NDArray
 
 from hapticop.devices.falcon import ftdi
 from hapticop.devices.falcon.codec import FrameCodec, FrameReader, Status, new_frame
+from hapticop.devices.falcon.usb_errors import FalconLoaderError, FalconUsbError, explain
 
-__all__ = [
-    "FalconUsbError", "FalconLoaderError", "FalconDisconnected", "FalconUsb", "FalconInfo",
-    "system_backend", "find_falcons", "describe_falcons", "connect", "UDEV_RULE",
-]
+__all__ = ["FalconUsb", "FalconInfo", "system_backend", "find_falcons", "describe_falcons", "connect"]
 
-UDEV_RULE = 'SUBSYSTEM=="usb", ATTRS{idVendor}=="0403", ATTRS{idProduct}=="cb48", MODE="0664", GROUP="plugdev"'
-_UDEV_HINT = (f"give your user access with a udev rule, e.g. /etc/udev/rules.d/99-novint-falcon.rules "
-              f"containing {UDEV_RULE} (then `udevadm control --reload` and replug, and be in group plugdev)")
 HANDSHAKE = b"\nC\r"
 HANDSHAKE_REPLIES = (b"\nD,\r", b"\x00\nD,\r")  # the leading 00 was seen on macOS
 AUTOBAUD = b"A"
 CHUNK = 62  # one USB packet's worth of data: 62 + 2 status bytes = 64
-
-
-class FalconUsbError(RuntimeError):
-    """Something between the host and the Falcon failed; the message says what to do."""
-
-
-class FalconLoaderError(FalconUsbError):
-    """The boot loader did not take the firmware (a reopen and retry often helps, §2.6)."""
-
-
-class FalconDisconnected(FalconUsbError):
-    """The device went away (unplugged, powered off, reset)."""
-
-
-def _explain(error: Exception, doing: str) -> FalconUsbError:
-    """A pyusb error as a FalconUsbError that names the cause a person can fix."""
-    code = getattr(error, "errno", None)
-    if code == errno.EACCES or code == errno.EPERM:
-        return FalconUsbError(f"permission denied while {doing}: {_UDEV_HINT}")
-    if code == errno.EBUSY:
-        return FalconUsbError(f"the Falcon is busy while {doing}: another program (another hapticop, a "
-                              "libnifalcon tool) has claimed it")
-    if code == errno.ENODEV or code == errno.ENOENT:
-        return FalconDisconnected(f"the Falcon disappeared while {doing}: unplugged or powered off?")
-    return FalconUsbError(f"USB error while {doing}: {error}")
 
 
 def system_backend(find_library: Callable[[str], str | None] | None = None):
@@ -92,7 +63,7 @@ def find_falcons(backend=None) -> list:
         return list(usb.core.find(find_all=True, idVendor=ftdi.VENDOR_ID, idProduct=ftdi.PRODUCT_ID,
                                   backend=backend))
     except usb.core.USBError as error:
-        raise _explain(error, "listing USB devices") from None
+        raise explain(error, "listing USB devices") from None
 
 
 @dataclass
@@ -126,7 +97,7 @@ def describe_falcons(backend=None, probe_firmware: bool = True) -> list[FalconIn
         except FalconUsbError as error:
             info.problem = str(error)
         except Exception as error:  # noqa: BLE001 - pyusb raises USBError and ValueError alike
-            info.problem = str(_explain(error, "opening the Falcon"))
+            info.problem = str(explain(error, "opening the Falcon"))
         finally:
             if falcon is not None:
                 falcon.close()
@@ -205,7 +176,7 @@ class FalconUsb:
             usb.util.claim_interface(dev, ftdi.INTERFACE)
         except self._usb.USBError as error:
             _dispose(dev)
-            raise _explain(error, "opening the Falcon") from None
+            raise explain(error, "opening the Falcon") from None
 
     def close(self) -> None:
         """Release the interface; safe to call twice, or after an unplug."""
@@ -229,7 +200,7 @@ class FalconUsb:
             self.device.ctrl_transfer(ftdi.VENDOR_OUT, request, value, index, None,
                                       self.timeout_ms if timeout_ms is None else timeout_ms)
         except self._usb.USBError as error:
-            raise _explain(error, f"sending FTDI request {request:#04x}") from None
+            raise explain(error, f"sending FTDI request {request:#04x}") from None
 
     def purge(self) -> None:
         """Empty both FTDI FIFOs (libnifalcon always issues both) and forget partial frames."""
@@ -262,7 +233,7 @@ class FalconUsb:
             raise FalconUsbError("the Falcon did not take a write within "
                                  f"{self.timeout_ms} ms: is its power supply connected?") from None
         except self._usb.USBError as error:
-            raise _explain(error, "writing to the Falcon") from None
+            raise explain(error, "writing to the Falcon") from None
 
     def _read_packet(self, timeout_ms: int) -> int:
         """One bulk IN packet into `_packet`; the number of data bytes after the 2 status bytes."""
@@ -272,7 +243,7 @@ class FalconUsb:
             self.timeouts += 1
             return 0
         except self._usb.USBError as error:
-            raise _explain(error, "reading from the Falcon") from None
+            raise explain(error, "reading from the Falcon") from None
         return max(0, n - ftdi.STATUS_BYTES)
 
     def _collect(self, want: int, max_packets: int, done: Callable[[bytes], bool] | None = None) -> bytes:

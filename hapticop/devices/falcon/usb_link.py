@@ -6,8 +6,9 @@ is done (raising what it raised). The lines it logs are handed over then, on the
 thread. A USB error during the run (unplugged, powered off) is logged once and the frames
 just stop: the block's `frames_ok` tells the rest of the system.
 
-`virtual_falcon` builds the virtual USB Falcon of `virtual_usb` on a run's clock, so the same
-block runs against it in tests (`usb_backend: virtual`).
+`virtual_falcon` builds the virtual Falcon of `virtual_falcon` on a run's clock, reached through
+the pyusb backend of `virtual_usb`, so the same block runs against it in tests
+(`usb_backend: virtual`).
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hapticop.devices.falcon.codec import Status
-from hapticop.devices.falcon.kinematics import Geometry
-from hapticop.devices.falcon.usb_driver import FalconUsb, FalconUsbError, connect
+from hapticop.devices.falcon.mechanism import Geometry
+from hapticop.devices.falcon.usb_driver import FalconUsb, connect
+from hapticop.devices.falcon.usb_errors import FalconUsbError
 
 __all__ = ["UsbLink", "virtual_falcon"]
 
@@ -109,7 +111,8 @@ def virtual_falcon(geometry: Geometry, now_ns: Callable[[], int], sleeps: bool, 
     pyusb backend that reaches it: (device, backend)."""
     from hapticop.devices.falcon.homing import HomingHand
     from hapticop.devices.falcon.simulated import SimulatedFalcon
-    from hapticop.devices.falcon.virtual_usb import VirtualFalcon, VirtualUsbBackend
+    from hapticop.devices.falcon.virtual_falcon import VirtualFalcon
+    from hapticop.devices.falcon.virtual_usb import VirtualUsbBackend
 
     device = VirtualFalcon(_RunClock(now_ns, sleeps), falcon=SimulatedFalcon(geometry, rng=rng), hand=HomingHand())
     return device, VirtualUsbBackend(device)

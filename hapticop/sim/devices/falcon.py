@@ -21,7 +21,7 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params, Port
 from hapticop.devices.falcon import WORKSPACE_CENTRE_M, Flag, SimulatedFalcon, new_frame
-from hapticop.devices.falcon.kinematics import Geometry
+from hapticop.devices.falcon.mechanism import Geometry
 from hapticop.devices.link import DatagramLink
 
 
