@@ -95,7 +95,7 @@ def falcon_blocks():
 
     clock, run_dir = VirtualClock(), Path(tempfile.mkdtemp())
     device = _block(FalconSimulator, "falcon_sim", FalconSimulatorParams(), clock, run_dir)
-    falcon = _block(Falcon, "falcon", FalconParams(), clock, run_dir)
+    falcon = _block(Falcon, "falcon", FalconParams(driver="sim", simulator="falcon_sim"), clock, run_dir)
     device.configure_resources()
     assert falcon.configure_resources()
     homing, hand = HomingHand(), device.inputs.hand_force.value

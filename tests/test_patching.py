@@ -154,13 +154,14 @@ def test_replacing_the_whole_document_with_a_list_is_refused(hallway):
 
 def test_merge_patch_changes_a_schedule(hallway):
     tree, _ = hallway
-    patch = load_patch("threads:\n  fieldbus:\n    schedules:\n      1: [ethercat]\n      2: [ethercat, ropod]\n",
-                       "p.yaml")
+    patch = load_patch("threads:\n  fieldbus:\n    schedules:\n      1: [ropod_plant, ethercat]\n"
+                       "      2: [ropod_plant, ethercat, ropod]\n", "p.yaml")
     _, _, plan, _ = prepare(tree, patch)
-    assert plan.schedules == {"fieldbus": {0: [], 1: ["ethercat"], 2: ["ethercat", "ropod"]}}
+    assert plan.schedules == {
+        "fieldbus": {0: [], 1: ["ropod_plant", "ethercat"], 2: ["ropod_plant", "ethercat", "ropod"]}}
     lines = plan.describe()
-    assert "thread 'fieldbus': schedule 1 [ropod_plant, ethercat, ropod] -> [ethercat]" in lines
-    assert "thread 'fieldbus': schedule 2 (none) -> [ethercat, ropod]" in lines
+    assert "thread 'fieldbus': schedule 1 [ropod_plant, ethercat, ropod] -> [ropod_plant, ethercat]" in lines
+    assert "thread 'fieldbus': schedule 2 (none) -> [ropod_plant, ethercat, ropod]" in lines
     assert not plan.params and not plan.unsupported
 
 
