@@ -9,6 +9,20 @@ from hapticop.validation import validate_text
 from .runtime_helpers import counting
 
 
+def _assert_nothing_stays(system, run_cycles) -> None:
+    """What `run_cycles` leaves allocated, the log writer's thread aside (not the cycle's business)."""
+    while not system.writer.queue.empty():
+        time.sleep(0.01)
+    only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
+    tracemalloc.start()
+    before = tracemalloc.take_snapshot().filter_traces(only_cycle)
+    run_cycles()
+    after = tracemalloc.take_snapshot().filter_traces(only_cycle)
+    tracemalloc.stop()
+    grown = sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
+    assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
+
+
 def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
     text = counting()
     validated = validate_text(text, "alloc.yaml")
@@ -28,16 +42,7 @@ def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
 
         cycles(0, 2_000)  # everything is running and warm
         assert system.state("recorder").flag_name == "running"
-        while not system.writer.queue.empty():  # the log writer thread is not the cycle's business
-            time.sleep(0.01)
-        only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
-        tracemalloc.start()
-        before = tracemalloc.take_snapshot().filter_traces(only_cycle)
-        cycles(2_000, 10_000)
-        after = tracemalloc.take_snapshot().filter_traces(only_cycle)
-        tracemalloc.stop()
-        grown = sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
-        assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
+        _assert_nothing_stays(system, lambda: cycles(2_000, 10_000))
     finally:
         system.writer.stop()
         system.built = system.main = None
@@ -66,16 +71,7 @@ def test_the_simulated_falcon_operator_and_world_allocate_nothing_that_stays(tmp
 
         cycles(0, 3_000)  # homed, and the operator drives
         assert system.state("falcon").flag_name == "running" and operator.driving_since_ns is not None
-        while not system.writer.queue.empty():
-            time.sleep(0.01)
-        only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
-        tracemalloc.start()
-        before = tracemalloc.take_snapshot().filter_traces(only_cycle)
-        cycles(3_000, 5_000)
-        after = tracemalloc.take_snapshot().filter_traces(only_cycle)
-        tracemalloc.stop()
-        grown = sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
-        assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
+        _assert_nothing_stays(system, lambda: cycles(3_000, 5_000))
     finally:
         for thread in (main, simulation):
             for runner in thread.runners.values():
@@ -119,16 +115,7 @@ def test_the_simulated_wheels_exchange_without_allocating(tmp_path):
         cycles(0, 2_000)
         assert system.state("ethercat").flag_name == "running" and system.state("ropod_plant").flag_name == "running"
         assert system.flag("ethercat.operational")  # the plant answers every frame
-        while not system.writer.queue.empty():
-            time.sleep(0.01)
-        only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
-        tracemalloc.start()
-        before = tracemalloc.take_snapshot().filter_traces(only_cycle)
-        cycles(2_000, 5_000)
-        after = tracemalloc.take_snapshot().filter_traces(only_cycle)
-        tracemalloc.stop()
-        grown = sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
-        assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
+        _assert_nothing_stays(system, lambda: cycles(2_000, 5_000))
     finally:
         system.writer.stop()
         system.built = system.main = None
