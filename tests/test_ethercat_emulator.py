@@ -220,3 +220,55 @@ def test_the_true_pose_is_shared_through_a_file(tmp_path):
     reader.close()
     writer.close()
     assert not (tmp_path / "truth").exists()
+
+
+# -- the emulator's control socket survives whatever it is sent --------------------------------------
+def test_the_control_socket_answers_bad_requests_and_keeps_the_segment_running(tmp_path):
+    """Not JSON, JSON that is not an object, nesting past Python's stack, bytes that are not UTF-8, a
+    line too long, nonsense values: each gets an error, and the next good request is answered."""
+    import socket as socketlib
+    import threading
+    import time
+
+    from hapticop.devices.ethercat.emulator.server import MAX_REQUEST_BYTES, FrameServer, control
+
+    server = FrameServer("unused", RopodSegment(rng=np.random.default_rng(0)), control_path=tmp_path / "control.sock",
+                         log=lambda _: None)
+    listener = server._listen()
+    stop = threading.Event()
+
+    def loop():  # the segment loop's side of the control channel, as run() does between frames
+        while not stop.is_set():
+            server.answer_requests()
+            time.sleep(0.001)
+
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    try:
+        def raw(payload: bytes) -> dict:
+            with socketlib.socket(socketlib.AF_UNIX, socketlib.SOCK_STREAM) as sock:
+                sock.settimeout(10)
+                sock.connect(str(tmp_path / "control.sock"))
+                sock.sendall(payload)
+                answer = b""
+                while not answer.endswith(b"\n"):
+                    chunk = sock.recv(65536)
+                    assert chunk, "the control socket closed without answering"
+                    answer += chunk
+            return json.loads(answer)
+
+        bad = [b"[1]\n", b'"status"\n', b"null\n", b"not json\n", b"\xff\xfe\n", b"[" * 100_000 + b"\n",
+               b'{"op": "al_error", "slave": 2, "code": 26, "hold_ms": 1e400}\n',
+               b'{"op": "lose", "slave": [1, 2]}\n', b'{"op": "late", "delay_us": {}, "frames": 1}\n',
+               b"x" * (MAX_REQUEST_BYTES + 10) + b"\n"]
+        for payload in bad:
+            answer = raw(payload)
+            assert answer["ok"] is False and answer["error"], payload[:40]
+        assert control(tmp_path / "control.sock", {"op": "ping"})["ok"] is True
+        status = control(tmp_path / "control.sock", {"op": "status"})
+        assert all(slave["present"] for slave in status["slaves"])  # nothing changed by the bad ones
+    finally:
+        stop.set()
+        thread.join(5)
+        server.running = False
+        listener.close()

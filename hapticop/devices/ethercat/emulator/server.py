@@ -33,6 +33,7 @@ from hapticop.devices.ethercat.emulator.truth import TruthWriter
 __all__ = ["FrameServer", "control"]
 
 STEP_NS = 1_000_000
+MAX_REQUEST_BYTES = 64 * 1024  # a fault request is a few dozen bytes
 
 
 class FrameServer:
@@ -85,9 +86,7 @@ class FrameServer:
                     if truth is not None:
                         truth.write((now - self.started_ns) / 1e9, model.plant.pose, model.plant.twist)
                     next_step = max(next_step + STEP_NS, now)
-                while not self.requests.empty():
-                    request, reply = self.requests.get_nowait()
-                    reply.put(self._handle(request))
+                self.answer_requests()
         finally:
             sock.close()
             if truth is not None:
@@ -95,6 +94,12 @@ class FrameServer:
             if listener is not None:
                 listener.close()
                 self.control_path.unlink(missing_ok=True)
+
+    def answer_requests(self) -> None:
+        """The control requests that arrived, answered between two frames (the loop's own thread)."""
+        while not self.requests.empty():
+            request, reply = self.requests.get_nowait()
+            reply.put(self._handle(request))
 
     # --- faults and status -------------------------------------------------------------
     def _slave(self, request: dict):
@@ -138,8 +143,10 @@ class FrameServer:
                 raise ValueError(f"unknown operation {op!r}")
             self.log(f"fault: {json.dumps(request)}")
             return {"ok": True}
-        except (KeyError, ValueError, TypeError) as error:
+        except (KeyError, ValueError, TypeError, OverflowError) as error:
             return {"ok": False, "error": str(error)}
+        except Exception as error:  # noqa: BLE001 - no request may stop the segment's loop
+            return {"ok": False, "error": f"{type(error).__name__}: {error}"}
 
     def _listen(self) -> socket.socket:
         self.control_path.unlink(missing_ok=True)
@@ -159,21 +166,31 @@ class FrameServer:
             threading.Thread(target=self._client, args=(connection,), daemon=True).start()
 
     def _client(self, connection: socket.socket) -> None:
-        with connection, connection.makefile("rw") as stream:
-            for line in stream:
-                try:
-                    request = json.loads(line)
-                except json.JSONDecodeError as error:
-                    answer = {"ok": False, "error": f"not JSON: {error}"}
-                else:
-                    reply: queue.SimpleQueue = queue.SimpleQueue()
-                    self.requests.put((request, reply))
-                    try:
-                        answer = reply.get(timeout=5.0)
-                    except queue.Empty:
-                        answer = {"ok": False, "error": "the emulator loop did not answer"}
-                stream.write(json.dumps(answer) + "\n")
+        """One client's requests, a JSON object a line. Whatever else arrives gets an error and
+        never reaches the loop: a bad request must not take the emulated segment down with it."""
+        with connection, connection.makefile("rwb") as stream:
+            while line := stream.readline(MAX_REQUEST_BYTES + 1):
+                whole = line.endswith(b"\n") or len(line) <= MAX_REQUEST_BYTES
+                answer = self._request(line) if whole else {
+                    "ok": False, "error": f"a request is one line of at most {MAX_REQUEST_BYTES} bytes"}
+                stream.write((json.dumps(answer) + "\n").encode())
                 stream.flush()
+                if not whole:
+                    return  # the rest of that line cannot be told from a next request
+
+    def _request(self, line: bytes) -> dict:
+        try:
+            request = json.loads(line)
+        except (ValueError, RecursionError) as error:  # not JSON, not UTF-8, or nested past Python's stack
+            return {"ok": False, "error": f"not JSON: {str(error)[:200]}"}
+        if not isinstance(request, dict):
+            return {"ok": False, "error": 'a request is a JSON object, e.g. {"op": "status"}'}
+        reply: queue.SimpleQueue = queue.SimpleQueue()
+        self.requests.put((request, reply))
+        try:
+            return reply.get(timeout=5.0)
+        except queue.Empty:
+            return {"ok": False, "error": "the emulator loop did not answer"}
 
 
 def control(path: Path, request: dict, timeout: float = 5.0) -> dict:
