@@ -322,4 +322,9 @@ COLLECTIONS: tuple[tuple[str, ...], ...] = (
     ("patches",),
     ("latencies",),
 )
+# The room a running system keeps for what live patches add: its shared region is sized at start.
+SPARE_ACTIVITIES = 16
+SPARE_FLAGS = 1024
+ARENA_BYTES = 1 << 20  # stream buffers added live
+
 RESERVED_NAMES = frozenset({"threads", "system", "flags"})

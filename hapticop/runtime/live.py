@@ -17,6 +17,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Protocol
 
+from hapticop.composition import flags as flagdefs
 from hapticop.composition.description import Composition, Stream
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import Loaded, ResolvedActivity
@@ -24,6 +25,8 @@ from hapticop.composition.units import format_duration
 from hapticop.runtime.assembly import thread_of
 from hapticop.runtime.described import Description
 from hapticop.runtime.logs import Logger
+from hapticop.runtime.region import Layout
+from hapticop.runtime.streams import latest_nbytes, queue_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 from hapticop.validation.changes import ChangePlan
 from hapticop.validation.patches import PatchError, prepare
@@ -37,6 +40,7 @@ class LiveTarget(Protocol):
     description: Description
     virtual: bool
     log: Logger
+    layout: Layout  # the region's layout, whose spare room live additions take
 
     @property
     def runners(self) -> dict[str, ActivityRunner]: ...
@@ -97,9 +101,30 @@ def check(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> dict[str, Res
                 problems.append(_refuse(("streams", stream), f"stream '{stream}' reaches thread '{thread}', which "
                                         "has its own process"))
                 break
+    lacking = _room_lacking(target, plan, loaded)
+    if lacking:
+        problems.append(_refuse(("activities",) if plan.added_activities else ("streams",), lacking))
     if problems:
         raise PatchError(problems)
     return resolved
+
+
+def _room_lacking(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> str | None:
+    """What the region's spare room lacks for the plan's additions, given those already made."""
+    flags = {}
+    for name in plan.added_activities:
+        iface = loaded.activities[name].interface
+        flags[name] = list(flagdefs.activity_flags(name, iface.flags_written, iface.flags_read))
+    buffers = []
+    for name in plan.added_streams:
+        spec = loaded.composition.streams[name]
+        writer_activity, writer_port = spec.writer.split(".")
+        port = loaded.activities[writer_activity].interface.outputs[writer_port]
+        if spec.policy.kind == "latest":
+            buffers.append(latest_nbytes(port))
+        else:
+            buffers.extend(queue_nbytes(port, spec.policy.capacity) for _ in spec.readers)
+    return target.layout.room_for(flags, buffers)
 
 
 def apply(target: LiveTarget, pending: PendingPatch) -> None:
@@ -107,6 +132,9 @@ def apply(target: LiveTarget, pending: PendingPatch) -> None:
     plan = pending.plan
     old = target.description
     new = old.patched(pending.tree, pending.composition, pending.resolved)
+    lacking = _room_lacking(target, plan, new.loaded)  # patches prepared together may not all fit
+    if lacking:
+        raise PatchError([_refuse(("activities",) if plan.added_activities else ("streams",), lacking)])
     for name, resolved in pending.resolved.items():
         if name in plan.params:
             _new_params(target, old, name, resolved)

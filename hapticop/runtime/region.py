@@ -14,7 +14,7 @@ from multiprocessing import shared_memory
 import numpy as np
 
 from hapticop.composition import lcsm
-from hapticop.composition.description import Composition
+from hapticop.composition.description import ARENA_BYTES, SPARE_ACTIVITIES, SPARE_FLAGS, Composition
 from hapticop.composition.loader import ResolvedActivity
 from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
@@ -22,9 +22,6 @@ from hapticop.runtime.timing import BINS
 ALIGN = 64
 # Room for what live patches add in the main process: activities with their flags and
 # the buffers of their streams. Children never see additions, so layouts still agree.
-SPARE_ACTIVITIES = 16
-SPARE_FLAGS = 1024
-ARENA_BYTES = 1 << 20
 
 
 def _align(n: int) -> int:
@@ -74,6 +71,23 @@ class Layout:
         for flag in new_flags:
             self.flag_index[flag] = len(self.flags)
             self.flags.append(flag)
+
+    def room_for(self, flags_by_activity: dict[str, list[str]], buffers: list[int]) -> str | None:
+        """What the spare room lacks for these live additions (None: they fit); changes nothing, so
+        a patch that would not fit is refused before any of it is applied."""
+        left = self.declared_activities + SPARE_ACTIVITIES - len(self.activities)
+        if len(flags_by_activity) > left:
+            return (f"no room for {len(flags_by_activity)} more activities: {left} of the {SPARE_ACTIVITIES} a "
+                    "running system may add are left")
+        new_flags = {f for flags in flags_by_activity.values() for f in flags if f not in self.flag_index}
+        if len(self.flags) + len(new_flags) > self.declared_flags + SPARE_FLAGS:
+            return f"no room for {len(new_flags)} more flags (at most {SPARE_FLAGS} may be added)"
+        used = self.arena_used
+        for nbytes in buffers:
+            if used + nbytes > ARENA_BYTES:
+                return f"no room for the new streams' buffers ({ARENA_BYTES} bytes for live additions)"
+            used = _align(used + nbytes)
+        return None
 
     def allocate(self, nbytes: int) -> int:
         """Offset of `nbytes` in the arena for a stream added live."""
