@@ -3,17 +3,15 @@
 A log call below the owner's level costs one integer comparison. Otherwise it puts one
 tuple on a lock-free queue (`SimpleQueue.put`) and returns; a writer thread per process
 formats the lines and appends them to one file per thread or activity in the run
-directory, which defaults to a tmpfs (`/dev/shm`) as the thesis advises. Errors and
+directory, which defaults to a tmpfs (`/dev/shm`) as the thesis advises (`rundirs`). Errors and
 warnings are echoed to the console by the writer, not by the caller.
 """
 
 from __future__ import annotations
 
-import os
 import queue
 import sys
 import threading
-import time
 from collections.abc import Callable
 from enum import IntEnum
 from pathlib import Path
@@ -31,12 +29,6 @@ class Level(IntEnum):
 LEVEL_NAMES = [level.name.lower() for level in Level]
 
 
-def default_run_dir(name: str) -> Path:
-    base = Path("/dev/shm") if Path("/dev/shm").is_dir() and os.access("/dev/shm", os.W_OK) else Path("/tmp")
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    return base / "hapticop" / f"{name}-{stamp}-{os.getpid()}"
-
-
 class LogWriter:
     """Drains the queue of one process into per-owner files."""
 
@@ -49,7 +41,7 @@ class LogWriter:
         self._stopped = False
 
     def start(self) -> LogWriter:
-        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.run_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
         self._thread.start()
         return self
 

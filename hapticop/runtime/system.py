@@ -11,6 +11,7 @@ own thread (`service.py`).
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,9 +27,10 @@ from hapticop.runtime.assembly import build, layout_of, make_runner, make_transp
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.described import Description
 from hapticop.runtime.live import LiveChanges
-from hapticop.runtime.logs import Level, LogWriter, default_run_dir
+from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
+from hapticop.runtime.rundirs import new_run_directory
 from hapticop.runtime.scheduler import Scheduler
 from hapticop.runtime.service import ControlService
 from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
@@ -79,7 +81,9 @@ class System:
         self.name = composition.name or Path(self.file).stem
         self.virtual = options.clock == "virtual"
         self.clock = VirtualClock() if self.virtual else RealtimeClock()
-        self.run_dir = options.run_dir or default_run_dir(self.name)
+        # What the run writes (logs, results, recordings) is its owner's alone, in every process it starts.
+        self.umask = os.umask(0o077)
+        self.run_dir = options.run_dir or new_run_directory(self.name)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
         self.description = Description.of(source.tree, loaded)
@@ -188,6 +192,7 @@ class System:
         self.built = None  # drop the views into the region before it is released
         self.main = None
         self.region.close()
+        os.umask(self.umask)
 
 
 @dataclass
