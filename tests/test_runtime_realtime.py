@@ -187,3 +187,71 @@ def test_the_hallway_in_real_time_scans_from_a_simulation_process_and_leaves_not
     assert "lcsm cleaning -> done" in (run / "lidar_sim.log").read_text()
     assert not list((run / "links").glob("*")) and not list((run / "worlds").glob("*"))  # withdrawn
     assert not list(Path("/dev/shm").glob(f"hapticop-scene-{os.getpid()}-*"))
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as stat:
+                    fields = stat.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
+    """SIGKILL leaves the main process no chance to shut down: its children notice, clean their
+    activities (a device block would bring its device to a safe state; here the recorder saves
+    what it recorded) and end, and the shared memory goes with them."""
+    shm_before = {name for name in os.listdir("/dev/shm") if name.startswith("psm_")}
+    process = _compose_process(tmp_path, pipeline("process"))
+    run = tmp_path / "run"
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and "-> running" not in _read(run / "recorder.log"):
+        time.sleep(0.02)
+    children = [pid for pid in _children(process.pid) if "process_main" in _cmdline(pid) or _is_spawned(pid)]
+    assert children, "the slow thread's process was not found"
+    process.kill()
+    process.wait(timeout=10)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_alive(pid) for pid in children):
+        time.sleep(0.02)
+    assert not any(_alive(pid) for pid in children), "a child outlived its parent"
+    assert (run / "recorder.npz").exists()  # the recorder's clean hook ran: its activity was cleaned
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and {n for n in os.listdir("/dev/shm") if n.startswith("psm_")} - shm_before:
+        time.sleep(0.05)
+    assert not {n for n in os.listdir("/dev/shm") if n.startswith("psm_")} - shm_before
+
+
+def _read(path) -> str:
+    try:
+        return path.read_text()
+    except OSError:
+        return ""
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+            return cmdline.read().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
+def _is_spawned(pid: int) -> bool:
+    """A multiprocessing 'spawn' child (not its resource tracker, which must outlive it)."""
+    line = _cmdline(pid)
+    return "multiprocessing.spawn" in line and "resource_tracker" not in line

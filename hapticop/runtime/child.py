@@ -3,11 +3,16 @@
 The child rebuilds the composition from the plain tree it is handed, attaches to the parent's
 shared region by name, builds only its own threads (one, or those sharing a named process),
 and runs their loops. Ctrl+C is the parent's to handle: the child ignores SIGINT and leaves
-when its threads are done or the region says terminate.
+when its threads are done or the region says terminate. If the parent dies without saying so
+(SIGKILL, the OOM killer), the kernel tells the child (PR_SET_PDEATHSIG): it cleans its
+activities, which brings their devices to a safe state, and ends within `ORPHAN_BOUND_S`.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import os
 import signal
 import sys
 import threading
@@ -22,6 +27,9 @@ from hapticop.runtime.deadlines import thread_start
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Region
 
+ORPHAN_BOUND_S = 1.0  # from the parent's death to this process's end, cleaned or not
+PR_SET_PDEATHSIG = 1
+
 
 def process_main(tree: dict, flags: list[str], region_name: str, threads: list[str], run_dir: str, seed: int,
                  messages) -> None:
@@ -30,8 +38,10 @@ def process_main(tree: dict, flags: list[str], region_name: str, threads: list[s
     first thread runs on this process's main thread; others it shares the process with get
     threads of their own."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
     loaded = load_tree(tree)
     region = Region.attach(layout_of(loaded, flags), region_name)
+    _leave_with_parent(parent, region, threads)
     clock = RealtimeClock()
     writer = LogWriter(Path(run_dir), echo=sys.stderr).start()
     built = build(loaded, region, threads, clock, writer, seed, apply_realtime=True)
@@ -59,6 +69,27 @@ def process_main(tree: dict, flags: list[str], region_name: str, threads: list[s
         writer.stop()
         built = None  # drop the views into the region before it is released (rebound, not deleted: run() reads it)
         region.close()
+
+
+def _leave_with_parent(parent: int, region: Region, threads: list[str]) -> None:
+    """When the parent dies, clean this process's threads (their activities first: zero forces,
+    zero wheel commands) and leave; whatever has not cleaned by the bound is left at once."""
+
+    def orphaned(_signum=None, _frame=None) -> None:
+        for thread in threads:
+            region.set_flag(f"threads.{thread}.lcsm.request_cleaning")
+        threading.Timer(0.8 * ORPHAN_BOUND_S, _terminate, args=(region,)).start()
+        threading.Timer(ORPHAN_BOUND_S, os._exit, args=(1,)).start()
+
+    signal.signal(signal.SIGTERM, orphaned)
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != parent:  # it died before the request took effect
+        orphaned()
+
+
+def _terminate(region: Region) -> None:
+    region.system[Region.TERMINATE] = 1  # every loop of this process leaves at once
 
 
 class _LiveChanges:
