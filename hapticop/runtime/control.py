@@ -215,12 +215,22 @@ class ControlServer:
                         if key.fileobj is self._wake_read or self._stopping.is_set():
                             return
                         if key.fileobj is self._listener:
-                            self._accept(selector, clients)
+                            try:
+                                self._accept(selector, clients)
+                            except Exception:  # noqa: BLE001 - a failed accept is retried at the next event
+                                pass
                         elif key.fileobj in clients:
-                            self._step(selector, clients, clients[key.fileobj], events)
+                            client = clients[key.fileobj]
+                            try:
+                                self._step(selector, clients, client, events)
+                            except Exception:  # noqa: BLE001 - one client's failure must not end the server
+                                self._close(selector, clients, client)
                     now = time.monotonic()
                     for client in [c for c in clients.values() if c.deadline <= now]:
-                        self._expire(selector, clients, client)
+                        try:
+                            self._expire(selector, clients, client)
+                        except Exception:  # noqa: BLE001 - as above
+                            self._close(selector, clients, client)
                     # A bounded number of connections: the rest wait in the listen backlog.
                     full = len(clients) >= 2 * MAX_CLIENTS
                     if full == listening:
@@ -313,8 +323,11 @@ class ControlServer:
 
     @staticmethod
     def _close(selector: selectors.BaseSelector, clients: dict[socket.socket, _Client], client: _Client) -> None:
-        selector.unregister(client.connection)
-        del clients[client.connection]
+        clients.pop(client.connection, None)
+        try:
+            selector.unregister(client.connection)
+        except (KeyError, ValueError):
+            pass  # never registered, or already closed
         client.connection.close()
 
     def _reply(self, line: bytes) -> dict:
