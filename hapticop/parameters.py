@@ -14,8 +14,10 @@ from typing import TypeVar, dataclass_transform
 
 T = TypeVar("T")
 
-#: What pydantic reads where a block's parameters hold one of these dataclasses.
-PYDANTIC_CONFIG = {"extra": "forbid", "use_attribute_docstrings": True}
+#: What pydantic reads where a block's parameters hold one of these dataclasses: unknown keys
+#: refused, and every number finite (a NaN gain or an infinite limit is a mistake, never a setting;
+#: a field that means infinity says so with `Field(allow_inf_nan=True)`).
+PYDANTIC_CONFIG = {"extra": "forbid", "use_attribute_docstrings": True, "allow_inf_nan": False}
 
 
 @dataclass_transform(frozen_default=True, field_specifiers=(dataclasses.field,))

@@ -170,3 +170,101 @@ def test_socket_path_rules(monkeypatch):
     assert socket_path("hallway") == Path("/tmp/hapticop-1234/hallway.sock")
     with pytest.raises(ControlError):
         socket_path("")
+
+
+# -- hostile and careless clients (see also test_control_hostile.py, against a running system) --------
+
+
+@pytest.mark.parametrize(("data", "error"), [
+    (b"[" * 200_000 + b"\n", "nested deeper than 64 levels"),
+    (b'{"a": ' + b"[" * 65 + b"]" * 65 + b"}\n", "nested deeper than 64 levels"),
+    (b"\n", "empty request"),
+    (b"   \r\n", "empty request"),
+    (b"", "empty request"),
+    (b"[1]\n", "a request is a JSON object"),
+    (b'"status"\n', "a request is a JSON object"),
+    (b"\x00\xff\xfe garbage\n", "not JSON"),
+    (b'{"a": NaN}\n', "NaN is not a number a request may carry"),
+    (b'{"a": -Infinity}\n', "-Infinity is not a number a request may carry"),
+    (b'{"a": ' + b"9" * 5000 + b"}\n", "not JSON"),
+    (b'{"a": "\\ud800"}', None),  # a lone surrogate, and no newline: the end of the stream ends it
+])
+def test_every_bad_request_gets_a_one_line_error_and_the_server_goes_on(sock, data, error):
+    from .control_helpers import send_raw
+
+    with ControlServer(sock, echo) as server:
+        reply = send_raw(sock, data)
+        if error is None:
+            assert reply["ok"] is True
+        else:
+            assert reply["ok"] is False and error in reply["error"], reply
+        assert request(sock, {"still": "there"})["echo"] == {"still": "there"}
+        assert server.running
+
+
+def test_nesting_inside_strings_is_not_nesting(sock):
+    with ControlServer(sock, echo):
+        text = "[" * 1000 + '"\\"{' + "}" * 10
+        assert request(sock, {"text": text})["echo"] == {"text": text}
+
+
+def test_a_request_without_newline_is_answered_at_its_deadline(sock, monkeypatch):
+    monkeypatch.setattr(control, "READ_DEADLINE", 0.3)
+    with ControlServer(sock, echo):
+        from .control_helpers import send_raw
+
+        silent = send_raw(sock, b"", close=False)
+        assert silent["ok"] is False and "no complete request within 0.3 s: got nothing" in silent["error"]
+        partial = send_raw(sock, b'{"op": "sta', close=False)
+        assert partial["ok"] is False and "an incomplete request (11 bytes, no newline)" in partial["error"]
+
+
+def test_slow_and_idle_clients_do_not_hold_up_the_others(sock, monkeypatch):
+    from .control_helpers import SlowClients
+
+    monkeypatch.setattr(control, "READ_DEADLINE", 1.0)
+    with ControlServer(sock, echo):
+        idle = [socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) for _ in range(3)]
+        try:
+            for client in idle:
+                client.connect(str(sock))
+            with SlowClients(sock, count=3, every_s=0.2):
+                for n in range(10):
+                    assert request(sock, {"n": n}, timeout=10)["echo"] == {"n": n}
+        finally:
+            for client in idle:
+                client.close()
+
+
+def test_more_clients_than_it_serves_are_told_busy(sock, monkeypatch):
+    monkeypatch.setattr(control, "MAX_CLIENTS", 4)
+    with ControlServer(sock, echo):
+        idle = [socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) for _ in range(4)]
+        try:
+            for client in idle:
+                client.connect(str(sock))
+            reply = request(sock, {"n": 1}, timeout=10)
+            assert reply["ok"] is False and reply["error"].startswith("busy: 4 clients are being served")
+        finally:
+            for client in idle:
+                client.close()
+        assert request(sock, {"n": 2}, timeout=10)["echo"] == {"n": 2}  # room again
+
+
+def test_a_flood_gets_an_answer_or_busy_for_every_request(sock):
+    from .control_helpers import answered_or_busy, flood
+
+    with ControlServer(sock, echo) as server:
+        replies = flood(sock, clients=20, requests=50, message={"op": "status"})
+        assert len(replies) == 1000
+        assert all(answered_or_busy(reply) for reply in replies), [r for r in replies if not answered_or_busy(r)][:3]
+        assert server.running and request(sock, {"n": 3})["echo"] == {"n": 3}
+
+
+def test_a_handler_that_recurses_without_end_does_not_end_the_server(sock):
+    def recursive(message: dict) -> dict:
+        return recursive(message)
+
+    with ControlServer(sock, recursive):
+        assert request(sock, {})["ok"] is False
+        assert request(sock, {})["ok"] is False

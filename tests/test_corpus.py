@@ -22,6 +22,7 @@ VALID = CORPUS / "valid"
 CASES = [
     ("invalid-nested-param-key.yaml", "unknown-key", 18, "unknown key 'fz_maxx'", "did you mean 'fz_max_n'?"),
     ("invalid-nested-param-value.yaml", "bad-value", 18, "'silent_ratio' must be less than 1.0 (got 1.5)", None),
+    ("invalid-param-nan.yaml", "bad-value", 18, "Input should be a finite number (got nan)", None),
     ("invalid-force-model-kind.yaml", "bad-value", 18, "unknown kind 'braking'", None),
     # found while writing the corpus: each once gave a crash, a second error or a wrong line
     ("invalid-arc-undeclared-place.yaml", "unknown-place", 21, "arc to undeclared place 'EXTRA' of net 'boot'", None),

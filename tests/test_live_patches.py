@@ -116,3 +116,43 @@ def test_patches_on_a_live_realtime_system(tmp_path, deploy):
     assert status["threads"]["worker"]["schedule"] == 0 and status["activities"]["relay"]["state"] == "running"
     # the relay stopped being stepped once disabled: far fewer steps than the 1500 cycles of 3 s
     assert result.timing["activities"]["relay"]["steps"] < 1400
+
+
+NOT_FINITE = [
+    "- {op: add, path: /activities/noise/params, value: {sigma: .nan}}",
+    "activities: {noise: {params: {sigma: .inf}}}",
+    '[{"op": "add", "path": "/activities/noise/params", "value": {"sigma": NaN}}]',
+    '[{"op": "add", "path": "/activities/noise/params", "value": {"sigma": -Infinity}}]',
+]
+
+
+def test_a_live_patch_with_a_value_that_is_not_finite_is_refused_and_changes_nothing(tmp_path):
+    from .control_helpers import while_running
+
+    def work(path, system):
+        before = system.composition.model_dump()
+        finite = request(path, {"op": "patch", "dry_run": True,
+                                "text": "- {op: add, path: /activities/noise/params, value: {sigma: 2.0}}"})
+        assert finite["ok"] is True, finite  # the same change with a number is one a running system takes
+        for text in NOT_FINITE:
+            reply = request(path, {"op": "patch", "text": text})
+            assert reply["ok"] is False, (text, reply)
+            found = reply["diagnostics"][0]
+            assert found["rule"] == "bad-value" and "finite number" in found["message"], (text, found)
+            assert found["line"] >= 1
+        assert request(path, {"op": "status"})["ok"] is True
+        assert system.composition.model_dump() == before
+
+    while_running(tmp_path, work)
+
+
+def test_a_patch_whose_aliases_would_expand_without_bound_is_refused_at_once(tmp_path):
+    from hapticop.validation.patches import PatchError, load_patch
+
+    levels = "".join(f"    l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * 10) + "]\n" for i in range(1, 9))
+    text = "- op: test\n  path: /name\n  value:\n    l0: &l0 [x, x, x, x, x, x, x, x, x, x]\n" + levels
+    with pytest.raises(PatchError) as caught:
+        load_patch(text, "laughs.yaml")
+    found = caught.value.diagnostics[0]
+    assert found.rule == "yaml-aliases" and found.file == "laughs.yaml" and "more than 100000 values" in found.message
+    assert load_patch(text[: text.index("    l2:")], "few.yaml")  # a few aliases are fine

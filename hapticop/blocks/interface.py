@@ -91,9 +91,10 @@ class Interface:
 
 
 class Params(BaseModel):
-    """Base of every block's parameter model: unknown keys are mistakes, not extensions."""
+    """Base of every block's parameter model: unknown keys are mistakes, not extensions, and
+    every number is finite unless its field allows NaN or infinity itself."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class DeviceParams(Params):

@@ -5,8 +5,10 @@ enter; the socket itself is mode 0600 and every connection's peer credentials ar
 checked (SO_PEERCRED), so only the same user, or root, can patch or query it.
 `hapticop patch` and `hapticop status` talk to it with `request`.
 
-Requests are handled one at a time in the server's own thread, in the order they
-arrive: a handler never runs concurrently with itself.
+One thread serves every client with non-blocking reads, each client with its own buffer, size
+limit and deadline, so a slow, idle or malformed client delays no one and cannot stop the server.
+Complete requests are handled one at a time in that thread, in the order they complete: a
+handler never runs concurrently with itself.
 """
 
 from __future__ import annotations
@@ -14,17 +16,24 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import selectors
 import socket
 import stat
 import struct
 import threading
+import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 MAX_REQUEST_BYTES = 1 << 20  # a patch is at most a composition's size (1 MiB)
 MAX_REPLY_BYTES = 16 << 20
-CONNECTION_TIMEOUT = 5.0  # seconds a client may take to send its request
+MAX_DEPTH = 64  # a request's arrays and objects nest no deeper (a patch is a string in it)
+MAX_CLIENTS = 32  # served at once; as many more are told "busy", the rest wait to be accepted
+READ_DEADLINE = 2.0  # seconds a client may take to send its whole request line
+WRITE_DEADLINE = 5.0  # seconds a client may take to read its reply
+DRAIN_DEADLINE = 0.5  # seconds a client's leftover bytes are read after its reply
 
 Handler = Callable[[dict], dict]
 
@@ -97,7 +106,7 @@ class ControlServer:
             listener.bind(str(self.path))
             os.chmod(self.path, 0o600)
             self._inode = os.stat(self.path).st_ino
-            listener.listen(8)
+            listener.listen(MAX_CLIENTS)
             listener.setblocking(False)
         except OSError as error:
             listener.close()
@@ -191,53 +200,145 @@ class ControlServer:
     # -- serving -------------------------------------------------------------------
 
     def _serve(self) -> None:
+        """One thread multiplexes every client: each has its own buffer and deadline, so a slow or
+        idle client never holds up another; requests are still answered one at a time."""
+        clients: dict[socket.socket, _Client] = {}
         with selectors.DefaultSelector() as selector:
             selector.register(self._listener, selectors.EVENT_READ)
             selector.register(self._wake_read, selectors.EVENT_READ)
-            while not self._stopping.is_set():
-                for key, _ in selector.select():
-                    if key.fileobj is self._wake_read or self._stopping.is_set():
-                        return
-                    try:
-                        connection, _ = self._listener.accept()
-                    except (BlockingIOError, InterruptedError):
-                        continue
-                    except OSError:
-                        if self._stopping.is_set():
+            listening = True
+            try:
+                while not self._stopping.is_set():
+                    now = time.monotonic()
+                    timeout = max(0.0, min((c.deadline for c in clients.values()), default=now + 1.0) - now)
+                    for key, events in selector.select(timeout):
+                        if key.fileobj is self._wake_read or self._stopping.is_set():
                             return
-                        continue
-                    with connection:
+                        if key.fileobj is self._listener:
+                            try:
+                                self._accept(selector, clients)
+                            except Exception:  # noqa: BLE001 - a failed accept is retried at the next event
+                                pass
+                        elif key.fileobj in clients:
+                            client = clients[key.fileobj]
+                            try:
+                                self._step(selector, clients, client, events)
+                            except Exception:  # noqa: BLE001 - one client's failure must not end the server
+                                self._close(selector, clients, client)
+                    now = time.monotonic()
+                    for client in [c for c in clients.values() if c.deadline <= now]:
                         try:
-                            self._handle(connection)
-                        except OSError:
-                            pass  # the client went away; nothing to tell it
+                            self._expire(selector, clients, client)
+                        except Exception:  # noqa: BLE001 - as above
+                            self._close(selector, clients, client)
+                    # A bounded number of connections: the rest wait in the listen backlog.
+                    full = len(clients) >= 2 * MAX_CLIENTS
+                    if full == listening:
+                        listening = not full
+                        if full:
+                            selector.unregister(self._listener)
+                        else:
+                            selector.register(self._listener, selectors.EVENT_READ)
+            finally:
+                for client in clients.values():
+                    client.connection.close()
 
-    def _handle(self, connection: socket.socket) -> None:
-        connection.setblocking(True)
-        connection.settimeout(CONNECTION_TIMEOUT)
-        uid = peer_uid(connection)
-        if not _allowed(uid):
-            _send(connection, {"ok": False, "error": f"permission denied: this system belongs to uid "
-                               f"{os.geteuid()}, not uid {uid}"})
-            _drain(connection)
-            return
+    def _accept(self, selector: selectors.BaseSelector, clients: dict[socket.socket, _Client]) -> None:
+        while len(clients) < 2 * MAX_CLIENTS:
+            try:
+                connection, _ = self._listener.accept()
+            except OSError:  # none left (EAGAIN), or out of descriptors: the others wait in the backlog
+                return
+            connection.setblocking(False)
+            client = _Client(connection, time.monotonic() + READ_DEADLINE)
+            clients[connection] = client
+            selector.register(connection, selectors.EVENT_READ)
+            try:
+                uid = peer_uid(connection)
+            except OSError:
+                uid = -1
+            if not _allowed(uid):
+                self._answer(selector, client, {"ok": False, "error": f"permission denied: this system belongs to "
+                                                f"uid {os.geteuid()}, not uid {uid}"})
+            elif sum(1 for c in clients.values() if c.phase == "reading") > MAX_CLIENTS:
+                self._answer(selector, client, {"ok": False, "error": f"busy: {MAX_CLIENTS} clients are being "
+                                                "served; try again"})
+
+    def _step(self, selector: selectors.BaseSelector, clients: dict[socket.socket, _Client], client: _Client,
+              events: int) -> None:
         try:
-            line = _read_line(connection, MAX_REQUEST_BYTES)
-        except _TooLarge:
-            _send(connection, {"ok": False, "error": f"the request is larger than {MAX_REQUEST_BYTES} bytes"})
-            _drain(connection)
+            if events & selectors.EVENT_READ:
+                chunk = client.connection.recv(65536)
+                client.received += len(chunk)
+                if client.phase == "reading":
+                    self._read(selector, client, chunk)
+                if not chunk or client.received > 2 * MAX_REQUEST_BYTES:
+                    client.eof = True  # nothing more to read (or to bother reading)
+            if events & selectors.EVENT_WRITE and client.reply:
+                del client.reply[:client.connection.send(client.reply)]
+                if not client.reply:
+                    client.connection.shutdown(socket.SHUT_WR)
+                    client.phase, client.deadline = "draining", time.monotonic() + DRAIN_DEADLINE
+        except (BlockingIOError, InterruptedError):
             return
-        except TimeoutError:
-            _send(connection, {"ok": False, "error": f"no request within {CONNECTION_TIMEOUT:g} s"})
+        except OSError:
+            client.eof, client.phase = True, "done"  # the client went away; nothing to tell it
+        if client.phase == "done" or client.eof and client.phase == "draining":
+            self._close(selector, clients, client)
+        else:
+            self._watch(selector, client)
+
+    @staticmethod
+    def _watch(selector: selectors.BaseSelector, client: _Client) -> None:
+        events = (0 if client.eof else selectors.EVENT_READ) | (selectors.EVENT_WRITE if client.reply else 0)
+        selector.modify(client.connection, events or selectors.EVENT_READ)
+
+    def _read(self, selector: selectors.BaseSelector, client: _Client, chunk: bytes) -> None:
+        if not chunk:
+            client.eof = True  # the end of the stream ends the line too
+            self._answer(selector, client, self._reply(bytes(client.buffer)))
             return
-        if not line.strip():
-            return  # a probe (or a client that gave up): nothing to answer
-        _send(connection, self._reply(line))
+        newline = chunk.find(b"\n")
+        client.buffer += chunk if newline < 0 else chunk[:newline]
+        if len(client.buffer) > MAX_REQUEST_BYTES:
+            self._answer(selector, client, {"ok": False,
+                                            "error": f"the request is larger than {MAX_REQUEST_BYTES} bytes"})
+        elif newline >= 0:
+            self._answer(selector, client, self._reply(bytes(client.buffer)))
+
+    def _expire(self, selector: selectors.BaseSelector, clients: dict[socket.socket, _Client], client: _Client) -> None:
+        if client.phase == "reading":
+            got = f"an incomplete request ({len(client.buffer)} bytes, no newline)" if client.buffer else "nothing"
+            self._answer(selector, client, {"ok": False, "error": f"no complete request within {READ_DEADLINE:g} s: "
+                                            f"got {got}; a request is one JSON object on one line"})
+            client.deadline = time.monotonic() + WRITE_DEADLINE
+        else:
+            self._close(selector, clients, client)  # a client that does not read its reply, or lingers
+
+    def _answer(self, selector: selectors.BaseSelector, client: _Client, reply: dict) -> None:
+        client.phase, client.deadline = "writing", time.monotonic() + WRITE_DEADLINE
+        client.buffer.clear()
+        client.reply = bytearray(_encode(reply))
+        self._watch(selector, client)
+
+    @staticmethod
+    def _close(selector: selectors.BaseSelector, clients: dict[socket.socket, _Client], client: _Client) -> None:
+        clients.pop(client.connection, None)
+        try:
+            selector.unregister(client.connection)
+        except (KeyError, ValueError):
+            pass  # never registered, or already closed
+        client.connection.close()
 
     def _reply(self, line: bytes) -> dict:
+        if not line.strip():
+            return {"ok": False, "error": "empty request: a request is one JSON object on one line"}
+        depth = _nesting_depth(line, MAX_DEPTH)
+        if depth > MAX_DEPTH:
+            return {"ok": False, "error": f"malformed request: nested deeper than {MAX_DEPTH} levels"}
         try:
-            message = json.loads(line)
-        except (UnicodeDecodeError, ValueError) as error:
+            message = json.loads(line, parse_constant=_refuse_constant)
+        except Exception as error:  # noqa: BLE001 - whatever a parse raises is the client's mistake
             return {"ok": False, "error": f"malformed request: not JSON ({error})"}
         if not isinstance(message, dict):
             return {"ok": False, "error": "malformed request: a request is a JSON object"}
@@ -248,6 +349,50 @@ class ControlServer:
         if not isinstance(reply, dict):
             return {"ok": False, "error": f"the handler answered a {type(reply).__name__}, not a JSON object"}
         return reply
+
+
+@dataclass
+class _Client:
+    """One connection's progress: reading its line, writing its reply, then draining what it
+    still sends (closing with unread data would reset the connection before it read the reply)."""
+
+    connection: socket.socket
+    deadline: float
+    phase: str = "reading"
+    buffer: bytearray = field(default_factory=bytearray)
+    reply: bytearray = field(default_factory=bytearray)
+    received: int = 0
+    eof: bool = False
+
+
+_BRACKETS = re.compile(rb'"(?:[^"\\]|\\.)*"|[\[\]{}]')
+
+
+def _nesting_depth(line: bytes, limit: int) -> int:
+    """How deep the JSON text's arrays and objects nest (strings skipped), counted no further
+    than past `limit`: checked before parsing, so the parser never recurses that deep."""
+    depth = 0
+    for match in _BRACKETS.finditer(line):
+        token = match.group()
+        if token in (b"[", b"{"):
+            depth += 1
+            if depth > limit:
+                return depth
+        elif token in (b"]", b"}"):
+            depth -= 1
+    return depth
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number a request may carry")
+
+
+def _encode(reply: dict) -> bytes:
+    try:
+        text = json.dumps(reply, allow_nan=False)
+    except Exception as error:  # noqa: BLE001 - a reply that cannot be written is reported, not raised
+        text = json.dumps({"ok": False, "error": f"the reply cannot be written as JSON: {error}"})
+    return text.encode("utf-8") + b"\n"
 
 
 class _TooLarge(Exception):
@@ -270,30 +415,6 @@ def _read_line(connection: socket.socket, limit: int) -> bytes:
         data += chunk
         if len(data) > limit:
             raise _TooLarge
-
-
-def _drain(connection: socket.socket, limit: int = MAX_REQUEST_BYTES, timeout: float = 0.5) -> None:
-    """After an early reply: read what the client still sends, so closing does not reset the
-    connection before the client has read the reply (bounded in bytes and time)."""
-    try:
-        connection.shutdown(socket.SHUT_WR)
-        connection.settimeout(timeout)
-        read = 0
-        while read <= limit:
-            chunk = connection.recv(65536)
-            if not chunk:
-                return
-            read += len(chunk)
-    except OSError:
-        pass
-
-
-def _send(connection: socket.socket, reply: dict) -> None:
-    try:
-        text = json.dumps(reply, allow_nan=False)
-    except (TypeError, ValueError) as error:
-        text = json.dumps({"ok": False, "error": f"the reply cannot be written as JSON: {error}"})
-    connection.sendall(text.encode("utf-8") + b"\n")
 
 
 def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5.0) -> dict:
@@ -327,7 +448,10 @@ def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5
         if os.geteuid() != 0 and not _allowed(server_uid):
             raise ControlError(f"refusing to talk to {path}: it is served by uid {server_uid}, not by you or root")
         try:
-            client.sendall(data)
+            try:
+                client.sendall(data)
+            except (BrokenPipeError, ConnectionResetError):
+                pass  # refused before it read everything (busy, too large): its reply says why
             line = _read_line(client, MAX_REPLY_BYTES)
         except TimeoutError:
             raise ControlError(f"the hapticop system {who} did not answer within {timeout:g} s") from None

@@ -21,7 +21,10 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
     layout = region.layout
     threads = {}
     for name, index in layout.thread_index.items():
-        summary = Summary.of(region.latency[index], int(region.latency_max[index]))
+        # A copy: the running loops go on counting, and a histogram read while it changes
+        # makes numpy's nonzero fail (`status` on the control socket reads a live system).
+        histogram = region.latency[index].copy()
+        summary = Summary.of(histogram, int(region.latency_max[index]))
         cycles = int(region.cycles[index] - region.cycles_base[index])
         missed = int(region.missed[index])
         cpu_ns = int(region.cpu_ns[index] - region.cpu_base[index])
@@ -34,11 +37,11 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
             "missed_percent": round(100.0 * missed / (cycles + missed), 3) if cycles + missed else None,
             "cpu_percent": round(100.0 * cpu_ns / elapsed_ns, 1) if elapsed_ns and cpu_ns else None,
             "wakeup_latency_us": _numbers(summary),
-            "histogram_us": sparse(region.latency[index]),
+            "histogram_us": sparse(histogram),
         }
     activities = {}
     for name, index in layout.activity_index.items():
-        summary = Summary.of(region.compute[index], int(region.compute_max[index]))
+        summary = Summary.of(region.compute[index].copy(), int(region.compute_max[index]))
         activities[name] = {"steps": summary.count, "compute_us": _numbers(summary)}
         if region.sim_ns[index]:
             activities[name]["simulation_us_per_step"] = round(
