@@ -216,15 +216,15 @@ def test_minimal_startup_just_subscribes(rig):
 def test_real_time_threaded_simulator_and_a_1khz_poll_loop():
     with TiMSimulator(noise_std_m=0.005, rng=np.random.default_rng(1)).start() as sim:
         client = ColaClient(sim.host, sim.port)
-        ranges, slowest = np.empty(POINTS, np.float32), 0.0
+        ranges = np.empty(POINTS, np.float32)
         end = time.monotonic() + 0.8
         while time.monotonic() < end:
-            start = time.perf_counter()
             client.poll()
             client.latest_scan(ranges)
-            slowest = max(slowest, time.perf_counter() - start)
             time.sleep(0.001)
         assert client.state is ClientState.STREAMING and client.scans >= 8, client.last_error
         assert np.nanmax(np.abs(ranges - room_ranges())) < 0.05
-        assert slowest < 0.05  # a poll never waits on the network
+        # a poll never waits on the network: its socket never blocks (how long a poll takes is the
+        # benchmarks' business, bench/micro_sick.py, not a test's)
+        assert client._sock.getblocking() is False and client._sock.gettimeout() == 0.0
         client.close()
