@@ -162,10 +162,12 @@ def patch(
     dry_run: bool = typer.Option(False, "--dry-run", help="validate and show the diff; change nothing"),
 ) -> None:
     """Change a running system: validated whole, applied at a cycle boundary, or refused."""
+    from hapticop.composition.yamlsource import SourceError, read_text
+
     try:
-        text = file.read_text()
-    except OSError as error:
-        typer.echo(f"error: cannot read {file}: {error.strerror}", err=True)
+        text = read_text(file, "a patch")
+    except SourceError as error:
+        typer.echo(error.diagnostic.to_text(), err=True)
         raise typer.Exit(2) from None
     reply = _ask(system, {"op": "patch", "text": text, "file": str(file), "dry_run": dry_run})
     if not reply.get("ok"):
