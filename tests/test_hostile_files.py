@@ -143,3 +143,30 @@ def test_patch_file_that_cannot_be_read_is_refused_before_asking_the_system(tmp_
     result = runner.invoke(app, ["patch", "no-such-system", str(file)])
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     assert f"{file}: error:" in result.output
+
+
+def test_validate_finds_third_party_blocks_without_running_them(tmp_path, monkeypatch):
+    package = tmp_path / "untrusted"
+    (package / "sub").mkdir(parents=True)
+    for init in (package / "__init__.py", package / "sub" / "__init__.py", package / "sub" / "blocks.py"):
+        init.write_text(f"open({str(tmp_path / 'RAN')!r}, 'a').write({init.name!r})\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    file = tmp_path / "third-party.yaml"
+    file.write_text("version: 1\nthreads:\n  main:\n    period: 1ms\n    deploy: main\n"
+                    "    schedules:\n      0: [mediator, thing]\nactivities:\n  mediator: {block: mediator}\n"
+                    "  thing: {block: 'untrusted.sub.blocks:Thing', params: {anything: 1}}\n")
+
+    result = runner.invoke(app, ["validate", str(file)])
+    assert result.exit_code == 0, result.output
+    assert not (tmp_path / "RAN").exists()
+    (line,) = [line for line in result.output.splitlines() if "warning:" in line]
+    assert line.startswith(f"{file}:10:") and "not imported" in line
+
+    missing = tmp_path / "missing.yaml"
+    missing.write_text(file.read_text().replace("sub.blocks:", "sub.nothing:"))
+    line = refused(runner.invoke(app, ["validate", str(missing)]), missing)
+    assert "cannot find module 'untrusted.sub.nothing'" in line and not (tmp_path / "RAN").exists()
+
+    result = runner.invoke(app, ["validate", "--import-blocks", str(file)])
+    assert result.exit_code == 1 and "is not a hapticop Block class" in result.output, result.output
+    assert (tmp_path / "RAN").read_text() == "__init__.py__init__.pyblocks.py"
