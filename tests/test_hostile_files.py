@@ -36,7 +36,7 @@ threads:
     period: {period}
     deploy: main
     schedules:
-      0: [mediator, echo]
+      0: [mediator, counter, echo]
 activities:
   mediator:
     block: mediator
@@ -45,19 +45,24 @@ activities:
     params: {{dtype: {dtype}}}
   counter:
     block: counter
+streams:
+  s: {{from: counter.count, to: [echo.input], max_age: {max_age}}}
 {extra}"""
 
 PLACES = {
     "duration": dict(period=bomb(), dtype="int64", extra=""),
     "literal-parameter": dict(period="1ms", dtype=bomb(), extra=""),
-    "stream-max-age": dict(period="1ms", dtype="int64",
-                           extra=f"streams:\n  s: {{from: counter.count, to: [echo.input], max_age: {bomb()}}}\n"),
+    "stream-max-age": dict(period="1ms", dtype="int64", max_age=bomb(), extra=""),
     "scripted-patch-at": dict(period="1ms", dtype="int64",
                               extra=f"patches:\n  p:\n    at: {bomb()}\n    patch: {{name: x}}\n"),
     "json-patch-value": dict(
         period="1ms", dtype="int64",
         extra=f"patches:\n  p:\n    at: 1s\n    patch: [{{op: add, path: /doc, value: {bomb()}}}]\n"),
 }
+
+
+for place in PLACES.values():
+    place.setdefault("max_age", "1s")
 
 
 def refused(result, file) -> str:
@@ -79,7 +84,7 @@ def test_alias_bomb_is_refused_wherever_it_stands(tmp_path, place):
 
 def test_deep_nesting_is_refused(tmp_path):
     file = tmp_path / "deep.yaml"
-    file.write_text(MINIMAL.format(period="1ms", dtype="[" * 200 + "]" * 200, extra=""))
+    file.write_text(MINIMAL.format(period="1ms", dtype="[" * 200 + "]" * 200, max_age="1s", extra=""))
     line = refused(runner.invoke(app, ["validate", str(file)]), file)
     assert "nests deeper" in line or "malformed YAML" in line
 
@@ -123,7 +128,7 @@ def test_nul_byte_in_extends_is_located(tmp_path):
     child = tmp_path / "child.yaml"
     child.write_text('name: x\nextends: "base\\0.yaml"\n')
     line = refused(runner.invoke(app, ["validate", str(child)]), child)
-    assert line.startswith(f"{child}:2:") and "which this file extends" in line
+    assert line.startswith(f"{child}:2:") and "'base\\0.yaml', which this file extends" in line
 
 
 def test_invalid_utf8_is_refused(tmp_path):

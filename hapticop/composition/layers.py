@@ -61,7 +61,8 @@ def resolve(source: Source, seen: tuple[str, ...] = ()) -> Source:
                                      column=column))
 
     def unreadable(reason: str) -> SourceError:
-        return SourceError(Diagnostic("extends", f"cannot read '{base_name}', which this file extends: {reason}",
+        shown = base_name.replace("\0", "\\0")  # a NUL byte printed raw would cut the line
+        return SourceError(Diagnostic("extends", f"cannot read '{shown}', which this file extends: {reason}",
                                       ("extends",), file=source.file, line=line, column=column))
 
     try:
