@@ -2,14 +2,20 @@
 
 Built-in blocks have short names. Any other block is named by its import path,
 `package.module:ClassName`, so an application can bring its own blocks without touching
-hapticop. Modules are imported only when a composition names them.
+hapticop. Modules are imported only when a composition names them, and not at all while
+`blocks_not_imported()` is in effect: checking an untrusted file must not run its code.
 """
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import importlib
+import importlib.machinery
+import importlib.util
 import re
+from collections.abc import Iterator
+from contextvars import ContextVar
 
 from hapticop.blocks.base import Block
 
@@ -34,14 +40,31 @@ BUILTIN: dict[str, str] = {
 _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 
 
+_importing = ContextVar("importing_blocks", default=True)
+
+
+@contextlib.contextmanager
+def blocks_not_imported() -> Iterator[None]:
+    """Within this block, `resolve` finds third-party modules without importing them."""
+    token = _importing.set(False)
+    try:
+        yield
+    finally:
+        _importing.reset(token)
+
+
 class UnknownBlock(LookupError):
     def __init__(self, name: str, reason: str, hint: str = ""):
         super().__init__(reason)
         self.name, self.reason, self.hint = name, reason, hint
 
 
-def resolve(name: str) -> type[Block]:
-    """The block class for `name`, or `UnknownBlock` saying why not."""
+def resolve(name: str) -> type[Block] | None:
+    """The block class for `name`, or `UnknownBlock` saying why not.
+
+    None when `name` is a third-party block whose module exists but, under
+    `blocks_not_imported()`, was not imported.
+    """
     target = BUILTIN.get(name)
     if target is None:
         if not _IMPORT_PATH.match(name):
@@ -50,6 +73,11 @@ def resolve(name: str) -> type[Block]:
             raise UnknownBlock(name, f"unknown block type '{name}'", hint)
         target = name
     module_name, class_name = target.split(":")
+    own = module_name == "hapticop" or module_name.startswith("hapticop.")
+    if not own and not _importing.get():
+        if not _module_exists(module_name):
+            raise UnknownBlock(name, f"cannot find module '{module_name}' for block '{name}'")
+        return None
     try:
         module = importlib.import_module(module_name)
     except ImportError as error:
@@ -58,3 +86,21 @@ def resolve(name: str) -> type[Block]:
     if not (isinstance(cls, type) and issubclass(cls, Block)):
         raise UnknownBlock(name, f"'{target}' is not a hapticop Block class")
     return cls
+
+
+def _module_exists(module_name: str) -> bool:
+    """Whether `module_name` can be found, without running it or any of its parent packages.
+
+    `importlib.util.find_spec` on a dotted name imports the parents, so each part below the
+    top level is looked up in its parent's directories instead.
+    """
+    top, *rest = module_name.split(".")
+    try:
+        spec = importlib.util.find_spec(top)
+        for part in rest:
+            if spec is None or spec.submodule_search_locations is None:
+                return False
+            spec = importlib.machinery.PathFinder.find_spec(part, list(spec.submodule_search_locations))
+    except (ImportError, ValueError):
+        return False
+    return spec is not None

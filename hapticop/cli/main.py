@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import threading
@@ -55,13 +56,19 @@ def validate(
     format: OutputFormat = typer.Option(OutputFormat.text, "--format", help="text for people, json for editors and CI"),
     state_limit: int = typer.Option(DEFAULT_STATE_LIMIT, min=100, help="markings to explore per Petri net"),
     strict: bool = typer.Option(False, help="treat warnings as errors"),
+    import_blocks: bool = typer.Option(
+        False, "--import-blocks",
+        help="import the modules of third-party blocks (running their code) to check their parameters"),
 ) -> None:
     """Check composition files without running anything; exit 1 on any error."""
+    from hapticop.blocks.registry import blocks_not_imported
+
     paths = list(files or _system_files())
     if not paths:
         typer.echo(f"no composition files given and none in {SYSTEMS_DIR}/", err=True)
         raise typer.Exit(2)
-    reports: list[Report] = [validate_path(p, state_limit).report for p in paths]
+    with contextlib.nullcontext() if import_blocks else blocks_not_imported():
+        reports: list[Report] = [validate_path(p, state_limit).report for p in paths]
     if format is OutputFormat.json:
         typer.echo(reports_to_json(reports))
     else:
@@ -162,10 +169,12 @@ def patch(
     dry_run: bool = typer.Option(False, "--dry-run", help="validate and show the diff; change nothing"),
 ) -> None:
     """Change a running system: validated whole, applied at a cycle boundary, or refused."""
+    from hapticop.composition.yamlsource import SourceError, read_text
+
     try:
-        text = file.read_text()
-    except OSError as error:
-        typer.echo(f"error: cannot read {file}: {error.strerror}", err=True)
+        text = read_text(file, "a patch")
+    except SourceError as error:
+        typer.echo(error.diagnostic.to_text(), err=True)
         raise typer.Exit(2) from None
     reply = _ask(system, {"op": "patch", "text": text, "file": str(file), "dry_run": dry_run})
     if not reply.get("ok"):

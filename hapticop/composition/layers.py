@@ -59,7 +59,16 @@ def resolve(source: Source, seen: tuple[str, ...] = ()) -> Source:
         raise SourceError(Diagnostic("extends", "'extends' names the file this one builds on", ("extends",),
                                      expected="a path such as 'hallway.yaml'", file=source.file, line=line,
                                      column=column))
-    base_path = (FilePath(source.file).parent / base_name).resolve()
+
+    def unreadable(reason: str) -> SourceError:
+        shown = base_name.replace("\0", "\\0")  # a NUL byte printed raw would cut the line
+        return SourceError(Diagnostic("extends", f"cannot read '{shown}', which this file extends: {reason}",
+                                      ("extends",), file=source.file, line=line, column=column))
+
+    try:
+        base_path = (FilePath(source.file).parent / base_name).resolve()
+    except (OSError, RuntimeError, ValueError) as error:  # a symlink loop, a NUL byte in the name
+        raise unreadable(getattr(error, "strerror", None) or str(error)) from None
     if str(base_path) in seen or len(seen) >= MAX_DEPTH:
         raise SourceError(Diagnostic("extends", f"'{base_name}' extends itself (through {len(seen)} files)",
                                      ("extends",), file=source.file, line=line, column=column))
@@ -67,9 +76,7 @@ def resolve(source: Source, seen: tuple[str, ...] = ()) -> Source:
         base = resolve(read_file(base_path), seen + (str(base_path),))
     except SourceError as error:
         if error.diagnostic.rule == "file-unreadable":
-            raise SourceError(Diagnostic("extends", f"cannot read '{base_name}', which this file extends: "
-                                         f"{error.diagnostic.message}", ("extends",), file=source.file, line=line,
-                                         column=column)) from None
+            raise unreadable(error.diagnostic.message.removeprefix("cannot read the file: ")) from None
         raise
     overlay = CommentedMap((k, v) for k, v in source.tree.items() if k != "extends")
     merged = merge(copy.deepcopy(base.tree), overlay)

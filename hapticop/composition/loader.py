@@ -16,7 +16,7 @@ from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params
 from hapticop.blocks.registry import UnknownBlock, resolve
 from hapticop.composition.description import COLLECTIONS, VERSION, Activity, Composition
-from hapticop.composition.diagnostics import Diagnostic, Path
+from hapticop.composition.diagnostics import Diagnostic, Path, Severity
 from hapticop.composition.model_errors import diagnostics_from
 
 
@@ -107,6 +107,14 @@ def _resolve_activities(loaded: Loaded) -> None:
         except UnknownBlock as error:
             loaded.diagnostics.append(
                 Diagnostic(rule="unknown-block", message=error.reason, path=path + ("block",), hint=error.hint)
+            )
+            loaded.broken.add(("activities", name))
+            continue
+        if block is None:
+            loaded.diagnostics.append(
+                Diagnostic(rule="block-not-imported", severity=Severity.WARNING, path=path + ("block",),
+                           message=f"block '{spec.block}' was found but not imported, so its parameters and "
+                           "ports are not checked", hint="validate with --import-blocks to run its module and check it")
             )
             loaded.broken.add(("activities", name))
             continue

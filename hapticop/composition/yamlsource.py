@@ -8,6 +8,8 @@ position a user should look at.
 
 from __future__ import annotations
 
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path as FilePath
 from typing import Any
@@ -116,31 +118,55 @@ def parse_text(text: str, file: str = "<string>") -> Source:
     return Source(file=file, tree=tree, text=text)
 
 
-def read_file(path: str | FilePath) -> Source:
-    path = FilePath(path)
+def read_text(path: str | FilePath, what: str = "a composition") -> str:
+    """The text of a regular file of at most `MAX_FILE_BYTES`, strictly UTF-8, or `SourceError`.
+
+    The type is checked before and after opening, and the file is opened without blocking,
+    so a FIFO, a device or a directory is refused instead of hanging or filling memory.
+    """
+    file = str(path)
+
+    def refuse(rule: str, message: str, hint: str = "") -> SourceError:
+        return SourceError(Diagnostic(rule=rule, message=message, hint=hint, file=file))
+
+    def too_large(size: int) -> SourceError:
+        return refuse("file-too-large", f"the file is {size / 1e6:.1f} MB; {what} may be at most "
+                      f"{MAX_FILE_BYTES // 1024} KiB", "split large parameter tables into the blocks that use them")
+
     try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise SourceError(
-                Diagnostic(
-                    rule="file-too-large",
-                    message=f"the file is {size / 1e6:.1f} MB; a composition may be at most "
-                    f"{MAX_FILE_BYTES // 1024} KiB",
-                    hint="split large parameter tables into the blocks that use them",
-                    file=str(path),
-                )
-            )
-        raw = path.read_bytes()
+        mode = os.stat(file).st_mode
+        if not stat.S_ISREG(mode):
+            raise refuse("file-unreadable", f"cannot read the file: {_kind(mode)}, not a regular file")
+        descriptor = os.open(file, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+        with os.fdopen(descriptor, "rb") as handle:
+            status = os.fstat(handle.fileno())
+            if not stat.S_ISREG(status.st_mode):  # replaced between the two looks
+                raise refuse("file-unreadable", f"cannot read the file: {_kind(status.st_mode)}, not a regular file")
+            if status.st_size > MAX_FILE_BYTES:
+                raise too_large(status.st_size)
+            raw = handle.read(MAX_FILE_BYTES + 1)
     except OSError as error:
-        raise SourceError(Diagnostic(rule="file-unreadable", message=f"cannot read the file: {error.strerror}",
-                                     file=str(path))) from None
+        raise refuse("file-unreadable", f"cannot read the file: {error.strerror or error}") from None
+    except ValueError as error:  # a NUL byte in the name
+        raise refuse("file-unreadable", f"cannot read the file: {error}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise too_large(len(raw))
     try:
-        text = raw.decode("utf-8")
+        return raw.decode("utf-8")
     except UnicodeDecodeError as error:
-        raise SourceError(
-            Diagnostic(rule="file-encoding", message=f"the file is not UTF-8 text (byte {error.start})", file=str(path))
-        ) from None
-    return parse_text(text, str(path))
+        raise refuse("file-encoding", f"the file is not UTF-8 text (byte {error.start})") from None
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return f"it is {name}"
+    return "it is a special file"
+
+
+def read_file(path: str | FilePath) -> Source:
+    return parse_text(read_text(path), str(path))
 
 
 def _yaml_type(value: Any) -> str:
@@ -155,29 +181,45 @@ def _yaml_type(value: Any) -> str:
     return type(value).__name__
 
 
+# Aliases let a few hundred bytes name billions of values ("billion laughs"): every reader
+# after the parser (pydantic, units, JSON Patch, deep copies) walks the tree expanded, so the
+# expanded size and the nesting are bounded here, once, for every document the project reads.
+MAX_EXPANDED_NODES = 200_000
+MAX_NESTING = 64
+
+
 def reject_aliases_of_containers(tree: Any, file: str) -> None:
-    """Refuse recursive anchors: a mapping that contains itself would hang every check."""
-    seen: set[int] = set()
+    """Refuse recursive anchors, alias expansion past `MAX_EXPANDED_NODES` and deep nesting.
 
-    def walk(node: Any, depth: int, stack: set[int]) -> None:
+    Each shared node is visited once and its expanded size remembered, so the check itself
+    costs the size of the file, not of its expansion.
+    """
+    sizes: dict[int, int] = {}
+
+    def refuse(node: Any, rule: str, message: str, hint: str = "") -> SourceError:
+        line, column = (node.lc.line + 1, node.lc.col + 1) if hasattr(node, "lc") else (0, 0)
+        return SourceError(Diagnostic(rule=rule, message=message, hint=hint, file=file, line=line, column=column))
+
+    def size(node: Any, depth: int, stack: set[int]) -> int:
         if not isinstance(node, (CommentedMap, CommentedSeq)):
-            return
+            return 1
         if id(node) in stack:
-            line, column = (node.lc.line + 1, node.lc.col + 1) if hasattr(node, "lc") else (0, 0)
-            raise SourceError(
-                Diagnostic(rule="yaml-recursive", message="a YAML anchor refers to itself", file=file, line=line,
-                           column=column)
-            )
-        if id(node) in seen:
-            return
-        seen.add(id(node))
+            raise refuse(node, "yaml-recursive", "a YAML anchor refers to itself")
+        if depth > MAX_NESTING:
+            raise refuse(node, "yaml-too-deep", f"the document nests deeper than {MAX_NESTING} levels")
+        if id(node) in sizes:
+            return sizes[id(node)]
         stack.add(id(node))
-        children = node.values() if isinstance(node, CommentedMap) else node
-        for child in children:
-            walk(child, depth + 1, stack)
+        children = [*node.keys(), *node.values()] if isinstance(node, CommentedMap) else node
+        total = 1 + sum(size(child, depth + 1, stack) for child in children)
         stack.discard(id(node))
+        if total > MAX_EXPANDED_NODES:
+            raise refuse(node, "yaml-too-large", f"YAML aliases expand this document past {MAX_EXPANDED_NODES} "
+                         "values", hint="an alias may repeat a value, not multiply the document")
+        sizes[id(node)] = total
+        return total
 
-    walk(tree, 0, set())
+    size(tree, 0, set())
 
 
 def locate(tree: Any, path: Path, *, key: bool = False) -> tuple[int, int]:
