@@ -116,7 +116,7 @@ def compose(
     duration: str | None = typer.Option(None, help="stop after this long (e.g. 30s); default: until Ctrl+C"),
     seed: int = typer.Option(0, help="seed of every activity's random generator"),
     run_dir: Path | None = typer.Option(
-        None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop)"),
+        None, help="logs and timing.json (default: a new directory under /dev/shm/hapticop-UID, yours alone)"),
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
@@ -310,6 +310,7 @@ def schema(
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
+    from hapticop.runtime.rundirs import RunDirectoryError
     from hapticop.runtime.supervisor import ForcedExit
 
     try:
@@ -319,6 +320,9 @@ def main() -> None:
         sys.exit(int(forced.args[0]))
     except KeyboardInterrupt:
         sys.exit(130)
+    except RunDirectoryError as error:  # a run directory that is not safely ours: said, not traced
+        print(f"hapticop: {error}", file=sys.stderr)
+        sys.exit(2)
     except Exception as error:  # noqa: BLE001 - the last line of defence for the user interface
         if os.environ.get("HAPTICOP_DEBUG"):
             raise
