@@ -10,7 +10,7 @@ import pytest
 
 from hapticop.runtime.rundirs import RunDirectoryError, new_run_directory, private_directory, prune_runs
 
-from .runtime_helpers import COUNTER, compose
+from .runtime_helpers import COUNTER
 
 
 def _mode(path) -> int:
@@ -71,11 +71,17 @@ def test_the_default_run_directory_is_this_users_and_private(monkeypatch):
 
 
 def test_what_a_run_writes_is_its_owners_alone(tmp_path):
-    before = os.umask(0o022)
-    try:
-        compose(tmp_path, COUNTER, duration="50ms")
-    finally:
-        os.umask(before)
-    files = [p for p in (tmp_path / "run-c").rglob("*") if p.is_file()]
+    """`hapticop compose` writes with umask 077, whatever the shell's: logs, results, timing."""
+    import subprocess
+    import sys
+
+    from .conftest import ROOT
+
+    path = tmp_path / "c.yaml"
+    path.write_text(COUNTER)
+    done = subprocess.run([sys.executable, "-m", "hapticop.cli", "compose", str(path), "--clock", "virtual",
+                           "--duration", "50ms", "--run-dir", str(tmp_path / "run")], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, preexec_fn=lambda: os.umask(0o022))
+    assert done.returncode == 0, done.stderr
+    files = [p for p in (tmp_path / "run").rglob("*") if p.is_file()]
     assert files and all(_mode(p) & 0o077 == 0 for p in files), {p.name: oct(_mode(p)) for p in files}
-    assert os.umask(0o022) == 0o022  # the process's own umask is given back when the system closes

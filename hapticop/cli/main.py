@@ -128,6 +128,7 @@ def compose(
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = _valid_or_exit(file, "not started")
+    os.umask(0o077)  # what the run writes (logs, results, recordings) is its owner's alone, children included
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
                          control=control)

@@ -11,7 +11,6 @@ own thread (`service.py`).
 from __future__ import annotations
 
 import dataclasses
-import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -81,8 +80,6 @@ class System:
         self.name = composition.name or Path(self.file).stem
         self.virtual = options.clock == "virtual"
         self.clock = VirtualClock() if self.virtual else RealtimeClock()
-        # What the run writes (logs, results, recordings) is its owner's alone, in every process it starts.
-        self.umask = os.umask(0o077)
         self.run_dir = options.run_dir or new_run_directory(self.name)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
@@ -192,7 +189,6 @@ class System:
         self.built = None  # drop the views into the region before it is released
         self.main = None
         self.region.close()
-        os.umask(self.umask)
 
 
 @dataclass

@@ -41,7 +41,6 @@ from hapticop.validation.core import Validated, check_source
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 
 OPERATIONS = ("add", "remove", "replace", "move", "copy", "test")
-MAX_PATCH_NODES = 100_000  # values in a patch with its YAML aliases expanded (a whole composition has a few thousand)
 PATCH_EXPECTED = (
     "a JSON Patch (a list of operations such as '- {op: replace, path: /activities/haptic/params/k1, value: 30.0}') "
     "or a merge patch (a mapping shaped like the part of the description it changes)"
@@ -113,23 +112,9 @@ def _load_patch(text: str, file: str) -> list | dict:
                             expected=PATCH_EXPECTED, file=file, line=1, column=1)]
             ) from None
         reject_aliases_of_containers(patch, file)
-    if _expanded_size(patch, {}) > MAX_PATCH_NODES:
-        raise PatchError([Diagnostic(
-            rule="yaml-aliases", message=f"the patch's YAML aliases expand to more than {MAX_PATCH_NODES} values",
-            hint="write the values out, or use fewer aliases of aliases", file=file, line=1, column=1)])
     check_patch(patch, file)
     return patch
 
-
-def _expanded_size(node: Any, sizes: dict[int, int]) -> int:
-    """How many values `node` holds once its aliases are copied out, as applying it (a `test`
-    compares, an `add` copies) would: counted per distinct node, so counting never expands."""
-    if not isinstance(node, (Mapping, list)):
-        return 1
-    if id(node) not in sizes:
-        children = node.values() if isinstance(node, Mapping) else node
-        sizes[id(node)] = 1 + sum(_expanded_size(child, sizes) for child in children)
-    return sizes[id(node)]
 
 
 def check_patch(patch: Any, file: str = "<patch>") -> None:
