@@ -74,7 +74,6 @@ def test_a_tcp_address_is_published_whole_and_withdrawn(tmp_path):
 
 
 def test_an_address_left_by_an_ended_process_is_no_answer(tmp_path):
-    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    (tmp_path / "links").mkdir()
-    (tmp_path / "links" / "lidar_sim.address").write_text(f"127.0.0.1 40123 {ended.stdout.strip()}\n")
+    subprocess.run([sys.executable, "-c", "import sys; from hapticop.devices.link import publish_address; "
+                    "publish_address(sys.argv[1], 'lidar_sim', '127.0.0.1', 40123)", str(tmp_path)], check=True)
     assert published_address(tmp_path, "lidar_sim") is None

@@ -15,9 +15,10 @@ address in the run directory instead (`publish_address`, `published_address`).
 from __future__ import annotations
 
 import hashlib
-import os
 import socket
 from pathlib import Path
+
+from hapticop.published import publish, published, withdraw
 
 _MAX_NAME = 107  # sun_path holds 108 bytes, the abstract namespace's leading NUL included
 
@@ -80,31 +81,16 @@ class DatagramLink:
         self.sock.close()
 
 
-def _address_file(run_dir: Path, activity: str) -> Path:
-    return Path(run_dir) / "links" / f"{activity}.address"
-
-
 def publish_address(run_dir: Path, activity: str, host: str, port: int) -> None:
-    """Say where `activity` serves its device over TCP (written whole: a reader never sees half)."""
-    path = _address_file(run_dir, activity)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_suffix(f".{os.getpid()}.tmp")
-    temporary.write_text(f"{host} {port} {os.getpid()}\n")
-    temporary.replace(path)
+    """Say where `activity` serves its device over TCP."""
+    publish(run_dir, "links", activity, (host, port))
 
 
 def published_address(run_dir: Path, activity: str) -> tuple[str, int] | None:
     """Where `activity` serves its device over TCP, or None until it has said (an address left by
     a process that has ended, in a reused run directory, is not an answer)."""
-    try:
-        host, port, pid = _address_file(run_dir, activity).read_text().split()
-        os.kill(int(pid), 0)
-    except (FileNotFoundError, ValueError, ProcessLookupError):
-        return None
-    except PermissionError:  # alive, another user's
-        pass
-    return host, int(port)
+    return published(run_dir, "links", activity)
 
 
 def withdraw_address(run_dir: Path, activity: str) -> None:
-    _address_file(run_dir, activity).unlink(missing_ok=True)
+    withdraw(run_dir, "links", activity)

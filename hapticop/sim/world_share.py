@@ -9,60 +9,33 @@ the operator says who it is (its variant), which the world's judge needs for the
 
 from __future__ import annotations
 
-import json
-import os
-import pickle
 from pathlib import Path
 
+from hapticop.published import publish, published, withdraw
 from hapticop.sim.hallway import HallwayGeometry
 
 
-def _file(run_dir: Path, activity: str) -> Path:
-    return Path(run_dir) / "worlds" / f"{activity}.pickle"
-
-
 def publish_world(run_dir: Path, activity: str, geometry: HallwayGeometry) -> None:
-    """Write the world's geometry where its simulators look (whole: a reader never sees half)."""
-    path = _file(run_dir, activity)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_suffix(f".{os.getpid()}.tmp")
-    temporary.write_bytes(pickle.dumps((os.getpid(), geometry)))
-    temporary.replace(path)
+    """Write the world's geometry where its simulators look."""
+    publish(run_dir, "worlds", activity, geometry)
 
 
 def find_world(run_dir: Path, activity: str) -> HallwayGeometry | None:
     """The geometry of the world `activity`, or None until it is open (a world left behind by an
     ended run in a reused run directory does not count)."""
-    try:
-        pid, geometry = pickle.loads(_file(run_dir, activity).read_bytes())
-        os.kill(pid, 0)
-    except (FileNotFoundError, ProcessLookupError, EOFError, pickle.UnpicklingError):
-        return None
-    except PermissionError:
-        pass
-    return geometry
+    return published(run_dir, "worlds", activity)
 
 
 def withdraw_world(run_dir: Path, activity: str) -> None:
-    _file(run_dir, activity).unlink(missing_ok=True)
-
-
-def _operator_file(run_dir: Path, activity: str) -> Path:
-    return Path(run_dir) / "operators" / f"{activity}.json"
+    withdraw(run_dir, "worlds", activity)
 
 
 def publish_operator(run_dir: Path, activity: str, description: dict) -> None:
-    """Say who the operator `activity` is (its variant, its seed), written whole."""
-    path = _operator_file(run_dir, activity)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_suffix(f".{os.getpid()}.tmp")
-    temporary.write_text(json.dumps(description))
-    temporary.replace(path)
+    """Say who the operator `activity` is (its variant, its seed)."""
+    publish(run_dir, "operators", activity, description)
 
 
 def find_operator(run_dir: Path, activity: str) -> dict | None:
-    """What the operator `activity` said about itself this run, or None if it said nothing."""
-    try:
-        return json.loads(_operator_file(run_dir, activity).read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
-        return None
+    """What the operator `activity` said about itself this run, or None if it said nothing (read
+    when the run is judged, perhaps after the operator's process has ended)."""
+    return published(run_dir, "operators", activity, while_writer_lives=False)
