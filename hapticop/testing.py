@@ -69,9 +69,11 @@ class BlockHarness:
         self._sources[port].write(np.asarray(value), self.clock.now_ns())
 
     def configure(self, max_cycles: int = 100_000) -> None:
-        """create, then each configuration hook until it completes, one period apart."""
+        """create, then each configuration hook until it completes, one period apart, with the
+        inputs refreshed before each call as the runtime does."""
         for hook in (self.block.create, self.block.configure_resources, self.block.configure_capabilities):
             for _ in range(max_cycles):
+                self._refresh()
                 if hook() is not False:
                     break
                 self.advance()
@@ -88,6 +90,18 @@ class BlockHarness:
                 self._refresh()
                 self.block.flush()
             self.advance()
+
+    def retune(self, params: dict[str, Any]) -> frozenset[str]:
+        """A live patch of running parameters as the runtime delivers it between two cycles: the
+        top-level keys of `params` replace the block's, then `retune` hears which ones changed."""
+        merged = self.block_type.Params.model_validate({**self.params.model_dump(), **params})
+        changed = frozenset(k for k in type(merged).model_fields if getattr(merged, k) != getattr(self.params, k))
+        if not changed <= self.block_type.running_params:
+            raise ValueError(f"{sorted(changed - self.block_type.running_params)} are not running parameters: "
+                             "a live patch would re-configure the block instead")
+        self.params = self.block.params = self.context.params = merged
+        self.block.retune(changed)
+        return changed
 
     def clean(self) -> None:
         self.block.clean()

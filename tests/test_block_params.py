@@ -55,8 +55,10 @@ def test_live_patch_classes_name_parameters():
     for block in (HapticController, RopodController):
         fields = set(block.Params.model_fields)
         assert block.capability_params <= fields and block.running_params <= fields
-    assert HapticController.running_params == {"blind"}
-    assert {"centring", "driving", "force_model", "governor"} == HapticController.capability_params
+    # A gain patch must never take the haptic loop out of running (issue 15): every law retunes live.
+    assert {"blind", "centring", "driving", "force_model", "governor", "scan_filter"} <= HapticController.running_params
+    assert not HapticController.capability_params
+    assert {"platform_xy", "platform_theta", "wheel"} <= RopodController.running_params
 
 
 def test_the_ropod_controllers_defaults_are_the_libraries():

@@ -49,13 +49,15 @@ class Block:
     # Read flags a composition may leave unbound (they stay false), so validation does not warn.
     optional_flags: ClassVar[frozenset[str]] = frozenset()
     rate: ClassVar[RateRange | None] = None
-    # Parameters a live patch may change with only capability configuration (gains, limits);
-    # a change to any other parameter takes the activity through resource configuration.
+    # Parameters a live patch may change with only capability configuration (a calibration, a
+    # homing offset); a change to any other parameter takes the activity through resource
+    # configuration. Gains and limits belong in `running_params`.
     capability_params: ClassVar[frozenset[str]] = frozenset()
     # A block that only simulates (the hallway world): all its compute counts as simulation.
     simulator: ClassVar[bool] = False
-    # Parameters the block reads every cycle (modes, limits): a live patch changes them between
-    # two cycles without taking the activity out of running.
+    # Parameters a live patch changes between two cycles without taking the activity out of
+    # running (gains, limits, modes): the block reads them each cycle, or rebuilds what depends
+    # on them in `retune`.
     running_params: ClassVar[frozenset[str]] = frozenset()
     # Parameters that name another activity this one needs, with what that activity must provide
     # (`{"simulator": "falcon_device"}`); a parameter left None needs nothing.
@@ -130,6 +132,12 @@ class Block:
 
     def clean(self) -> bool | None:
         """Release everything the other hooks acquired."""
+
+    def retune(self, changed: frozenset[str]) -> None:
+        """New `running_params` arrived (already in `self.params`): rebuild what depends on the
+        `changed` ones, keeping the state that makes the change bumpless (filter memories,
+        integrators). Called on the activity's thread between two of its cycles; it may allocate,
+        since it runs once per patch, not once per cycle."""
 
     @classmethod
     def implements_compute(cls) -> bool:

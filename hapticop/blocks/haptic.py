@@ -54,8 +54,9 @@ class HapticController(Block):
                      "handle_lost": "the handle position is stale (Falcon frames stopped): no force, no motion"}
     awaits = frozenset({"resources_ready"})
     optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
-    running_params = frozenset({"blind"})
-    capability_params = frozenset({"centring", "driving", "force_model", "governor"})
+    # Every law retunes between two cycles (`retune`): a live gain change never stops the robot.
+    running_params = frozenset({"blind", "centring", "driving", "force_model", "governor", "scan_filter",
+                                "centred_within_m"})
 
     @classmethod
     def interface(cls, params: HapticControllerParams) -> Interface:
@@ -88,12 +89,33 @@ class HapticController(Block):
 
     def configure_capabilities(self) -> bool:
         """Build the control laws, then hold the handle at its origin before commanding motion."""
-        if getattr(self, "built_for", None) is not self.params:  # first time, or a patch changed them
+        if getattr(self, "built_for", None) is not self.params:  # first time, or re-configured
             self._build()
             self.built_for = self.params
         self._centre_only()
-        return bool(self.inputs.handle_position.valid
-                    and np.linalg.norm(self.inputs.handle_position.value) < self.params.centred_within_m)
+        handle = self.inputs.handle_position
+        if not handle.valid:
+            self.context.waiting_for("the handle's position (no Falcon frames yet)")
+            return False
+        off_centre = float(np.linalg.norm(handle.value))
+        if off_centre >= self.params.centred_within_m:
+            self.context.waiting_for(f"the handle within {self.params.centred_within_m * 1e3:g} mm of its "
+                                     f"centre before commanding motion (it is {off_centre * 1e3:.0f} mm off)")
+            return False
+        self.context.waiting_for(None)
+        return True
+
+    def retune(self, changed: frozenset[str]) -> None:
+        """A gain, limit or model changed while running: the next cycle uses it, with no re-centring.
+        The PD keeps its last position (its velocity estimate does not jump); a new filter or force
+        model takes the scan in hand at once."""
+        p = self.params
+        if "centring" in changed:
+            self.pd.params = p.centring
+        self.driving = p.driving
+        if changed & {"scan_filter", "force_model", "governor"}:
+            self._build_scan_laws()
+        self.built_for = p
 
     def compute(self) -> None:
         p_in = self.inputs
@@ -171,6 +193,11 @@ class HapticController(Block):
         p = self.params
         self.pd = CentringPD(p.centring)
         self.driving = p.driving
+        self._build_scan_laws()
+
+    def _build_scan_laws(self) -> None:
+        """The scan filter, the force model and the governor: all hang on the scan's angles."""
+        p = self.params
         self.filter = make_scan_filter(p.scan_filter)
         angles = self.filter.configure(self.inputs.angles.value if self.inputs.angles.valid
                                        else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))

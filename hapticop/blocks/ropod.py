@@ -39,7 +39,7 @@ class RopodControllerParams(Params):
 
 class RopodController(Block):
     Params = RopodControllerParams
-    capability_params = frozenset({"platform_xy", "platform_theta", "wheel"})
+    running_params = frozenset({"platform_xy", "platform_theta", "wheel"})  # gains retune bumplessly
 
     @classmethod
     def interface(cls, params: RopodControllerParams) -> Interface:
@@ -62,12 +62,16 @@ class RopodController(Block):
         self.zero = np.zeros(3)
 
     def configure_capabilities(self) -> None:
-        """New gains (a live patch), or a restart: no stale integrator either way."""
+        """A (re)start: no stale integrator."""
         params = self._controller_params()
         if params != self.controller.params:
             self.controller = PlatformVelocityController(params)
         else:
             self.controller.reset()
+
+    def retune(self, changed: frozenset[str]) -> None:
+        """New gains while driving: the controllers keep their states, so the wheels see no jump."""
+        self.controller.retune(self._controller_params())
 
     def compute(self) -> None:
         sensors, setpoint = self.inputs.wheel_sensors, self.inputs.velocity_setpoint

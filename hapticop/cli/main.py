@@ -216,7 +216,8 @@ def status(
                    f"{timing['missed_deadlines']} missed{failed}")
     for name, a in state["activities"].items():
         failed = f" FAILED: {a['failed']}" if a["failed"] else ""
-        typer.echo(f"  activity {name}: {a['state']}{failed}")
+        waiting = f", waiting for {a['waiting_for']}" if a.get("waiting_for") else ""
+        typer.echo(f"  activity {name}: {a['state']}{waiting}{failed}")
     for net, marking in state["markings"].items():
         typer.echo(f"  net {net}: {marking}")
     typer.echo(f"  flags set: {', '.join(state['flags'])}")

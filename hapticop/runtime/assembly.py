@@ -136,6 +136,7 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination)
+                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination,
+                              region.waiting[region.layout.activity_index[name]])
     block = resolved.block(context)
     return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)

@@ -111,9 +111,9 @@ class _LiveChanges:
         while self.messages.poll():
             thread, (kind, *args) = self.messages.recv()
             if kind == "params":
-                name, params = args
+                name, params, changed = args
                 runner = self.built.runners[name]
-                runner.block.params = runner.block.context.params = type(runner.block.params).model_validate(params)
+                runner.retune(type(runner.block.params).model_validate(params), frozenset(changed))
             elif kind == "schedules":
                 self.built.threads[thread].replace_schedules({int(k): v for k, v in args[0].items()})
             elif kind == "max_age":

@@ -172,3 +172,19 @@ class ActivityContext:
     run_dir: Path  # where the activity may leave results (logs live there too)
     simulation: SimulationTimer = field(default_factory=SimulationTimer)
     coordination: Any = None  # the mediator's handle in the main process: start_threads(), step()
+    waiting_slot: np.ndarray | None = None  # the region's text `status` shows (None: a harness, no region)
+    waiting: str | None = None  # what the activity's configuration waits for now
+
+    def waiting_for(self, what: str | None) -> None:
+        """Say what a configuration hook is waiting for (None: nothing any more), so a wait is never
+        silent: logged once per change and shown by `hapticop status`. Not for `compute`."""
+        if what == self.waiting:
+            return
+        self.waiting = what
+        if what is not None:
+            self.log.info("waiting for %s", what)
+        slot = self.waiting_slot
+        if slot is not None:
+            text = (what or "").encode()[: len(slot)]
+            slot[:] = 0
+            slot[: len(text)] = np.frombuffer(text, np.uint8)

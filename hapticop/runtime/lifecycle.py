@@ -189,9 +189,21 @@ class Lifecycle:
         try:
             return hook()
         except Exception as error:  # noqa: BLE001
-            self._fail(RUNNING_FAILED, None, error)
-            self._enter(State.PAUSING)
+            self.fail_running(error)
             return None
+
+    @property
+    def configured(self) -> bool:
+        """Its hooks have built what they build: running, paused, or capabilities ready."""
+        state = self.state
+        return state in (State.RUNNING, State.PAUSING) or (
+            state is State.CAPABILITY_CONFIGURATION and self.capabilities_ready)
+
+    def fail_running(self, error: BaseException) -> None:
+        """A running owner's hook raised: reported, and the owner pauses (safe outputs)."""
+        self._fail(RUNNING_FAILED, None, error)
+        if self.state is State.RUNNING:
+            self._enter(State.PAUSING)
 
     def _configure_capabilities(self) -> None:
         if self.failed[self.index] == CAPABILITY_FAILED:

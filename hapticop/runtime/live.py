@@ -168,19 +168,22 @@ def apply(target: LiveTarget, pending: PendingPatch) -> None:
 
 
 def _new_params(target: LiveTarget, old: Description, name: str, resolved: ResolvedActivity) -> None:
+    """Running parameters reach the block between two of its cycles; others re-configure it."""
     was = old.activities[name]
-    changed = {k for k in type(resolved.params).model_fields if getattr(resolved.params, k) != getattr(was.params, k)}
+    changed = frozenset(k for k in type(resolved.params).model_fields
+                        if getattr(resolved.params, k) != getattr(was.params, k))
     if changed <= was.block.running_params:
-        request = None  # read every cycle: the next cycle uses them
+        request = None
     elif changed <= was.block.capability_params | was.block.running_params:
         request = "request_capability_configuration"
     else:
         request = "request_resource_configuration"
+    retuned = changed if request is None else frozenset()  # a re-configuration rebuilds it all
     runner = target.runners.get(name)
     if runner is not None:
-        runner.block.params = runner.block.context.params = resolved.params
+        runner.retune(resolved.params, retuned)
     else:
-        target.send(old.owner_thread[name], ("params", name, resolved.spec.params))
+        target.send(old.owner_thread[name], ("params", name, resolved.spec.params, sorted(retuned)))
     if request is not None:
         target.set_flag(f"{name}.lcsm.{request}")
 

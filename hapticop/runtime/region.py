@@ -20,6 +20,7 @@ from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
 
 ALIGN = 64
+WAITING_BYTES = 160  # what an activity's configuration waits for, as UTF-8 text `status` shows
 # Room for what live patches add in the main process: activities with their flags and
 # the buffers of their streams. Children never see additions, so layouts still agree.
 
@@ -126,6 +127,7 @@ class Layout:
         section("compute_max", (acts,), "int64")
         section("compute", (acts, BINS), "int64")
         section("sim_ns", (acts,), "int64")  # time each activity spent in simulated devices
+        section("waiting", (acts, WAITING_BYTES), "uint8")
         section("cpu_ns", (threads,), "int64")  # CPU time each thread's loop has used
         section("cpu_base", (threads,), "int64")  # ... and had used when timing started
         section("cycles_base", (threads,), "int64")  # cycles before timing started
@@ -199,6 +201,11 @@ class Region:
 
     def buffer_at(self, offset: int, nbytes: int) -> np.ndarray:
         return np.ndarray((nbytes,), dtype=np.uint8, buffer=self.memory.buf, offset=offset)
+
+    def waiting_for(self, activity: str) -> str | None:
+        """What the activity last said its configuration waits for (None: nothing)."""
+        raw = bytes(self.waiting[self.layout.activity_index[activity]]).rstrip(b"\0")
+        return raw.decode("utf-8", "replace") if raw else None
 
     def close(self) -> None:
         for name in self.layout.sections:

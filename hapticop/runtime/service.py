@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from hapticop.composition.description import Composition
+from hapticop.composition.lcsm import State
 from hapticop.coordination.coordinator import Coordinator
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.control import ControlError, ControlServer, socket_path
@@ -63,6 +64,12 @@ class ControlService:
             return {"ok": False, "error": f"patch not applied: {pending.error}"}
         return {**result, "applied": True}
 
+    def _waiting(self, activity: str, state: str) -> str | None:
+        """What a configuring activity waits for; nothing once it left configuration."""
+        configuring = state in (State.CREATION.flag_name, State.RESOURCE_CONFIGURATION.flag_name,
+                                State.CAPABILITY_CONFIGURATION.flag_name)
+        return self.region.waiting_for(activity) if configuring else None
+
     def status(self) -> dict:
         region, layout, clock = self.region, self.region.layout, self.clock
         owners = {owner: {"state": region.state_of(owner).flag_name,
@@ -75,7 +82,8 @@ class ControlService:
             "uptime_s": (clock.now_ns() - int(region.system[Region.STARTED_NS])) / SECOND,
             "threads": {t: {**owners[f"threads.{t}"], "schedule": int(region.selected[i])}
                         for t, i in layout.thread_index.items()},
-            "activities": {a: owners[a] for a in layout.activity_index},
+            "activities": {a: {**owners[a], "waiting_for": self._waiting(a, owners[a]["state"])}
+                           for a in layout.activity_index},
             "flags": sorted(name for name, i in layout.flag_index.items() if region.flags[i]),
             "markings": self.coordinator.markings(),
             "timing": timing(region, composition),

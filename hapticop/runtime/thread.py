@@ -35,6 +35,7 @@ class ActivityRunner:
         self.simulator = block.simulator
         self.flushes = block.implements_flush()
         self.took = 0  # this cycle's compute time so far (compute, then flush)
+        self.retuned: tuple[object, frozenset[str]] | None = None  # new running parameters, not yet taken
         layout = region.layout
         self.index = layout.activity_index[name]
         self.inputs = [port for port in vars(block.inputs).values()]
@@ -49,7 +50,24 @@ class ActivityRunner:
     def state(self) -> State:
         return self.lifecycle.state
 
+    def retune(self, params: object, changed: frozenset[str]) -> None:
+        """Hand the block new parameters; it takes them before its next step, on its own thread."""
+        self.retuned = (params, changed)
+
+    def _take_parameters(self) -> None:
+        params, changed = self.retuned  # type: ignore[misc]
+        self.retuned = None
+        block = self.block
+        block.params = block.context.params = params
+        if changed and self.lifecycle.configured:  # one still configuring builds from the new ones
+            try:
+                block.retune(changed)
+            except Exception as error:  # noqa: BLE001 - a block's bug is its failure, not the thread's
+                self.lifecycle.fail_running(error)
+
     def step(self) -> None:
+        if self.retuned is not None:
+            self._take_parameters()
         for port in self.inputs:
             port.refresh()
         relay = self.relay

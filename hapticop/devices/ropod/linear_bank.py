@@ -82,17 +82,29 @@ class ControllerBank:
 
     def __init__(self, params: LinearControllerParams | Sequence[LinearControllerParams], ts: float,
                  n: int | None = None):
+        if n is None:
+            n = 1 if isinstance(params, LinearControllerParams) else len(params)
+        self.n, self.ts = n, float(ts)
+        self._coef = self._coefficients(params)
+        # States: PI integrator, lead-lag, low-pass; level-reset memory.
+        self._xi, self._xd, self._xl = [0.0] * n, [0.0] * n, [0.0] * n
+        self._prev_reset = [False] * n
+        # Per-stage outputs of the last step.
+        self._y_pi, self._y_leadlag, self._clamped = [0.0] * n, [0.0] * n, [False] * n
+        self._no_reset = (False,) * n
+        self._error, self._reset, self._out = [0.0] * n, [False] * n, [0.0] * n
+
+    def _coefficients(self, params: LinearControllerParams | Sequence[LinearControllerParams]) -> tuple:
+        """Per channel: gain, saturation, h*wi, lead-lag D, a, b, low-pass g, a (Tustin at `ts`)."""
         channels = [params] if isinstance(params, LinearControllerParams) else list(params)
         cols = {f.name: np.array([getattr(c, f.name) for c in channels], np.float64)
                 for f in fields(LinearControllerParams)}
-        if n is None:
-            n = len(channels)
+        n, ts = self.n, self.ts
         p = {k: np.broadcast_to(v, (n,)).astype(np.float64) for k, v in cols.items()}
         if ts <= 0 or np.any(p["i_saturation"] <= 0) or np.any(p["i_fhz"] < 0):
             raise ValueError("need ts > 0, i_saturation > 0 and i_fhz >= 0")
         if np.any(p["ll_zero_fhz"] <= 0) or np.any(p["ll_pole_fhz"] <= 0) or np.any(p["lpf_fhz"] <= 0):
             raise ValueError("lead-lag and low-pass frequencies must be > 0")
-        self.n, self.ts = n, float(ts)
         h = ts / 2.0
         two_pi = 2.0 * math.pi
         w_p = two_pi * p["ll_pole_fhz"]
@@ -104,15 +116,12 @@ class ControllerBank:
         ll_b = w_p / (1.0 + a_n)
         g = w_l * h / (1.0 + w_l * h)
         lp_a = 1.0 - 2.0 * g
-        # Per channel: gain, saturation, h*wi, lead-lag D, a, b, low-pass g, a.
-        self._coef = tuple(zip(*(c.tolist() for c in (p["p_gain"], p["i_saturation"], h_wi, dd, ll_a, ll_b, g, lp_a))))
-        # States: PI integrator, lead-lag, low-pass; level-reset memory.
-        self._xi, self._xd, self._xl = [0.0] * n, [0.0] * n, [0.0] * n
-        self._prev_reset = [False] * n
-        # Per-stage outputs of the last step.
-        self._y_pi, self._y_leadlag, self._clamped = [0.0] * n, [0.0] * n, [False] * n
-        self._no_reset = (False,) * n
-        self._error, self._reset, self._out = [0.0] * n, [False] * n, [0.0] * n
+        return tuple(zip(*(c.tolist() for c in (p["p_gain"], p["i_saturation"], h_wi, dd, ll_a, ll_b, g, lp_a))))
+
+    def retune(self, params: LinearControllerParams | Sequence[LinearControllerParams]) -> None:
+        """New gains and corner frequencies from the next step on; the states stay, so the output
+        carries on from where it was instead of restarting from zero (bumpless)."""
+        self._coef = self._coefficients(params)
 
     def reset(self) -> None:
         """All states to zero, as at start."""

@@ -15,6 +15,7 @@ the images are read and written with precompiled structs. `step` allocates nothi
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Literal
@@ -169,6 +170,16 @@ class PlatformVelocityController:
         """Controller states and the setpoint history to zero (start of running)."""
         self.bank.reset()
         _zero(self._v_sp)
+
+    def retune(self, params: PlatformControllerParams) -> None:
+        """New platform and wheel controller gains from the next cycle on, states kept (bumpless).
+        Anything else in `params` (geometry, limits, distribution) needs a new controller."""
+        unchanged = dataclasses.replace(params, platform_xy=self.params.platform_xy,
+                                        platform_theta=self.params.platform_theta, wheel=self.params.wheel)
+        if unchanged != self.params:
+            raise ValueError("only the platform and wheel controller gains retune; build a new controller")
+        self.bank.retune([params.platform_xy, params.platform_xy, params.platform_theta] + [params.wheel] * self.wheels)
+        self.params = params
 
     def enable(self) -> None:
         self._enabled = True
