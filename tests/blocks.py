@@ -21,13 +21,18 @@ class Stuck(Block):
     Params = StuckParams
 
     def create(self):
-        return self.params.stuck_in != "creation"
+        return self._step("creation")
 
     def configure_resources(self):
-        return self.params.stuck_in != "resource_configuration"
+        return self._step("resource_configuration")
 
     def configure_capabilities(self):
-        return self.params.stuck_in != "capability_configuration"
+        return self._step("capability_configuration")
+
+    def _step(self, stage: str) -> bool:
+        stuck = self.params.stuck_in == stage
+        self.context.waiting_for(f"a '{stage}' that never completes (a test)" if stuck else None)
+        return not stuck
 
     def clean(self):
         (self.run_dir / f"{self.name}.cleaned").write_text("yes")

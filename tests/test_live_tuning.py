@@ -5,6 +5,8 @@ configuration, where it waited for a re-centred handle the operator was holding 
 robot stopped mid-hallway for good. Gains, limits and force models now retune in place.
 """
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,33 @@ def test_a_retuned_haptic_controller_renders_with_the_new_gain_at_once():
     harness.step()
     assert harness.outputs.force.value[0] == -0.8
     assert np.linalg.norm(harness.outputs.velocity_setpoint.value) == pytest.approx(2 * speed)  # k2 doubled
+
+
+def test_status_says_what_a_configuring_activity_waits_for(tmp_path):
+    from hapticop.runtime.control import request
+
+    from .runtime_helpers import counting
+
+    socket = tmp_path / "stuck.sock"
+    text = (counting().replace("schedules: {0: [mediator, noise]}", "schedules: {0: [mediator, noise, stuck]}")
+            .replace("  recorder: {block: echo}\n", "  recorder: {block: echo}\n  stuck: {block: 'tests.blocks:Stuck', "
+                     "params: {stuck_in: capability_configuration}}\n"))
+    replies = {}
+
+    def operator(system):
+        def talk():
+            try:
+                for _ in range(200):  # until the stuck activity has said so (bounded: 10 s)
+                    reply = replies["status"] = request(socket, {"op": "status"}) if socket.exists() else {}
+                    if reply.get("ok") and reply["status"]["activities"]["stuck"]["waiting_for"]:
+                        break
+                    threading.Event().wait(0.05)
+            finally:
+                system.request_shutdown()
+        threading.Thread(target=talk, daemon=True).start()
+
+    compose(tmp_path, text, clock="realtime", duration="30s", on_start=operator, control=str(socket))
+    stuck = replies["status"]["status"]["activities"]["stuck"]
+    assert stuck["state"] == "capability_configuration"
+    assert stuck["waiting_for"] == "a 'capability_configuration' that never completes (a test)"
+    assert replies["status"]["status"]["activities"]["mediator"]["waiting_for"] is None
