@@ -45,9 +45,9 @@ class Counter(Block):
 
 
 class EchoParams(Params):
-    dtype: Literal["int64", "float64", "float32", "uint8"] = "int64"
-    shape: tuple[int, ...] = ()
-    unit: str = "1"
+    dtype: Literal["int64", "float64", "float32", "uint8"] = Field("int64", description="the samples' element type")
+    shape: tuple[int, ...] = Field((), description="the samples' shape (() for a scalar)")
+    unit: str = Field("1", description="the samples' unit")
 
 
 class Echo(Block):

@@ -70,6 +70,8 @@ class EthercatMasterParams(DeviceParams):
 
 
 class EthercatMaster(Block):
+    """The EtherCAT master: brings the segment to OP, then exchanges the wheels' process data each cycle."""
+
     Params = EthercatMasterParams
     needs = {"simulator": "ropod_wheels"}
     flags_written = {"operational": "every expected slave is in OP and exchanging process data"}
@@ -170,6 +172,8 @@ class EthercatWatchdogParams(Params):
 
 
 class EthercatWatchdog(Block):
+    """Watches every slave's AL state and the working counter; raises `slave_fault` when one is lost."""
+
     Params = EthercatWatchdogParams
     flags_written = {
         "all_operational": "every slave in OP with a healthy working counter",

@@ -28,11 +28,11 @@ class LidarParams(DeviceParams):
     host: str = Field("127.0.0.1", description="scanner address (the TiM's factory default is 192.168.0.1)")
     port: int = Field(2112, ge=1, le=65535, description="CoLa A port of the scanner")
     points: int = Field(811, ge=2, le=10_000, description="points per scan")
-    scan_rate_hz: float = Field(15.0, gt=0, le=100)
-    angle_min_deg: float = -135.0
-    angle_max_deg: float = 135.0
+    scan_rate_hz: float = Field(15.0, gt=0, le=100, description="the scanner's scan rate")
+    angle_min_deg: float = Field(-135.0, description="the first beam's angle, the sensor's frame (0 ahead)")
+    angle_max_deg: float = Field(135.0, description="the last beam's angle")
     min_range_m: float = Field(0.05, ge=0, description="closer values are invalid")
-    max_range_m: float = Field(10.0, gt=0)
+    max_range_m: float = Field(10.0, gt=0, description="the farthest range the scanner reports")
     reconnect_backoff_s: tuple[float, float] = Field((0.1, 2.0), description="first and longest retry delay")
     yaw_deg: float = Field(
         math.degrees(ROPOD_BODY.lidar.yaw_rad), description="the scanner's heading on the robot: beam angles are "

@@ -2,16 +2,20 @@
 
 Built-in blocks have short names. Any other block is named by its import path,
 `package.module:ClassName`, so an application can bring its own blocks without touching
-hapticop. Modules are imported only when a composition names them, and not at all while
-`blocks_not_imported()` is in effect: checking an untrusted file must not run its code.
+hapticop; an installed package may also give its blocks short names through the
+`hapticop.blocks` entry-point group (`spring = "mypkg.blocks:Spring"`). Modules are imported
+only when a composition names them, and not at all while `blocks_not_imported()` is in
+effect: checking an untrusted file must not run its code.
 """
 
 from __future__ import annotations
 
 import contextlib
 import difflib
+import functools
 import importlib
 import importlib.machinery
+import importlib.metadata
 import importlib.util
 import re
 from collections.abc import Iterator
@@ -59,6 +63,17 @@ class UnknownBlock(LookupError):
         self.name, self.reason, self.hint = name, reason, hint
 
 
+@functools.cache
+def installed() -> dict[str, str]:
+    """Short names that installed packages give their blocks (entry points), without importing them;
+    read once per process (installing a package means starting hapticop again)."""
+    found = {}
+    for point in importlib.metadata.entry_points(group="hapticop.blocks"):
+        if _IMPORT_PATH.match(point.value):
+            found[point.name] = point.value
+    return found
+
+
 def resolve(name: str) -> type[Block] | None:
     """The block class for `name`, or `UnknownBlock` saying why not.
 
@@ -66,9 +81,11 @@ def resolve(name: str) -> type[Block] | None:
     `blocks_not_imported()`, was not imported.
     """
     target = BUILTIN.get(name)
+    if target is None and not _IMPORT_PATH.match(name):
+        target = installed().get(name)
     if target is None:
         if not _IMPORT_PATH.match(name):
-            close = difflib.get_close_matches(name, BUILTIN, n=1)
+            close = difflib.get_close_matches(name, [*BUILTIN, *installed()], n=1)
             hint = f"did you mean '{close[0]}'?" if close else "use a built-in name or 'package.module:ClassName'"
             raise UnknownBlock(name, f"unknown block type '{name}'", hint)
         target = name

@@ -24,6 +24,7 @@ app = typer.Typer(
 
 SYSTEMS_DIR = Path("systems")
 
+from hapticop.cli.catalogue import blocks as _blocks  # noqa: E402
 from hapticop.cli.devices import devices as _devices  # noqa: E402
 from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
@@ -33,6 +34,7 @@ app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
+app.command("blocks")(_blocks)
 
 
 class OutputFormat(str, Enum):

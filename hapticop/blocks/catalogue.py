@@ -1,0 +1,213 @@
+"""Every block an author can name, with what it declares: the reference `hapticop blocks` prints.
+
+Built from the blocks' own declarations (ports, flags, rate, parameter models, which
+parameters retune live), so the catalogue cannot drift from the code. Blocks whose ports
+depend on their parameters are described with their defaults.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Port
+from hapticop.blocks.registry import BUILTIN, UnknownBlock, installed, resolve
+
+# Units by the suffix of a parameter's name (the project names SI quantities with their unit).
+_UNITS = [("_n_per_m", "N/m"), ("_ns_per_m", "N·s/m"), ("_rad_per_s_m", "rad/(s·m)"), ("_per_s", "1/s"),
+          ("_rad_s", "rad/s"),
+          ("_mps2", "m/s²"), ("_mps", "m/s"), ("_nm_per_a", "N·m/A"), ("_n_per_s", "N/s"), ("_n", "N"),
+          ("_m", "m"), ("_s", "s"), ("_ms", "ms"), ("_hz", "Hz"), ("_fhz", "Hz"), ("_deg", "°"), ("_rad", "rad"),
+          ("_a", "A"), ("_kg", "kg")]
+
+
+@dataclass
+class ParameterEntry:
+    name: str  # dotted for nested parameter sets: driving.k1_per_s
+    type: str
+    default: Any
+    unit: str
+    description: str
+    live: str  # "retunes live", "capability configuration", "resource configuration"
+
+
+@dataclass
+class BlockEntry:
+    name: str  # what a composition's `block:` says
+    target: str  # module:Class
+    origin: str  # built-in, installed (entry point) or import path
+    summary: str
+    inputs: dict[str, dict] = field(default_factory=dict)
+    outputs: dict[str, dict] = field(default_factory=dict)
+    flags_read: dict[str, str] = field(default_factory=dict)
+    flags_written: dict[str, str] = field(default_factory=dict)
+    rate: str = "any"
+    needs: dict[str, str] = field(default_factory=dict)
+    provides: list[str] = field(default_factory=list)
+    parameters: list[ParameterEntry] = field(default_factory=list)
+    error: str = ""  # why the block could not be described (an import that failed)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def catalogue(names: list[str] | None = None) -> list[BlockEntry]:
+    """Built-in and installed blocks (or just `names`, which may be import paths), described."""
+    sources = {**{n: ("built-in", t) for n, t in BUILTIN.items()},
+               **{n: ("installed", t) for n, t in installed().items() if n not in BUILTIN}}
+    wanted = names if names else list(sources)
+    return [describe(name, *sources.get(name, ("import path", name))) for name in wanted]
+
+
+def describe(name: str, origin: str, target: str) -> BlockEntry:
+    entry = BlockEntry(name, target, origin, "")
+    try:
+        cls = resolve(name)
+    except UnknownBlock as error:
+        entry.error = f"{error.reason}" + (f" ({error.hint})" if error.hint else "")
+        return entry
+    assert cls is not None  # resolve imports unless told not to
+    entry.summary = _summary(cls)
+    try:
+        params = cls.Params()
+    except ValueError:  # a default that needs a setting (the Falcon's firmware path): ports by defaults
+        params = cls.Params.model_construct()
+    iface = cls.declare(params)
+    entry.inputs = {n: _port(p) for n, p in iface.inputs.items()}
+    entry.outputs = {n: _port(p) for n, p in iface.outputs.items()}
+    entry.flags_read, entry.flags_written = dict(iface.flags_read), dict(iface.flags_written)
+    entry.rate = iface.rate.describe() if iface.rate else "any"
+    entry.needs = dict(cls.needs)
+    entry.provides = sorted(cls.provides)
+    entry.parameters = _parameters(cls, params.model_dump(mode="json"))
+    return entry
+
+
+def _summary(cls: type[Block]) -> str:
+    doc = inspect.getdoc(cls)
+    if not doc or doc == inspect.getdoc(Block):
+        doc = inspect.getdoc(inspect.getmodule(cls)) or ""
+    return doc.strip().split("\n\n")[0].replace("\n", " ")
+
+
+def _port(port: Port) -> dict:
+    return {"dtype": port.dtype, "shape": list(port.shape), "unit": port.unit, "doc": port.doc,
+            "required": port.required}
+
+
+def _live(cls: type[Block], top: str) -> str:
+    if top in cls.running_params:
+        return "retunes live"
+    if top in cls.capability_params:
+        return "capability configuration"
+    return "resource configuration"
+
+
+def _parameters(cls: type[Block], defaults: dict) -> list[ParameterEntry]:
+    """One entry per leaf parameter, read off the parameter model's JSON Schema: it carries the
+    nested libraries' parameter sets with their docstrings, defaults and bounds."""
+    schema = cls.Params.model_json_schema()
+    defs = schema.get("$defs", {})
+    found: list[ParameterEntry] = []
+
+    def deref(prop: dict) -> dict:
+        while True:
+            if "$ref" in prop:
+                prop = defs[prop["$ref"].rsplit("/", 1)[-1]]
+            elif len(prop.get("allOf", ())) == 1:
+                prop = prop["allOf"][0]
+            else:
+                return prop
+
+    def walk(properties: dict, prefix: str, top: str) -> None:
+        for name, prop in properties.items():
+            dotted, root = f"{prefix}{name}", top or name
+            target = deref(prop)
+            if "properties" in target:
+                walk(target["properties"], f"{dotted}.", root)
+                continue
+            found.append(ParameterEntry(dotted, _type_name(prop, deref), _default_at(defaults, dotted),
+                                        _unit(name), prop.get("description") or target.get("description", ""),
+                                        _live(cls, root)))
+
+    walk(schema.get("properties", {}), "", "")
+    return found
+
+
+def _default_at(defaults: dict, dotted: str) -> Any:
+    """The default of a dotted parameter; a model chosen by `kind` is shown by its kind."""
+    value: Any = defaults
+    for part in dotted.split("."):
+        if not isinstance(value, dict) or part not in value:
+            return "(required)"
+        value = value[part]
+    if isinstance(value, dict) and "kind" in value:
+        return f"kind {value['kind']} with its defaults"
+    return value
+
+
+def _type_name(prop: dict, deref) -> str:
+    """A property's type in a few words: int, number >= 0, one of 'a', 'b', a union's variants."""
+    prop = deref(prop)
+    if "enum" in prop:
+        return "one of " + ", ".join(repr(v) for v in prop["enum"])
+    if "const" in prop:
+        return repr(prop["const"])
+    for key in ("anyOf", "oneOf"):
+        if key in prop:
+            return " or ".join(_type_name(option, deref) for option in prop[key])
+    if "properties" in prop:
+        kind = prop["properties"].get("kind", {})
+        return f"{prop.get('title', 'object')}" + (f" (kind {kind['const']!r})" if "const" in kind else "")
+    kind = prop.get("type", "any")
+    if kind == "array":
+        return f"list of {_type_name(prop.get('items', {}), deref)}"
+    bounds = [f"{word} {prop[key]}" for key, word in (("minimum", ">="), ("exclusiveMinimum", ">"),
+                                                      ("maximum", "<="), ("exclusiveMaximum", "<")) if key in prop]
+    return " ".join([kind, *bounds])
+
+
+def _unit(name: str) -> str:
+    for suffix, unit in _UNITS:
+        if name.endswith(suffix):
+            return unit
+    return ""
+
+
+def to_markdown(entries: list[BlockEntry]) -> str:
+    """The catalogue as the reference page docs/blocks.md."""
+    lines = ["# Block catalogue", "",
+             "Every built-in block, as `hapticop blocks` describes it from the blocks' own declarations",
+             "(regenerate with `hapticop blocks --markdown > docs/blocks.md`; a test keeps it current).",
+             "Ports are described for the block's default parameters; *live* says what a patch of that",
+             "parameter does to a running activity: it retunes between two cycles, or takes the activity",
+             "through capability or resource configuration.", ""]
+    for entry in entries:
+        lines += [f"## `{entry.name}`", "", f"`{entry.target}` ({entry.origin}). {entry.summary}", ""]
+        if entry.error:
+            lines += [f"Cannot be described: {entry.error}", ""]
+            continue
+        lines.append(f"Rate: {entry.rate}.")
+        if entry.needs:
+            lines.append("Needs: " + ", ".join(f"`{p}` names an activity providing {w}" for p, w in entry.needs.items())
+                         + ".")
+        if entry.provides:
+            lines.append("Provides: " + ", ".join(entry.provides) + ".")
+        lines.append("")
+        for title, ports in (("Inputs", entry.inputs), ("Outputs", entry.outputs)):
+            if ports:
+                lines += [f"{title}:", "", "| port | dtype | shape | unit | |", "|---|---|---|---|---|"]
+                lines += [f"| `{n}` | {p['dtype']} | {tuple(p['shape'])} | {p['unit']} | {p['doc']}"
+                          f"{'' if p['required'] else ' (optional)'} |" for n, p in ports.items()]
+                lines.append("")
+        for title, flags in (("Flags read", entry.flags_read), ("Flags written", entry.flags_written)):
+            if flags:
+                lines += [f"{title}: " + "; ".join(f"`{n}` ({d})" for n, d in flags.items()) + ".", ""]
+        if entry.parameters:
+            lines += ["| parameter | type | default | unit | live | |", "|---|---|---|---|---|---|"]
+            lines += [f"| `{p.name}` | {p.type.replace('|', '∣')} | `{p.default}` | {p.unit} | {p.live} | "
+                      f"{p.description.replace('|', '∣')} |" for p in entry.parameters]
+            lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
