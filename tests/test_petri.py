@@ -73,3 +73,46 @@ def test_explore_stops_at_the_state_limit():
     n = net(places=ring, transitions=moves, marking={f"P{i}": 1 for i in range(6)})
     analysis = explore(n, Environment(), state_limit=200)
     assert not analysis.complete and analysis.states >= 200 and analysis.findings == []
+
+
+MODES = dict(  # drive while the grip (a level flag) is held, park when it is let go
+    places={"DRIVE": None, "PARK": None, "GRIPPED": None},
+    transitions={"park": {"in": ["DRIVE"], "out": ["PARK"], "unless": ["GRIPPED"]},
+                 "drive": {"in": ["PARK", "GRIPPED"], "out": ["DRIVE", "GRIPPED"]}},
+    marking={"PARK": 1})
+
+
+def test_an_inhibitor_arc_fires_only_while_its_place_is_empty():
+    n = net(**MODES)
+    drive, park, gripped = (n.index(p) for p in ("DRIVE", "PARK", "GRIPPED"))
+    marking = n.initial.copy()
+    marking[gripped] = 1  # the grip is held: drive, and stay driving
+    n.fire_to_steady_state(marking)
+    assert marking[drive] == 1 and marking[park] == 0
+    assert not n.enabled(marking).any()
+    marking[gripped] = 0  # let go: park
+    n.fire_to_steady_state(marking)
+    assert marking[park] == 1 and marking[drive] == 0
+    assert n.enabled(marking).tolist() == [False, False]
+
+
+def test_explore_lets_a_tracked_flag_open_an_inhibitor_at_any_step():
+    env = Environment(tracking_sources=frozenset({"GRIPPED"}))
+    analysis = explore(net(**MODES), env)
+    assert analysis.complete and analysis.findings == [] and analysis.states == 2
+
+
+def test_explore_tests_a_kept_inhibitor_place_for_zero():
+    # 'late' waits for BUSY to empty; nothing ever empties it: a dead marking
+    n = net(places={"A": None, "BUSY": None, "B": None},
+            transitions={"late": {"in": ["A"], "out": ["B"], "unless": ["BUSY"]}},
+            marking={"A": 1, "BUSY": 1}, terminal=["B"])
+    (finding,) = explore(n, Environment(), frozenset({"B"})).findings
+    assert finding.kind == "dead" and finding.marking == {"A": 1, "BUSY": 1}
+
+
+def test_a_transition_needing_a_flag_true_and_false_at_once_never_fires():
+    n = net(places={"A": None, "F": None, "B": None},
+            transitions={"never": {"in": ["A", "F"], "out": ["B"], "unless": ["F"]}}, marking={"A": 1})
+    (finding,) = explore(n, Environment(tracking_sources=frozenset({"F"}))).findings
+    assert finding.kind == "dead"

@@ -85,6 +85,9 @@ def to_dot(cg: CompositionGraph) -> str:
             for pname, weight in transition.outputs.items():
                 label = f" [label={weight}]" if weight != 1 else ""
                 lines.append(f"    {_id('transition', nname, tname)} -> {_id('place', nname, pname)}{label};")
+            for pname in transition.inhibitors:  # an inhibitor arc ends in a small circle
+                lines.append(f"    {_id('place', nname, pname)} -> {_id('transition', nname, tname)} "
+                             "[arrowhead=odot];")
         lines.append("  }")
     for mname, fmap in comp.coordination.flag_maps.items():
         for kind in ("converting_sources", "tracking_sources", "converting_sinks", "tracking_sinks"):

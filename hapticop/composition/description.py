@@ -195,10 +195,14 @@ class Place(Strict):
 
 
 class Transition(Strict):
-    """Fires when every input place holds its arc weight in tokens."""
+    """Fires when every input place holds its arc weight in tokens and every `unless` place is empty."""
 
     inputs: dict[PlaceName, Weight] = Field(alias="in", description="input places and arc weights")
     outputs: dict[PlaceName, Weight] = Field(default_factory=dict, alias="out")
+    inhibitors: list[PlaceName] = Field(
+        default_factory=list, alias="unless",
+        description="places that must be empty for it to fire (inhibitor arcs): a place tracking a flag makes "
+                    "the net react to that flag being false")
     doc: str = ""
 
     @field_validator("inputs", "outputs", mode="before")

@@ -170,6 +170,11 @@ class CompositionGraph:
                     self._node(place(name, pname), declared=False)
                     self.g.add_edge(transition(name, tname), place(name, pname), kind="arc", weight=weight,
                                     path=tpath + ("out", pname))
+                for index, pname in enumerate(tspec.inhibitors):
+                    self._node(place(name, pname), declared=False)
+                    if not self.g.has_edge(place(name, pname), transition(name, tname)):
+                        self.g.add_edge(place(name, pname), transition(name, tname), kind="inhibitor",
+                                        path=tpath + ("unless", index))
             for field_name in ("marking", "terminal"):
                 for index, pname in enumerate(getattr(spec, field_name)):
                     self._node(place(name, pname), declared=False)

@@ -39,7 +39,8 @@ def nets_and_places(cg: G.CompositionGraph) -> Check:
             continue
         places = [n[2] for n, _ in cg.nodes_of("place") if n[1] == net_name]
         for u, v, data in list(cg.g.in_edges(node, data=True)) + list(cg.g.out_edges(node, data=True)):
-            what = {"arc": "arc to", "marking": "initial marking of", "terminal": "terminal",
+            what = {"arc": "arc to", "inhibitor": "inhibitor arc from", "marking": "initial marking of",
+                    "terminal": "terminal",
                     "source": "flag map binding to", "sink": "flag map binding to"}[data["kind"]]
             yield Diagnostic("unknown-place", f"{what} undeclared place '{place_name}' of net '{net_name}'",
                              data["path"], hint=_suggest(place_name, places) or "declare it under 'places'")
@@ -157,7 +158,7 @@ def reachability(cg: G.CompositionGraph, state_limit: int = DEFAULT_STATE_LIMIT)
     if any(c.startswith("coordination") for c, _ in cg.loaded.broken) or any(cg.nodes_of("net", declared=False)):
         return  # with a net or flag map set aside, the others' environment is unknown
     for name, spec in comp.coordination.nets.items():
-        referenced = {p for t in spec.transitions.values() for p in (*t.inputs, *t.outputs)}
+        referenced = {p for t in spec.transitions.values() for p in (*t.inputs, *t.outputs, *t.inhibitors)}
         referenced |= set(spec.marking) | set(spec.terminal)
         if not referenced <= set(spec.places):
             continue  # the undeclared place was reported; the net cannot be compiled

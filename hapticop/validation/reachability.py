@@ -67,15 +67,20 @@ def explore(
     names = [net.places[i] for i in kept]
 
     # Transitions over the kept places only; tracked inputs become static guards.
+    # An inhibitor arc on a tracked place is a guard the flag being false opens: the environment
+    # may leave it open at any step. On a kept place it is a test for zero tokens.
     transitions = []
-    for tname, (inputs, outputs) in zip(net.transitions, net.arcs):
+    for tname, (inputs, outputs, empty) in zip(net.transitions, net.arcs):
         if any(w > 1 for i, w in inputs if i in tracked):
             continue  # a level flag never holds more than one token
+        if any(i in tracked and w for i, w in inputs if i in empty):
+            continue  # needs the same flag true and false at once
         pre = [(position[i], int(w)) for i, w in inputs if w and i not in tracked]
         post = [(position[i], int(w)) for i, w in outputs if w and i not in tracked]
+        zero = [position[i] for i in empty if i not in tracked]
         # A transition guarded by a level flag consumes that token: once per step at most.
         guarded = any(w for i, w in inputs if i in tracked)
-        transitions.append((tname, pre, post, guarded))
+        transitions.append((tname, pre, post, zero, guarded))
     events = [position[net.index(p)] for p in sorted(env.converting_sources) if net.index(p) not in tracked]
     emits = [position[net.index(p)] for p in sorted(env.converting_sinks) if net.index(p) not in tracked]
     terminal_positions = [position[net.index(p)] for p in terminal if net.index(p) in position]
@@ -122,8 +127,8 @@ def explore(
     while queue:
         marking = queue.popleft()
         moves: list[tuple[tuple, str, bool]] = []
-        for tname, pre, post, guarded in transitions:
-            if all(marking[k] >= w for k, w in pre):
+        for tname, pre, post, zero, guarded in transitions:
+            if all(marking[k] >= w for k, w in pre) and not any(marking[k] for k in zero):
                 nxt = list(marking)
                 for k, w in pre:
                     nxt[k] -= w
