@@ -202,3 +202,51 @@ class Spring(Block):
     def compute(self):
         np.multiply(self.inputs.position.value, -self.params.stiffness_n_per_m, out=self.outputs.force.value)
         self.outputs.force.publish()
+
+
+class SwitchParams(Params):
+    on_at: int = Field(100, ge=0, description="cycle at which the flag goes true")
+    off_at: int = Field(200, ge=0, description="cycle at which it goes false again")
+
+
+class Switch(Block):
+    """Holds its flag 'on' true from cycle on_at to off_at: a grip held, then let go."""
+
+    Params = SwitchParams
+    flags_written = {"on": "true between on_at and off_at"}
+
+    def create(self):
+        self.cycle = 0
+
+    def compute(self):
+        self.cycle += 1
+        self.flags["on"] = self.params.on_at <= self.cycle < self.params.off_at
+
+
+class GainParams(Params):
+    gain: float = Field(1.0, description="published every cycle")
+    label: str = Field("", description="a parameter that needs re-configuration")
+
+
+class Gain(Block):
+    """Publishes its running parameter `gain` each cycle and keeps every value it published."""
+
+    Params = GainParams
+    outputs = {"gain": Port("float64", (), "1")}
+    running_params = frozenset({"gain"})
+
+    def create(self):
+        self.seen = []
+        self.retuned = []
+
+    def retune(self, changed):
+        self.retuned.append(sorted(changed))
+
+    def compute(self):
+        self.seen.append(self.params.gain)
+        self.outputs.gain.value[...] = self.params.gain
+        self.outputs.gain.publish()
+
+    def clean(self):
+        (self.run_dir / f"{self.name}.gains").write_text(" ".join(f"{g:g}" for g in self.seen))
+        (self.run_dir / f"{self.name}.retuned").write_text(repr(self.retuned))

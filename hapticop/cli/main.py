@@ -222,6 +222,8 @@ def status(
         typer.echo(f"  activity {name}: {a['state']}{waiting}{failed}")
     for net, marking in state["markings"].items():
         typer.echo(f"  net {net}: {marking}")
+    if state.get("modes") is not None:
+        typer.echo(f"  modes holding: {', '.join(state['modes']) or 'none'}")
     typer.echo(f"  flags set: {', '.join(state['flags'])}")
 
 

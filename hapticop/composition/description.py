@@ -267,6 +267,18 @@ class ScriptedPatch(Strict):
     doc: str = ""
 
 
+class Mode(Strict):
+    """Parameter values that hold while a flag is true: "parked" with a stiffer centring, say.
+
+    Only parameters a block retunes while running may change with a mode, so entering and
+    leaving one never takes an activity out of running."""
+
+    when: FlagName = Field(description="the flag that selects the mode: it holds while the flag is true")
+    params: dict[Name, dict[str, Any]] = Field(
+        description="per activity, parameter values merged over its own while the mode holds")
+    doc: str = ""
+
+
 MAX_LATENCIES = 5
 """End-to-end latencies a composition may track (each sample carries one origin stamp per latency)."""
 
@@ -293,6 +305,9 @@ class Composition(Strict):
     patches: dict[Name, ScriptedPatch] = Field(
         default_factory=dict, description="patches applied while running, at given times"
     )
+    modes: dict[Name, Mode] = Field(
+        default_factory=dict, description="parameter values that hold while a flag is true; when several hold, "
+        "a later mode's values win")
     latencies: dict[Name, Latency] = Field(
         default_factory=dict, max_length=MAX_LATENCIES,
         description="end-to-end latencies to measure and report, e.g. handle displacement to wheel command",

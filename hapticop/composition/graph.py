@@ -1,7 +1,7 @@
 """The composition as one networkx graph: the single structure every check runs on.
 
-Nodes are threads, activities, ports, streams, nets, places, transitions, flags and the
-parties that own flags; an activity that needs another (a device block and its simulator)
+Nodes are threads, activities, ports, streams, nets, places, transitions, flags, modes and
+the parties that own flags; an activity that needs another (a device block and its simulator)
 has a `needs` edge to it. Every reference written in the file becomes an edge that carries
 the YAML path where it was written, so a check that finds a bad edge can say where. A
 reference to something undeclared becomes a node with `declared=False` rather than an
@@ -47,6 +47,10 @@ def place(net_name: str, place_name: str) -> Node:
 
 def transition(net_name: str, name: str) -> Node:
     return ("transition", net_name, name)
+
+
+def mode(name: str) -> Node:
+    return ("mode", name)
 
 
 def flag(name: str) -> Node:
@@ -199,6 +203,13 @@ class CompositionGraph:
                     else:
                         self.g.add_edge(place(spec.net, pname), flag(flag_name), kind="sink", mode=kind,
                                         flag_map=name, path=path)
+
+        for name, spec in comp.modes.items():  # a mode reads its flag like a tracking source
+            path = ("modes", name)
+            self._node(mode(name), spec=spec, path=path)
+            if flag(spec.when) not in self.g:
+                self.g.add_node(flag(spec.when), declared=False)
+            self.g.add_edge(flag(spec.when), mode(name), kind="source", mode="mode", path=path + ("when",))
 
     def _port_reference(self, activity_name: str, port_name: str) -> bool:
         if not self._reference(activity(activity_name), "activities", activity_name):

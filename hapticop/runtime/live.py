@@ -178,14 +178,19 @@ def _new_params(target: LiveTarget, old: Description, name: str, resolved: Resol
         request = "request_capability_configuration"
     else:
         request = "request_resource_configuration"
-    retuned = changed if request is None else frozenset()  # a re-configuration rebuilds it all
+    retune(target, old, name, resolved.params, changed if request is None else frozenset())
+    if request is not None:  # a re-configuration rebuilds it all
+        target.set_flag(f"{name}.lcsm.{request}")
+
+
+def retune(target: LiveTarget, description: Description, name: str, params, changed: frozenset[str]) -> None:
+    """Give an activity new parameters, wherever it runs; it takes them before its next step and
+    retunes what depends on the `changed` ones."""
     runner = target.runners.get(name)
     if runner is not None:
-        runner.retune(resolved.params, retuned)
+        runner.retune(params, changed)
     else:
-        target.send(old.owner_thread[name], ("params", name, resolved.spec.params, sorted(retuned)))
-    if request is not None:
-        target.set_flag(f"{name}.lcsm.{request}")
+        target.send(description.owner_thread[name], ("params", name, params.model_dump(mode="json"), sorted(changed)))
 
 
 def _connect(target: LiveTarget, stream: str, new: Description) -> None:

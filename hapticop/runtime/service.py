@@ -86,5 +86,7 @@ class ControlService:
                            for a in layout.activity_index},
             "flags": sorted(name for name, i in layout.flag_index.items() if region.flags[i]),
             "markings": self.coordinator.markings(),
+            "modes": [name for name, mode in composition.modes.items()
+                      if mode.when in layout.flag_index and region.flag(mode.when)],
             "timing": timing(region, composition),
         }

@@ -27,6 +27,7 @@ from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.described import Description
 from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
+from hapticop.runtime.modes import Modes
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.rundirs import new_run_directory
@@ -98,6 +99,7 @@ class System:
                                      shutdown_timeout_ns=options.shutdown_timeout_ns,
                                      finish=self._finish)
         self.live = LiveChanges(self, Path(self.file).name, self.supervisor.reasons)
+        self.modes = Modes(self, self.flag_index, self.region.flags)
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
@@ -142,6 +144,7 @@ class System:
     def _between_cycles(self) -> None:
         """The main thread's duty before each of its cycles: live changes, then supervision."""
         self.live.apply_due(self.clock.now_ns() - int(self.region.system[Region.STARTED_NS]))
+        self.modes.apply_due()  # after the patches: a mode's values stay over a patched activity's
         self.supervisor.check(self.description)
 
     # -- what a live patch may touch (live.LiveTarget) -----------------------------------

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import select
+import threading
 import time
 from collections.abc import Callable
 
@@ -36,6 +37,7 @@ class ActivityRunner:
         self.flushes = block.implements_flush()
         self.took = 0  # this cycle's compute time so far (compute, then flush)
         self.retuned: tuple[object, frozenset[str]] | None = None  # new running parameters, not yet taken
+        self._retuning = threading.Lock()
         layout = region.layout
         self.index = layout.activity_index[name]
         self.inputs = [port for port in vars(block.inputs).values()]
@@ -51,12 +53,17 @@ class ActivityRunner:
         return self.lifecycle.state
 
     def retune(self, params: object, changed: frozenset[str]) -> None:
-        """Hand the block new parameters; it takes them before its next step, on its own thread."""
-        self.retuned = (params, changed)
+        """Hand the block new parameters; it takes them before its next step, on its own thread.
+        Parameters given twice before that step arrive as one change of both sets of names."""
+        with self._retuning:
+            if self.retuned is not None:
+                changed = changed | self.retuned[1]
+            self.retuned = (params, changed)
 
     def _take_parameters(self) -> None:
-        params, changed = self.retuned  # type: ignore[misc]
-        self.retuned = None
+        with self._retuning:  # the main thread may hand over more meanwhile
+            params, changed = self.retuned  # type: ignore[misc]
+            self.retuned = None
         block = self.block
         block.params = block.context.params = params
         if changed and self.lifecycle.configured:  # one still configuring builds from the new ones

@@ -130,6 +130,11 @@ def plan_changes(old: Composition, new: Composition) -> ChangePlan:
         if before.max_age != after.max_age:
             say(f"stream '{name}': max_age {_duration(before.max_age)} -> {_duration(after.max_age)}")
 
+    for name in sorted(set(old.modes) | set(new.modes)):
+        if _semantic(old.modes.get(name)) != _semantic(new.modes.get(name)):
+            what = "added" if name not in old.modes else "removed" if name not in new.modes else "changed"
+            say(f"mode '{name}' {what}")  # taken up between two cycles (runtime/modes.py)
+
     _coordination_changes(plan, old, new)
     return plan
 

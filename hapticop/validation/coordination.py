@@ -100,8 +100,9 @@ def flags(cg: G.CompositionGraph) -> Check:
         if source_reads and not owner_writes and not sink_writes:
             for _, d in source_reads:
                 who = f"read by {info.declared_by}" if owner_reads else "never written"
-                yield Diagnostic("flag-no-writer", f"flag '{name}' is {who}: no one writes it, so this source "
-                                 "never sees it change", d["path"])
+                effect = "the mode never holds" if d["mode"] == "mode" else "this source never sees it change"
+                yield Diagnostic("flag-no-writer", f"flag '{name}' is {who}: no one writes it, so {effect}",
+                                 d["path"])
         if sink_writes and not owner_reads and not source_reads and not owner_writes:
             for _, d in sink_writes:
                 yield Diagnostic("flag-no-reader", f"flag '{name}' is read by no one: setting it from a sink "

@@ -9,7 +9,7 @@ from hapticop.composition.diagnostics import Report
 from hapticop.composition.graph import CompositionGraph
 from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.yamlsource import Source
-from hapticop.validation import coordination, structure
+from hapticop.validation import coordination, modes, structure
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 
 
@@ -41,7 +41,7 @@ def check_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> Vali
     report.extend(source.place(d, key=d.rule == "unknown-key") for d in loaded.diagnostics)
     cg = CompositionGraph(loaded)
     if loaded.composition is not None:
-        for check in structure.CHECKS + coordination.CHECKS:
+        for check in structure.CHECKS + coordination.CHECKS + modes.CHECKS:
             found = check(cg, state_limit) if check is coordination.reachability else check(cg)
             report.extend(source.place(d) for d in found)
     return Validated(report, source, cg)
