@@ -28,6 +28,7 @@ CASES = [
     ("invalid-arc-undeclared-place.yaml", "unknown-place", 21, "arc to undeclared place 'EXTRA' of net 'boot'", None),
     ("invalid-mediator-off-main.yaml", "mediator", 12, "scheduled on thread 'sensors'", None),
     ("invalid-net-unbounded.yaml", "net-unbounded", 18, "place 'COUNT' is unbounded", None),
+    ("invalid-period-param-mismatch.yaml", "period-mismatch", 15, "'centring.period_s' is 0.002 s", None),
     ("invalid-mode-not-live.yaml", "mode-not-live", 41, "changes 'scan_points' of 'haptic'", "retunes live: blind"),
     ("invalid-period-no-unit.yaml", "bad-duration", 10, "a duration needs a unit", None),
     ("invalid-sink-owner-writes.yaml", "flag-two-writers", 30, "is written by activity 'mediator'", None),

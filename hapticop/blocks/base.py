@@ -59,6 +59,9 @@ class Block:
     # running (gains, limits, modes): the block reads them each cycle, or rebuilds what depends
     # on them in `retune`.
     running_params: ClassVar[frozenset[str]] = frozenset()
+    # Dotted parameters that restate the period of the thread running the block, in seconds (a
+    # discretisation step): validation refuses a composition where they disagree.
+    period_params: ClassVar[frozenset[str]] = frozenset()
     # Parameters that name another activity this one needs, with what that activity must provide
     # (`{"simulator": "falcon_device"}`); a parameter left None needs nothing.
     needs: ClassVar[dict[str, str]] = {}

@@ -54,6 +54,7 @@ class HapticController(Block):
                      "handle_lost": "the handle position is stale (Falcon frames stopped): no force, no motion"}
     awaits = frozenset({"resources_ready"})
     optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
+    period_params = frozenset({"centring.period_s", "force_model.period_s"})
     # Every law retunes between two cycles (`retune`): a live gain change never stops the robot.
     running_params = frozenset({"blind", "centring", "driving", "force_model", "governor", "scan_filter",
                                 "centred_within_m"})

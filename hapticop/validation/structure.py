@@ -157,6 +157,22 @@ def rates(cg: G.CompositionGraph) -> Check:
                 f"(thread '{u[1]}' period {format_duration(period)})", data["path"],
                 expected=f"a thread rate of {rate.describe()}", hint=rate.why,
             )
+        yield from _period_params(v[1], resolved, u[1], period)
+
+
+def _period_params(name: str, resolved, thread: str, period_ns: int) -> Check:
+    """A parameter that restates the thread's period (a discretisation step in seconds) must agree
+    with it: a 1 ms filter run every 2 ms is wrong by a factor of two, silently."""
+    for dotted in sorted(resolved.block.period_params):
+        value = resolved.params
+        for part in dotted.split("."):
+            value = getattr(value, part, None)
+        if not isinstance(value, (int, float)) or abs(value * 1e9 - period_ns) <= 1e-6 * period_ns:
+            continue  # absent with this choice (a force model without it), or right
+        yield Diagnostic(
+            "period-mismatch", f"activity '{name}': parameter '{dotted}' is {value:g} s, but thread '{thread}' runs "
+            f"it every {format_duration(period_ns)}", ("activities", name, "params", *dotted.split(".")),
+            expected=f"{period_ns / 1e9:g}", hint=f"set '{dotted}: {period_ns / 1e9:g}', the thread's period")
 
 
 def streams(cg: G.CompositionGraph) -> Check:
