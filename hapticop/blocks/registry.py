@@ -3,7 +3,8 @@
 Built-in blocks have short names. Any other block is named by its import path,
 `package.module:ClassName`, so an application can bring its own blocks without touching
 hapticop; an installed package may also give its blocks short names through the
-`hapticop.blocks` entry-point group (`spring = "mypkg.blocks:Spring"`). Modules are imported
+`hapticop.blocks` entry-point group (`spring = "mypkg.blocks:Spring"`); a module beside the
+composition file is found too (`search_beside`). Modules are imported
 only when a composition names them, and not at all while `blocks_not_imported()` is in
 effect: checking an untrusted file must not run its code.
 """
@@ -18,8 +19,10 @@ import importlib.machinery
 import importlib.metadata
 import importlib.util
 import re
+import sys
 from collections.abc import Iterator
 from contextvars import ContextVar
+from pathlib import Path
 
 from hapticop.blocks.base import Block
 
@@ -61,6 +64,15 @@ class UnknownBlock(LookupError):
     def __init__(self, name: str, reason: str, hint: str = ""):
         super().__init__(reason)
         self.name, self.reason, self.hint = name, reason, hint
+
+
+def search_beside(composition_file: str | Path) -> None:
+    """Let `module:Class` blocks be found in the composition's own folder, as an author expects of
+    a file kept beside the YAML that names it. Searched last, so it never hides an installed module;
+    child processes inherit the search path."""
+    folder = str(Path(composition_file).resolve().parent)
+    if folder not in sys.path:
+        sys.path.append(folder)
 
 
 @functools.cache

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hapticop.blocks.registry import search_beside
 from hapticop.composition.diagnostics import Report
 from hapticop.composition.layers import resolve
 from hapticop.composition.yamlsource import Source, SourceError, parse_text, read_file
@@ -33,6 +34,7 @@ def validate_path(path: str | Path, state_limit: int = DEFAULT_STATE_LIMIT) -> V
         source = resolve(read_file(path))
     except SourceError as error:
         return Validated(Report(str(path), [error.diagnostic]))
+    search_beside(path)  # its own blocks may sit beside it
     return validate_source(source, state_limit)
 
 
