@@ -120,3 +120,31 @@ def test_the_simulated_wheels_exchange_without_allocating(tmp_path):
         system.writer.stop()
         system.built = system.main = None
         system.region.close()
+
+
+def test_the_virtual_wall_and_its_scripted_hand_allocate_nothing_that_stays(tmp_path):
+    """systems/wall.yaml: the Falcon, the wall, the button, the force limit, the simulated Falcon and the hand."""
+    from .conftest import SYSTEMS
+
+    validated = validate_text((SYSTEMS / "wall.yaml").read_text(), "wall.yaml")
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    try:
+        main = system.built.threads["main"]
+        system.start_threads()
+
+        def cycles(start, count):
+            for i in range(start, start + count):
+                system.clock.advance_to(i * 1_000_000)
+                main.cycle()
+
+        cycles(0, 2_000)  # homed, the grip in place, the hand about to push
+        assert system.state("wall").flag_name == "running" and system.state("limit").flag_name == "running"
+        _assert_nothing_stays(system, lambda: cycles(2_000, 1_500))  # pushing into the wall, and holding
+        assert main.runners["limit"].block.outputs.force.value[1] > 0
+    finally:
+        for runner in main.runners.values():
+            runner.block.clean()
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()

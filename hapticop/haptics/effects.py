@@ -152,9 +152,9 @@ def render_workspace_limit(p: WorkspaceLimitParams, position: NDArray[np.float64
     vx, vy, vz = float(velocity[0]), float(velocity[1]), float(velocity[2])
     if p.kind == "box":
         hx, hy, hz = p.half_size_m  # type: ignore[union-attr]
-        out[0] = -math.copysign(_inwards(abs(ex) - hx, math.copysign(vx, ex), k, b), ex)
-        out[1] = -math.copysign(_inwards(abs(ey) - hy, math.copysign(vy, ey), k, b), ey)
-        out[2] = -math.copysign(_inwards(abs(ez) - hz, math.copysign(vz, ez), k, b), ez)
+        out[0] = -math.copysign(_inwards(abs(ex) - hx, vx * math.copysign(1.0, ex), k, b), ex)
+        out[1] = -math.copysign(_inwards(abs(ey) - hy, vy * math.copysign(1.0, ey), k, b), ey)
+        out[2] = -math.copysign(_inwards(abs(ez) - hz, vz * math.copysign(1.0, ez), k, b), ez)
         return out
     r = math.sqrt(ex * ex + ey * ey + ez * ez)
     f = 0.0
