@@ -10,10 +10,11 @@ import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.effects import HANDLE_RATE
-from hapticop.blocks.interface import Interface, Params, Port
+from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.force_limit import ForceLimit as Limiter
 from hapticop.haptics.force_limit import ForceLimitParams
+
+HANDLE_RATE = RateRange(500.0, 2000.0, "forces for the Falcon: its loop runs near 1 kHz")
 
 
 class ForceSumParams(Params):
@@ -65,8 +66,8 @@ class ForceLimit(Block):
         inputs = {"demand": Port("float64", (3,), "N", "the force asked for, device frame")}
         if params.dead_man:
             inputs["enable"] = Port("uint8", (), "1", "nonzero while the force may be rendered (a dead-man grip)")
-        return Interface(inputs=inputs, outputs={"force": Port("float64", (3,), "N", "the force bounded, device frame")},
-                         rate=HANDLE_RATE)
+        bounded = Port("float64", (3,), "N", "the force bounded, device frame")
+        return Interface(inputs=inputs, outputs={"force": bounded}, rate=HANDLE_RATE)
 
     def create(self) -> None:
         self.limiter = Limiter()

@@ -22,7 +22,6 @@ from hapticop.blocks.interface import Params, Port
 from hapticop.devices.falcon import WORKSPACE_CENTRE_M, Flag
 from hapticop.devices.falcon.homing import HomingHand
 
-
 #: The hand's stiffness and damping while it places the grip, as the homing hand's (N/m, N s/m).
 HAND_KP, HAND_KD = 300.0, 20.0
 
@@ -50,11 +49,13 @@ PUSH_HOLD_RELEASE = (
 
 class ScriptedHandParams(Params):
     start_m: tuple[float, float, float] = Field(
-        (0.0, 0.0, 0.0), description="where the hand brings the grip after homing, device frame from the workspace centre")
-    settle_s: float = Field(0.5, ge=0.0, le=10.0, description="how long it takes to get there; the script begins then")
+        (0.0, 0.0, 0.0), description="where the hand brings the grip after homing, device frame from the "
+        "workspace centre")
+    settle_s: float = Field(0.5, ge=0.0, le=10.0,
+                            description="how long it takes to get there; the script begins then")
     script: tuple[Keyframe, ...] = Field(
-        PUSH_HOLD_RELEASE, min_length=1, description="keyframes in increasing time; the default holds button 1, pushes down "
-        "up to 4 N by 0.5 s, holds 4 N until 2.0 s, lets go by 2.2 s and finishes at 2.5 s")
+        PUSH_HOLD_RELEASE, min_length=1, description="keyframes in increasing time; the default holds button 1, "
+        "pushes down up to 4 N by 0.5 s, holds 4 N until 2.0 s, lets go by 2.2 s and finishes at 2.5 s")
 
     @field_validator("script")
     @classmethod

@@ -5,11 +5,10 @@ each cycle it takes the command frames that arrived, steps the handle's physics 
 the motors' force and the operator's hand (an input stream), and answers every valid command with
 one status frame through the real codec, as the firmware does. The true handle state goes out as
 streams for the operator and the world, with the LEDs the host lights (red: home me, green: homed),
-which is what a person holding the grip can see; the buttons the operator holds go into every status
-frame. Placed just before the Falcon block in one
-thread's schedule it keeps the block's timing exactly (the command sent in the block's `flush` is
-answered before the block's next `compute`); on a thread or process of its own it answers a cycle
-or so later, as a device on a wire would.
+which is what a person holding the grip can see; the buttons the operator holds go out in every status
+frame. Placed just before the Falcon block in one thread's schedule it keeps the block's timing
+exactly (the command sent in the block's `flush` is answered before the block's next `compute`); on
+a thread or process of its own it answers a cycle or so later, as a device on a wire would.
 """
 
 from __future__ import annotations
