@@ -1,8 +1,9 @@
 """A button (or a dead-man grip) turned into a flag the coordination can react to.
 
-It reads a button bit mask (the Falcon block's `buttons` port: the grip's four buttons, docs/devices/falcon.md
-§4) and raises `pressed` while the chosen buttons are held; a change counts only once it has lasted
-`debounce_s`, so a bouncing contact does not switch modes back and forth. A stale mask (the Falcon's
+It reads a button bit mask (the Falcon block's `buttons` port: the grip's four buttons,
+docs/devices/falcon.md §4.2) and raises `pressed` while the chosen buttons are held; a change
+counts only once it has lasted `debounce_s`, so a bouncing contact does not switch modes back and
+forth. A stale mask (the Falcon's
 frames stopped) reads as released at once: a dead-man switch fails towards "let go".
 """
 
