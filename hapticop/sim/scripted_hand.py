@@ -67,9 +67,10 @@ class ScriptedHandParams(Params):
 
 
 class ScriptedHand(Block):
+    """Homing, then the grip placed, then the script: the force and buttons of a hand on the simulated Falcon."""
+
     Params = ScriptedHandParams
     simulator = True
-    provides = frozenset({"operator"})
     inputs = {
         "handle_position": Port("float64", (3,), "m", "true handle position, device frame, from the workspace centre"),
         "handle_velocity": Port("float64", (3,), "m/s", "true handle velocity, device frame"),
@@ -123,8 +124,8 @@ class ScriptedHand(Block):
 
     def _settle(self, hand: np.ndarray) -> None:
         """A hand's spring and damper towards the start point (a person placing the grip)."""
-        (sx, sy, sz), position, velocity = self.params.start_m, self.inputs.handle_position.value, \
-            self.inputs.handle_velocity.value
+        sx, sy, sz = self.params.start_m
+        position, velocity = self.inputs.handle_position.value, self.inputs.handle_velocity.value
         hand[0] = HAND_KP * (sx - float(position[0])) - HAND_KD * float(velocity[0])
         hand[1] = HAND_KP * (sy - float(position[1])) - HAND_KD * float(velocity[1])
         hand[2] = HAND_KP * (sz - float(position[2])) - HAND_KD * float(velocity[2])
