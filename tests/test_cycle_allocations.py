@@ -3,6 +3,8 @@
 import time
 import tracemalloc
 
+import numpy as np
+
 from hapticop.runtime.system import RunOptions, System
 from hapticop.validation import validate_text
 
@@ -117,6 +119,103 @@ def test_the_simulated_wheels_exchange_without_allocating(tmp_path):
         assert system.flag("ethercat.operational")  # the plant answers every frame
         _assert_nothing_stays(system, lambda: cycles(2_000, 5_000))
     finally:
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()
+
+
+def test_the_virtual_wall_and_its_scripted_hand_allocate_nothing_that_stays(tmp_path):
+    """systems/wall.yaml: the Falcon, the wall, the button, the force limit, the simulated Falcon and the hand."""
+    from .conftest import SYSTEMS
+
+    validated = validate_text((SYSTEMS / "wall.yaml").read_text(), "wall.yaml")
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    try:
+        main = system.built.threads["main"]
+        system.start_threads()
+
+        def cycles(start, count):
+            for i in range(start, start + count):
+                system.clock.advance_to(i * 1_000_000)
+                main.cycle()
+
+        cycles(0, 2_000)  # homed, the grip in place, the hand about to push
+        assert system.state("wall").flag_name == "running" and system.state("limit").flag_name == "running"
+        _assert_nothing_stays(system, lambda: cycles(2_000, 1_500))  # pushing into the wall, and holding
+        assert main.runners["limit"].block.outputs.force.value[1] > 0
+    finally:
+        for runner in main.runners.values():
+            runner.block.clean()
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()
+
+
+EVERY_EFFECT = """
+version: 1
+name: effects
+threads:
+  main:
+    period: 1ms
+    deploy: main
+    schedules: {0: [mediator, hand, falcon_sim, falcon, wall, spring, fluid, box, ball, sum, limit]}
+activities:
+  mediator: {block: mediator}
+  hand: {block: scripted_hand}
+  falcon_sim: {block: falcon_simulator}
+  falcon: {block: falcon, params: {driver: sim, simulator: falcon_sim}}
+  wall: {block: virtual_wall, params: {wall: {point_m: [0.0, -0.006, 0.0], normal: [0.0, 1.0, 0.0]}}}
+  spring: {block: spring_damper, params: {spring: {kp_n_per_m: 20.0}}}
+  fluid: {block: viscous_field}
+  box: {block: workspace_limit, params: {limit: {kind: box, half_size_m: [0.005, 0.005, 0.005]}}}
+  ball: {block: workspace_limit, params: {limit: {kind: sphere, radius_m: 0.006}}}
+  sum: {block: force_sum, params: {inputs: 5}}
+  limit: {block: force_limit}
+streams:
+  position: {from: falcon.position, to: [wall.position, spring.position, fluid.position, box.position, ball.position]}
+  velocity: {from: falcon.velocity, to: [wall.velocity, spring.velocity, fluid.velocity, box.velocity, ball.velocity]}
+  f1: {from: wall.force, to: sum.force_1}
+  f2: {from: spring.force, to: sum.force_2}
+  f3: {from: fluid.force, to: sum.force_3}
+  f4: {from: box.force, to: sum.force_4}
+  f5: {from: ball.force, to: sum.force_5}
+  total: {from: sum.force, to: limit.demand}
+  device: {from: limit.force, to: falcon.force}
+  true_position: {from: falcon_sim.handle_position, to: hand.handle_position}
+  true_velocity: {from: falcon_sim.handle_velocity, to: hand.handle_velocity}
+  leds: {from: falcon_sim.leds, to: hand.leds}
+  hand_force: {from: hand.hand_force, to: falcon_sim.hand_force}
+"""
+
+
+def test_every_haptic_effect_summed_and_limited_allocates_nothing_that_stays(tmp_path):
+    """The spring, the fluid, both workspace limits and the wall, added by force_sum, on the simulated Falcon."""
+    validated = validate_text(EVERY_EFFECT, "effects.yaml")
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    try:
+        main = system.built.threads["main"]
+        system.start_threads()
+
+        def cycles(start, count):
+            for i in range(start, start + count):
+                system.clock.advance_to(i * 1_000_000)
+                main.cycle()
+
+        cycles(0, 1_900)
+        assert system.state("sum").flag_name == "running"
+        _assert_nothing_stays(system, lambda: cycles(1_900, 1_000))  # the hand pushes down through the fields
+        names = ("wall", "spring", "fluid", "box", "ball")
+        felt = dict.fromkeys(names, 0.0)
+        for i in range(2_900, 3_400):  # holding, then letting go: the handle springs back up
+            cycles(i, 1)
+            for name in names:
+                felt[name] = max(felt[name], float(np.abs(main.runners[name].block.outputs.force.value).max()))
+        assert all(felt.values()), felt  # each one rendered something
+    finally:
+        for runner in main.runners.values():
+            runner.block.clean()
         system.writer.stop()
         system.built = system.main = None
         system.region.close()

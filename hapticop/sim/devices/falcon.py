@@ -5,10 +5,10 @@ each cycle it takes the command frames that arrived, steps the handle's physics 
 the motors' force and the operator's hand (an input stream), and answers every valid command with
 one status frame through the real codec, as the firmware does. The true handle state goes out as
 streams for the operator and the world, with the LEDs the host lights (red: home me, green: homed),
-which is what a person holding the grip can see. Placed just before the Falcon block in one
-thread's schedule it keeps the block's timing exactly (the command sent in the block's `flush` is
-answered before the block's next `compute`); on a thread or process of its own it answers a cycle
-or so later, as a device on a wire would.
+which is what a person holding the grip can see; the buttons the operator holds go out in every status
+frame. Placed just before the Falcon block in one thread's schedule it keeps the block's timing
+exactly (the command sent in the block's `flush` is answered before the block's next `compute`); on
+a thread or process of its own it answers a cycle or so later, as a device on a wire would.
 """
 
 from __future__ import annotations
@@ -40,8 +40,11 @@ class FalconSimulator(Block):
     simulator = True
     provides = frozenset({"falcon_device"})
     running_params = frozenset({"sim_fault"})
-    inputs = {"hand_force": Port("float64", (3,), "N", "the operator's hand on the grip, device frame",
-                                 required=False)}
+    inputs = {
+        "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip, device frame", required=False),
+        "buttons": Port("uint8", (), "1", "the grip buttons the operator holds (bit mask, codec Button bits)",
+                        required=False),
+    }
     outputs = {
         "handle_position": Port("float64", (3,), "m", "true handle position, device frame, from the workspace centre"),
         "handle_velocity": Port("float64", (3,), "m/s", "true handle velocity, device frame"),
@@ -69,6 +72,7 @@ class FalconSimulator(Block):
         now = self.clock.now_ns()
         dt, self.last_ns = (now - self.last_ns) / 1e9, now
         hand, device, frame_size = self.inputs.hand_force.value, self.device, len(self.command)
+        device.buttons = int(self.inputs.buttons.value)
         stepped = False
         while n := self.link.receive_into(self.command):
             if n != frame_size:
