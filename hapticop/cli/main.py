@@ -29,12 +29,14 @@ from hapticop.cli.devices import devices as _devices  # noqa: E402
 from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
+from hapticop.cli.new import new as _new  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
 app.command("blocks")(_blocks)
+app.command("new")(_new)
 
 
 class OutputFormat(str, Enum):

@@ -147,4 +147,5 @@ def new(
         module_file.write_text(BLOCK.format(name=name, file=yaml_file.name))
     for path in targets:
         typer.echo(f"wrote {path}")
-    typer.echo(f"next: hapticop validate {yaml_file} && hapticop compose {yaml_file}")
+    check = "validate --import-blocks" if block else "validate"  # validate runs no author's code unless asked
+    typer.echo(f"next: hapticop {check} {yaml_file} && hapticop compose {yaml_file}")
