@@ -91,3 +91,16 @@ modes:
 """
     errors = _errors(text)
     assert any(e.rule == "bad-value" and "force_limit_n" in e.to_text() for e in errors), [e.to_text() for e in errors]
+
+
+def test_the_desk_parks_when_the_grip_is_let_go_and_drives_while_it_is_held(tmp_path):
+    from .conftest import SYSTEMS
+
+    result = compose(tmp_path, (SYSTEMS / "desk_modes.yaml").read_text(), duration=None, name="desk_modes")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    run = tmp_path / "run-desk_modes"
+    changes = [line.split("modes: ", 1)[1] for line in (run / "system.log").read_text().splitlines()
+               if "modes: " in line]
+    assert changes == ["entered parked", "left parked", "entered parked"]  # homing, gripped, let go
+    centre = (run / "centre.log").read_text()
+    assert centre.count("-> running") == 1 and "running -> capability_configuration" not in centre
