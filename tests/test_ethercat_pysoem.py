@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"EtherCAT over veth
 
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC  # noqa: E402
 from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES  # noqa: E402
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, new_rx_image, rxpdo_view  # noqa: E402
 
 NAMES = ["ek1100", "ek1122_front", "wheel_1", "wheel_2", "ek1122_rear", "wheel_3", "wheel_4"]
 PRODUCTS = [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
@@ -127,6 +127,60 @@ def test_outputs_of_the_wrong_length_are_refused_before_pysoem_copies_them(maste
     master.bring_up()
     with pytest.raises(ValueError, match="outputs of wheel_1 are 36 bytes, got 37"):
         master.write_outputs(2, np.zeros(37, np.uint8))
+
+
+def _pass_safe_op_error(master, positions) -> None:
+    """What SOEM's check does for a slave in SAFE-OP+ERROR: acknowledge (SAFE-OP + 0x10)."""
+    for p in positions:
+        master.slaves[p].state = 0x04 | 0x10
+        master.slaves[p].write_state()
+
+
+def test_after_a_watchdog_trip_the_next_outputs_rearm_it_and_every_wheel_drives_again(box, master):
+    """Read back through SOEM's own register access: 0x0440 falls to 0 when the outputs stop,
+    and the first outputs after the acknowledgement set it to 1 again; back in OP, the drives run."""
+    master.bring_up()
+    rx = new_rx_image(4)
+    view = rxpdo_view(rx)
+    view["command1"] = int(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_VELOCITY)
+    view["limit1_p"] = view["limit2_p"] = 5.0
+    view["limit1_n"] = view["limit2_n"] = -5.0
+    for wheel, position in enumerate(WHEELS):
+        master.write_outputs(position, rx[wheel])
+    for _ in range(10):
+        assert master.exchange() == 12
+    assert [master.slaves[p]._fprd(0x0440, 2) for p in WHEELS] == [b"\x01\x00"] * 4
+    # no outputs for longer than the watchdog time SOEM left programmed (the SII's 100 ms)
+    _until(lambda: all(box.fault("status")["slaves"][p]["al_status"] == 0x14 for p in WHEELS),
+           "every wheel trips its watchdog")
+    master.master.read_state()
+    assert [(master.slaves[p].state, master.slaves[p].al_status) for p in WHEELS] == [(0x14, 0x001B)] * 4
+    assert [master.slaves[p]._fprd(0x0440, 2) for p in WHEELS] == [b"\x00\x00"] * 4
+    _pass_safe_op_error(master, WHEELS)
+    master.exchange()
+    assert [master.slaves[p]._fprd(0x0440, 2) for p in WHEELS] == [b"\x01\x00"] * 4  # re-armed
+    master.master.state = 0x08
+    master.master.write_state()
+    for _ in range(10):
+        master.exchange()
+    assert master.master.state_check(0x08, 50_000) == 0x08
+    for _ in range(10):
+        master.exchange()
+    assert all(_drives(w) for w in box.fault("status")["wheels"])
+
+
+def test_a_request_for_init_is_honoured_from_safe_op_with_the_error(box, master):
+    master.bring_up()
+    master.exchange()
+    box.fault("trip_watchdog", slave=3)
+    master.master.read_state()
+    wheel = master.slaves[3]
+    assert (wheel.state, wheel.al_status) == (0x14, 0x001B)
+    wheel.state = 0x01  # INIT, with no acknowledgement: SOES and ESCs go, and the error is gone
+    wheel.write_state()
+    assert wheel.state_check(0x01, 50_000) == 0x01
+    master.master.read_state()
+    assert (wheel.state, wheel.al_status) == (0x01, 0)
 
 
 def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box):
