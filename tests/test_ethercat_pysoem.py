@@ -129,6 +129,16 @@ def test_outputs_of_the_wrong_length_are_refused_before_pysoem_copies_them(maste
         master.write_outputs(2, np.zeros(37, np.uint8))
 
 
+def test_fault_requests_that_make_no_sense_are_refused_and_the_segment_runs_on(box, master):
+    master.bring_up()
+    for op, args in (("cut", {"slave": 7}), ("reconnect", {"slave": 5}), ("restore", {"slave": 2}),
+                     ("lose", {"slave": "2"}), ("cut", {"slave": None}), ("unplug", {"slave": 2})):
+        with pytest.raises(RuntimeError, match=f"emulator refused {op}: "):
+            box.fault(op, **args)
+    assert master.exchange() == 12
+    assert all(s["reached"] and s["state"] == 8 for s in box.fault("status")["slaves"])
+
+
 def _pass_safe_op_error(master, positions) -> None:
     """What SOEM's check does for a slave in SAFE-OP+ERROR: acknowledge (SAFE-OP + 0x10)."""
     for p in positions:

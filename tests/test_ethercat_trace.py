@@ -41,7 +41,8 @@ def facts_from_trace(doc: dict) -> dict:
             "wheels": int(re.search(r"= (\d+) x \(", lrw).group(1)),
             "datagrams": [{"cmd": r["cmd"], "ado": r["ado"], "len": r["len"], "count": r["count"]}
                           for r in doc["by_register"]],
-            "lrw": {"count": doc["datagrams_by_command"]["LRW"], "length": int(re.search(r"length (\d+)", lrw).group(1)),
+            "lrw": {"count": doc["datagrams_by_command"]["LRW"],
+                    "length": int(re.search(r"length (\d+)", lrw).group(1)),
                     "expected_wkc": int(re.search(r"expected WKC (\d+)", lrw).group(1))}}
 
 
@@ -133,7 +134,8 @@ def replay(facts: dict) -> Replay:
     for k, station in enumerate(wheel_stations):
         r.send(FPWR, station, 0x0800, struct.pack("<HHBBBB", 0x1000, RXPDO_BYTES, 0x64, 0, 1, 0), 1)
         r.send(FPWR, station, 0x0808, struct.pack("<HHBBBB", 0x1100, TXPDO_BYTES, 0x20, 0, 1, 0), 1)
-        r.send(FPWR, station, 0x0600, struct.pack("<IHBBHBBB3x", k * RXPDO_BYTES, RXPDO_BYTES, 0, 7, 0x1000, 0, 2, 1), 1)
+        r.send(FPWR, station, 0x0600,
+               struct.pack("<IHBBHBBB3x", k * RXPDO_BYTES, RXPDO_BYTES, 0, 7, 0x1000, 0, 2, 1), 1)
         r.send(FPWR, station, 0x0610, struct.pack("<IHBBHBBB3x", wheels * RXPDO_BYTES + k * TXPDO_BYTES, TXPDO_BYTES,
                                                   0, 7, 0x1100, 0, 1, 1), 1)
     # SAFE-OP; valid outputs before OP (an LRW already counts 12), then OP and the cycles
