@@ -6,7 +6,8 @@ send/receive the process data, read the sensors, step the platform velocity cont
 (0.2 m/s forward). The EtherCAT watchdog runs SOEM's slave check in its own thread, as in
 systems/hallway_ethercat.yaml (exchange SCHED_FIFO 39, watchdog 40, emulator 45). Then a
 wheel is lost and powered back several times; each time it measures how long until the
-controller is held (zero velocity setpoint) and until every slave is back in OP.
+controller is held (zero velocity setpoint) and until every slave is back in OP. Losing wheel_3
+also takes wheel_4, wired behind it, off the segment until wheel_3 has power again.
 
 Measures: round-trip time of send+receive, working-counter errors, missed cycles, CPU of
 the master's process and of the emulator's. Run as root:

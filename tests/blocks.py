@@ -104,6 +104,58 @@ class ConstantTwist(Block):
         out.publish()
 
 
+class HeldHandleParams(Params):
+    push_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class HeldHandle(Block):
+    """Stands for the Falcon's handle: at its origin until `go`, then held at `push_m` (a hand
+    that pushes and keeps pushing), so the real haptic controller drives."""
+
+    Params = HeldHandleParams
+    outputs = {"position": Port("float64", (3,), "m"), "velocity": Port("float64", (3,), "m/s")}
+    flags_read = {"go": "the haptic loop runs: push"}
+
+    def compute(self):
+        self.outputs.position.value[:] = self.params.push_m if self.flags["go"] else 0.0
+        self.outputs.velocity.value[:] = 0.0
+        self.outputs.position.publish()
+        self.outputs.velocity.publish()
+
+
+class OpenScan(Block):
+    """Stands for the LIDAR in open space: every beam of the TiM561's 270 degrees sees nothing
+    within 20 m, a fresh scan every cycle."""
+
+    outputs = {"ranges": Port("float32", (811,), "m"), "angles": Port("float32", (811,), "rad")}
+
+    def create(self):
+        self.outputs.angles.value[:] = np.linspace(-0.75 * np.pi, 0.75 * np.pi, 811)
+        self.outputs.ranges.value[:] = 20.0
+
+    def compute(self):
+        self.outputs.angles.publish()
+        self.outputs.ranges.publish()
+
+
+class SetpointWatch(Block):
+    """Reads a velocity setpoint and keeps, in this process, every change between zero and motion."""
+
+    inputs = {"velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s")}
+    zero_changes: list[bool] = []  # True: the setpoint became zero; False: it commands motion again
+
+    def create(self):
+        self.zero = True
+
+    def compute(self):
+        port = self.inputs.velocity_setpoint
+        if port.valid:
+            zero = not port.value.any()
+            if zero != self.zero:
+                self.zero = zero
+                SetpointWatch.zero_changes.append(zero)
+
+
 class Simulator(Block):
     """Stands for a simulated device: it does some arithmetic each cycle, all of it simulation."""
 

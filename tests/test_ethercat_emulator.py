@@ -189,16 +189,98 @@ def test_the_process_data_watchdog_drops_a_wheel_to_safe_op_with_code_0x001b(seg
     assert request(seg, 0x1004, 0x14) == (0x04, 0)  # acknowledged back to SAFE-OP
 
 
-def test_a_lost_slave_is_passed_by_and_comes_back_in_init(seg):
+def test_a_powered_off_wheel_takes_the_wheel_behind_it_off_the_line(seg):
+    """wheel_3 (position 5) feeds wheel_4 (6): without power it passes no frame on. wheel_4 keeps
+    power and its state, until its watchdog fires for want of outputs."""
     bring_up(seg)
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    send(seg, (LRW, 0, 0, bytes(size)), now=NS)
     seg.slaves[5].present = False
-    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 6
-    (_, wkc), = send(seg, (LRW, 0, 0, bytes(4 * (RXPDO_BYTES + TXPDO_BYTES))))
-    assert wkc == 9
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 5
+    (_, wkc), = send(seg, (LRW, 0, 0, bytes(size)), now=2 * NS)
+    assert wkc == 6  # wheel_1 and wheel_2 only
+    assert send(seg, (FPRD, 0x1007, 0x0130, bytes(2)))[0][1] == 0  # wheel_4 does not answer
+    wheel_4 = seg.slaves[6]
+    assert wheel_4.state == 8 and wheel_4.outputs_live  # still driving on the last outputs it had
+    seg.tick(NS + 101 * NS)  # past the default 100 ms with no outputs: it trips
+    assert (wheel_4.al_status, wheel_4.al_code) == (0x14, 0x001B) and not wheel_4.outputs_live
     seg.slaves[5].power_on()
     seg.slaves[5].present = True
     assert seg.slaves[5].state == 1 and seg.slaves[5].station == 0  # freshly powered: INIT, no address
     assert send(seg, (APRD, (-5) & 0xFFFF, 0x0010, bytes(2)))[0] == (u16(0), 1)
+    assert send(seg, (APRD, (-6) & 0xFFFF, 0x0010, bytes(2)))[0] == (u16(0x1007), 1)  # kept its address
+    data, wkc = send(seg, (FPRD, 0x1007, 0x0130, bytes(6)))[0]
+    assert (data[0], struct.unpack_from("<H", data, 4)[0], wkc) == (0x14, 0x001B, 1)
+
+
+def test_the_wiring_follows_the_ports_so_a_junction_branch_falls_alone(seg):
+    assert seg.segment.upstream == [None, 0, 1, 2, 1, 4, 5]
+    seg.slaves[2].present = False  # wheel_1: wheel_2 behind it goes too, the rear junction stays
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 5
+    assert [s.name for s, r in zip(seg.slaves, seg.segment.reached()) if r] == ["EK1100", "EK1122", "EK1122",
+                                                                               "SWMC", "SWMC"]
+    seg.slaves[2].present = True
+    seg.slaves[1].present = False  # the front junction: everything after the coupler
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 1
+    assert seg.segment.behind(1) == [2, 3, 4, 5, 6] and seg.segment.behind(5) == [6]
+
+
+def test_a_cut_cable_leaves_the_far_wheels_powered_until_they_return_in_safe_op_with_the_error(seg):
+    bring_up(seg)
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    send(seg, (LRW, 0, 0, bytes(size)), now=NS)
+    seg.segment.cut.add(5)
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 5
+    assert send(seg, (LRW, 0, 0, bytes(size)), now=2 * NS)[0][1] == 6
+    far = seg.slaves[5:7]
+    assert [s.state for s in far] == [8, 8] and all(s.present for s in far)
+    seg.tick(NS + 101 * NS)
+    assert [(s.al_status, s.al_code) for s in far] == [(0x14, 0x001B)] * 2
+    seg.segment.cut.discard(5)
+    for station in (0x1006, 0x1007):  # addresses and error kept: SOEM acknowledges and asks for OP
+        data, wkc = send(seg, (FPRD, station, 0x0130, bytes(6)))[0]
+        assert (data[0], struct.unpack_from("<H", data, 4)[0], wkc) == (0x14, 0x001B, 1)
+        assert request(seg, station, 0x14) == (0x04, 0)
+    send(seg, (LRW, 0, 0, bytes(size)), now=200 * NS)
+    for station in (0x1006, 0x1007):
+        assert request(seg, station, 0x08, now=200 * NS) == (0x08, 0)
+    assert all(s.outputs_live for s in far)
+
+
+def test_the_watchdog_rearms_on_the_next_output_write_and_the_wheel_drives_again(seg):
+    bring_up(seg)
+    wheel = seg.wheels[1]
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    commands = bytearray(size)
+    for n in range(4):
+        struct.pack_into("<HH", commands, n * (RXPDO_BYTES + TXPDO_BYTES),
+                         int(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_VELOCITY), 0)
+    send(seg, (LRW, 0, 0, commands), now=NS)
+    assert send(seg, (FPRD, 0x1004, 0x0440, bytes(2)))[0][0] == u16(1)
+    wheel.trip_watchdog()
+    assert send(seg, (FPRD, 0x1004, 0x0440, bytes(2)))[0][0] == u16(0)
+    assert (wheel.al_status, wheel.al_code) == (0x14, 0x001B)
+    assert request(seg, 0x1004, 0x14) == (0x04, 0)  # acknowledged
+    send(seg, (LRW, 0, 0, commands), now=2 * NS)
+    assert send(seg, (FPRD, 0x1004, 0x0440, bytes(2)))[0][0] == u16(1)  # re-armed by the write
+    assert request(seg, 0x1004, 0x08) == (0x08, 0)
+    assert wheel.outputs_live
+    send(seg, (LRW, 0, 0, commands), now=3 * NS)
+    seg.step(3 * NS)
+    seg.step(4 * NS)
+    assert rxpdo_view(seg.rx)["command1"][1] == 0x000B  # its drive gets its commands again
+
+
+def test_a_request_for_init_is_honoured_from_an_error_and_clears_it(seg):
+    bring_up(seg)
+    wheel = seg.wheels[0]
+    wheel.trip_watchdog()
+    assert request(seg, 0x1003, 0x01) == (0x01, 0)  # no acknowledge needed
+    wheel = seg.wheels[2]
+    wheel.raise_error(0x0032, until_ns=50 * NS)  # even while the cause persists
+    assert request(seg, 0x1006, 0x02, now=NS) == (0x14, 0x0032)
+    assert request(seg, 0x1006, 0x01, now=NS) == (0x01, 0)
+    assert request(seg, 0x1006, 0x02, now=NS) == (0x02, 0)  # and the state machine moves on from there
 
 
 def test_a_persisting_al_error_cannot_be_acknowledged_until_its_cause_is_gone(seg):
@@ -264,9 +346,29 @@ def test_the_control_socket_answers_bad_requests_and_keeps_the_segment_running(t
         for payload in bad:
             answer = raw(payload)
             assert answer["ok"] is False and answer["error"], payload[:40]
-        assert control(tmp_path / "control.sock", {"op": "ping"})["ok"] is True
-        status = control(tmp_path / "control.sock", {"op": "status"})
-        assert all(slave["present"] for slave in status["slaves"])  # nothing changed by the bad ones
+        path = tmp_path / "control.sock"
+        nonsense = [{"op": "lose", "slave": 7}, {"op": "lose", "slave": True}, {"op": "lose", "slave": 5.0},
+                    {"op": "lose", "slave": "5"}, {"op": "cut"}, {"op": "cut", "slave": -1},
+                    {"op": "reconnect", "slave": 5}, {"op": "restore", "slave": 5}]
+        for bad_request in nonsense:
+            answer = control(path, bad_request)
+            assert answer["ok"] is False and answer["error"], bad_request
+        assert control(path, {"op": "ping"})["ok"] is True
+        status = control(path, {"op": "status"})
+        assert all(slave["present"] and slave["reached"] for slave in status["slaves"])  # nothing changed
+        assert status["cut"] == []
+        # the faults themselves, and the state they leave, through the same socket
+        assert control(path, {"op": "cut", "slave": 5})["ok"] is True
+        assert control(path, {"op": "cut", "slave": 5})["ok"] is False  # already cut
+        assert control(path, {"op": "lose", "slave": 2})["ok"] is True
+        assert control(path, {"op": "lose", "slave": 2})["ok"] is False  # already off
+        status = control(path, {"op": "status"})
+        assert [s["reached"] for s in status["slaves"]] == [True, True, False, False, True, False, False]
+        assert [s["present"] for s in status["slaves"]] == [True, True, False, True, True, True, True]
+        assert status["cut"] == [5] and [w["live"] for w in status["wheels"]] == [False, False, False, False]
+        assert control(path, {"op": "reconnect", "slave": 5})["ok"] is True
+        assert control(path, {"op": "restore", "slave": 2})["ok"] is True
+        assert all(s["reached"] for s in control(path, {"op": "status"})["slaves"])
     finally:
         stop.set()
         thread.join(5)

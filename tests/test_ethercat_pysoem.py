@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"EtherCAT over veth
 
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC  # noqa: E402
 from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES  # noqa: E402
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, new_rx_image, rxpdo_view  # noqa: E402
 
 NAMES = ["ek1100", "ek1122_front", "wheel_1", "wheel_2", "ek1122_rear", "wheel_3", "wheel_4"]
 PRODUCTS = [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
@@ -129,6 +129,70 @@ def test_outputs_of_the_wrong_length_are_refused_before_pysoem_copies_them(maste
         master.write_outputs(2, np.zeros(37, np.uint8))
 
 
+def test_fault_requests_that_make_no_sense_are_refused_and_the_segment_runs_on(box, master):
+    master.bring_up()
+    for op, args in (("cut", {"slave": 7}), ("reconnect", {"slave": 5}), ("restore", {"slave": 2}),
+                     ("lose", {"slave": "2"}), ("cut", {"slave": None}), ("unplug", {"slave": 2})):
+        with pytest.raises(RuntimeError, match=f"emulator refused {op}: "):
+            box.fault(op, **args)
+    assert master.exchange() == 12
+    assert all(s["reached"] and s["state"] == 8 for s in box.fault("status")["slaves"])
+
+
+def _pass_safe_op_error(master, positions) -> None:
+    """What SOEM's check does for a slave in SAFE-OP+ERROR: acknowledge (SAFE-OP + 0x10)."""
+    for p in positions:
+        master.slaves[p].state = 0x04 | 0x10
+        master.slaves[p].write_state()
+
+
+def test_after_a_watchdog_trip_the_next_outputs_rearm_it_and_every_wheel_drives_again(box, master):
+    """Read back through SOEM's own register access: 0x0440 falls to 0 when the outputs stop,
+    and the first outputs after the acknowledgement set it to 1 again; back in OP, the drives run."""
+    master.bring_up()
+    rx = new_rx_image(4)
+    view = rxpdo_view(rx)
+    view["command1"] = int(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_VELOCITY)
+    view["limit1_p"] = view["limit2_p"] = 5.0
+    view["limit1_n"] = view["limit2_n"] = -5.0
+    for wheel, position in enumerate(WHEELS):
+        master.write_outputs(position, rx[wheel])
+    for _ in range(10):
+        assert master.exchange() == 12
+    assert [master.slaves[p]._fprd(0x0440, 2) for p in WHEELS] == [b"\x01\x00"] * 4
+    # no outputs for longer than the watchdog time SOEM left programmed (the SII's 100 ms)
+    _until(lambda: all(box.fault("status")["slaves"][p]["al_status"] == 0x14 for p in WHEELS),
+           "every wheel trips its watchdog")
+    master.master.read_state()
+    assert [(master.slaves[p].state, master.slaves[p].al_status) for p in WHEELS] == [(0x14, 0x001B)] * 4
+    assert [master.slaves[p]._fprd(0x0440, 2) for p in WHEELS] == [b"\x00\x00"] * 4
+    _pass_safe_op_error(master, WHEELS)
+    master.exchange()
+    assert [master.slaves[p]._fprd(0x0440, 2) for p in WHEELS] == [b"\x01\x00"] * 4  # re-armed
+    master.master.state = 0x08
+    master.master.write_state()
+    for _ in range(10):
+        master.exchange()
+    assert master.master.state_check(0x08, 50_000) == 0x08
+    for _ in range(10):
+        master.exchange()
+    assert all(_drives(w) for w in box.fault("status")["wheels"])
+
+
+def test_a_request_for_init_is_honoured_from_safe_op_with_the_error(box, master):
+    master.bring_up()
+    master.exchange()
+    box.fault("trip_watchdog", slave=3)
+    master.master.read_state()
+    wheel = master.slaves[3]
+    assert (wheel.state, wheel.al_status) == (0x14, 0x001B)
+    wheel.state = 0x01  # INIT, with no acknowledgement: SOES and ESCs go, and the error is gone
+    wheel.write_state()
+    assert wheel.state_check(0x01, 50_000) == 0x01
+    master.master.read_state()
+    assert (wheel.state, wheel.al_status) == (0x01, 0)
+
+
 def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box):
     home = os.readlink("/proc/thread-self/ns/net")
     with Sandbox(interface="hapticop-ecat7", peer="hapticop-esc7") as inner:
@@ -146,22 +210,32 @@ def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box
 
 
 # --- the watchdog's recovery, with the runtime --------------------------------------------
+# The real haptic controller commands the robot, as in systems/hallway.yaml; only its devices are
+# stood in for: a hand holding the Falcon's handle pushed forward (0.3 m/s) and a LIDAR in open space.
 
 RECOVERY = """
 version: 1
 name: ecat_recovery
 threads:
-  main: {period: 1ms, deploy: main, schedules: {0: [mediator, drive]}}
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, hand, scan, haptic, watch]}}
   fieldbus: {period: 1ms, deploy: thread, schedules: {0: [ethercat, ropod]}}
   watchdog: {period: 1ms, deploy: thread, schedules: {0: [ethercat_watchdog]}}
 activities:
   mediator: {block: mediator}
-  drive: {block: "tests.blocks:ConstantTwist", params: {twist: [0.3, 0.0, 0.0]}}
+  hand: {block: "tests.blocks:HeldHandle", params: {push_m: [0.0, 0.0, -0.0157]}}
+  scan: {block: "tests.blocks:OpenScan"}
+  haptic: {block: haptic_controller}
+  watch: {block: "tests.blocks:SetpointWatch"}
   ethercat: {block: ethercat_master, params: {driver: pysoem, interface: hapticop-ecat0, receive_timeout_us: 5000}}
   ropod: {block: ropod_controller}
   ethercat_watchdog: {block: ethercat_watchdog, params: {interface: hapticop-ecat0}}
 streams:
-  velocity_setpoint: {from: drive.velocity_setpoint, to: ropod.velocity_setpoint}
+  handle_position: {from: hand.position, to: haptic.handle_position}
+  handle_velocity: {from: hand.velocity, to: haptic.handle_velocity}
+  scan_ranges: {from: scan.ranges, to: haptic.ranges}
+  scan_angles: {from: scan.angles, to: haptic.angles}
+  velocity_setpoint: {from: haptic.velocity_setpoint, to: [ropod.velocity_setpoint, watch.velocity_setpoint]}
+  platform_velocity: {from: ropod.platform_velocity, to: haptic.platform_velocity}
   wheel_sensors: {from: ethercat.wheel_sensors, to: ropod.wheel_sensors}
   wheel_commands: {from: ropod.wheel_commands, to: ethercat.wheel_commands}
   slave_states: {from: ethercat.slave_states, to: ethercat_watchdog.slave_states}
@@ -169,15 +243,17 @@ streams:
 coordination:
   nets:
     fault:
-      places: {WATCHING: , FAULT: }
+      places: {WATCHING: , FAULT: , ROPOD_RUNNING: , HAPTIC_RUNNING: }
       transitions: {}
       marking: {WATCHING: 1}
       terminal: [WATCHING]
   flag_maps:
     fault:
       net: fault
-      tracking_sources: {ethercat_watchdog.slave_fault: FAULT}
-      tracking_sinks: {ropod.stop: FAULT, drive.held: FAULT}
+      tracking_sources: {ethercat_watchdog.slave_fault: FAULT, ropod.lcsm.running: ROPOD_RUNNING,
+                         haptic.lcsm.running: HAPTIC_RUNNING}
+      tracking_sinks: {ropod.stop: FAULT, haptic.robot_held: FAULT, haptic.resources_ready: ROPOD_RUNNING,
+                       hand.go: HAPTIC_RUNNING}
 """
 
 
@@ -190,40 +266,65 @@ def _until(condition, what: str, timeout_s: float = 15.0):
         time.sleep(0.005)
 
 
+def _drives(wheel: dict) -> bool:
+    """A wheel drives: its slave applies the outputs (OP, watchdog armed) and both motors are enabled."""
+    return wheel["live"] and wheel["watchdog"] == 1 and wheel["enabled"]
+
+
+# (fault, its arguments, how it is undone, how long the cause persists: until the robot has stopped)
+FAULTS = (("lose", {"slave": 5}, "restore", True),
+          ("al_error", {"slave": 3, "code": 0x0032, "hold_ms": 600}, None, True),
+          ("trip_watchdog", {"slave": 6}, None, False),
+          ("cut", {"slave": 5}, "reconnect", True))
+
+
 @pytest.fixture(scope="module")
 def recovery_run(tmp_path_factory):
-    from .blocks import ConstantTwist
+    from .blocks import SetpointWatch
     from .runtime_helpers import compose
 
     tmp = tmp_path_factory.mktemp("ecat")
+    ropod_log = tmp / "run-recovery" / "ropod.log"
     seen: dict = {"errors": []}
-    ConstantTwist.changes.clear()
-    # (fault, its arguments, how long the cause persists: the robot must come to a stop meanwhile)
-    faults = (("lose", {"slave": 5}, True), ("al_error", {"slave": 3, "code": 0x0032, "hold_ms": 600}, True),
-              ("trip_watchdog", {"slave": 6}, False))
+    SetpointWatch.zero_changes.clear()
     with Sandbox() as box:
+        def status():
+            return box.fault("status")
+
         def speed():
-            return abs(box.fault("status")["twist"][0])
+            return abs(status()["twist"][0])
 
         def all_op():
-            return [s["state"] for s in box.fault("status")["slaves"]] == [8] * 7
+            return [s["state"] for s in status()["slaves"]] == [8] * 7
+
+        def every_wheel_drives():
+            return all(_drives(w) for w in status()["wheels"])
+
+        def stops_raised():
+            return ropod_log.read_text().count("stop raised") if ropod_log.exists() else 0
 
         def scenario(system):
             try:
-                _until(lambda: speed() > 0.1, "the robot drives")
-                for fault, args, lasting in faults:
-                    before = len(ConstantTwist.changes)
+                _until(lambda: speed() > 0.1 and every_wheel_drives(), "the robot drives on every wheel")
+                for fault, args, undo, lasting in FAULTS:
+                    zeros, stops = len(SetpointWatch.zero_changes), stops_raised()
                     box.fault(fault, **args)
-                    _until(lambda: True in ConstantTwist.changes[before:], f"{fault}: the drive is told to hold")
-                    _until(lambda: system.flag("ropod.stop") or all_op(), f"{fault}: ropod.stop raised")
-                    seen[fault] = {"held": True}
+                    _until(lambda: True in SetpointWatch.zero_changes[zeros:],
+                           f"{fault}: the haptic controller commands no motion")
+                    _until(lambda: stops_raised() > stops, f"{fault}: ropod.stop raised")
+                    seen[fault] = {"held": True, "stop raised": True}
                     if lasting:
                         _until(lambda: speed() < 0.02, f"{fault}: the robot stops")
                         seen[fault]["stopped"] = True
-                    if fault == "lose":
-                        box.fault("restore", slave=5)
+                    if fault == "cut":  # the far wheels keep power, and trip for want of outputs
+                        _until(lambda: [(s["al_status"], s["al_code"]) for s in status()["slaves"][5:]]
+                               == [(0x14, 0x001B)] * 2, "cut: both far wheels trip their watchdogs")
+                    if undo:
+                        box.fault(undo, **args)
                     _until(lambda: all_op() and not system.flag("ropod.stop"), f"{fault}: every slave back in OP")
+                    _until(every_wheel_drives, f"{fault}: every wheel drives again")
                     _until(lambda: speed() > 0.1, f"{fault}: the robot drives again")
+                    seen[fault]["wheels"] = [_drives(w) for w in status()["wheels"]]
             except Exception as error:  # noqa: BLE001 - reported by the tests, not lost in a thread
                 seen["errors"].append(str(error))
             finally:
@@ -232,18 +333,22 @@ def recovery_run(tmp_path_factory):
         def on_start(system):
             threading.Thread(target=scenario, args=(system,), daemon=True).start()
 
-        result = compose(tmp, RECOVERY, clock="realtime", duration="60s", name="recovery", on_start=on_start,
+        result = compose(tmp, RECOVERY, clock="realtime", duration="90s", name="recovery", on_start=on_start,
                          shutdown_timeout="5s")
         seen["final_states"] = [s["state"] for s in box.fault("status")["slaves"]]
     return result, tmp / "run-recovery", seen
 
 
-def test_a_lost_wheel_stops_the_robot_and_is_recovered(recovery_run):
+LASTING = {"held": True, "stop raised": True, "stopped": True, "wheels": [True] * 4}
+
+
+def test_a_lost_wheel_cuts_off_the_wheel_behind_it_and_both_drive_again(recovery_run):
     result, run, seen = recovery_run
     assert not seen["errors"], seen["errors"]
-    assert seen["lose"] == {"held": True, "stopped": True}
+    assert seen["lose"] == LASTING
     log = (run / "ethercat_watchdog.log").read_text()
-    for line in ("wheel_3: OP -> NONE", "wheel_3: lost", "wheel_3: recovered", "wheel_3: reconfigured"):
+    for line in ("wheel_3: OP -> NONE", "wheel_3: lost", "wheel_3: recovered", "wheel_3: reconfigured",
+                 "wheel_4: OP -> NONE", "wheel_4: lost", "wheel_4: found again"):
         assert line in log
 
 
@@ -251,11 +356,22 @@ def test_an_al_error_and_a_watchdog_trip_are_acknowledged_back_to_op(recovery_ru
     result, run, seen = recovery_run
     assert not seen["errors"], seen["errors"]
     log = (run / "ethercat_watchdog.log").read_text()
-    assert seen["al_error"] == {"held": True, "stopped": True}
+    assert seen["al_error"] == LASTING
     assert "wheel_2: OP -> SAFE-OP+ERR (AL code 0x0032" in log and "wheel_2: acknowledging the error" in log
     assert "wheel_2: SAFE-OP -> OP" in log
-    assert seen["trip_watchdog"] == {"held": True}
+    assert seen["trip_watchdog"] == {"held": True, "stop raised": True, "wheels": [True] * 4}
     assert "wheel_4: OP -> SAFE-OP+ERR (AL code 0x001B" in log and "wheel_4: SAFE-OP -> OP" in log
+
+
+def test_a_cut_cable_leaves_the_far_wheels_in_safe_op_with_the_error_until_recovered(recovery_run):
+    result, run, seen = recovery_run
+    assert not seen["errors"], seen["errors"]
+    assert seen["cut"] == LASTING
+    log = (run / "ethercat_watchdog.log").read_text().split("wheel_3: OP -> NONE")[-1]  # the cut, not the loss
+    for wheel in ("wheel_3", "wheel_4"):
+        assert f"{wheel}: lost" in log and f"{wheel}: found again" in log
+        assert f"{wheel}: NONE -> SAFE-OP+ERR (AL code 0x001B" in log
+    assert "wheel_3: recovered" not in log  # it kept its address: nothing to recover
 
 
 def test_the_run_ends_cleanly_with_every_slave_in_init(recovery_run):

@@ -60,7 +60,7 @@ class Esc:
         self.esc_type = esc_type
         self.eeprom = build_sii(identity)
         self.mem = bytearray(MEMORY)
-        self.present = True  # False: powered off or cut off; the frame passes it by
+        self.present = True  # False: powered off (the segment also cuts off whatever is wired behind it)
         self.fmmus: list[Fmmu] = []
         self.outputs_sm: tuple[int, int] | None = None  # (start, length) of the programmed output buffer
         self.last_output_ns = 0
@@ -135,6 +135,11 @@ class Esc:
     def _al_control(self, now_ns: int) -> None:
         value = struct.unpack_from("<H", self.mem, REG_AL_CONTROL)[0]
         requested, ack = value & 0x0F, bool(value & AL_ERROR)
+        if requested == AL_INIT:  # INIT is always honoured and clears the error, acknowledged or not
+            struct.pack_into("<H", self.mem, REG_AL_CODE, 0)
+            self.error_held_until_ns = 0
+            self._set_state(AL_INIT)
+            return
         error = bool(self.al_status & AL_ERROR)
         if error and (not ack or now_ns < self.error_held_until_ns):
             return  # an error must be acknowledged (and its cause gone) before the state machine moves again
@@ -260,9 +265,9 @@ class Esc:
     def _note_output_write(self, start: int, end: int, now_ns: int) -> None:
         sm = self.outputs_sm
         if sm is not None and start < sm[0] + sm[1] <= end:  # the buffer's last byte completes it
-            self.last_output_ns = now_ns
-            if not self.watchdog_expired:
-                struct.pack_into("<H", self.mem, REG_WD_STATUS, 1)
+            self.last_output_ns = now_ns  # a complete write re-arms the watchdog, after a trip too
+            self.watchdog_expired = False
+            struct.pack_into("<H", self.mem, REG_WD_STATUS, 1)
 
     def _eeprom_command(self) -> None:
         control = struct.unpack_from("<H", self.mem, REG_EEP_CONTROL)[0]
