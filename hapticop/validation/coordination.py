@@ -189,7 +189,8 @@ def threads_cleaned(cg: G.CompositionGraph) -> Check:
         starts = _written_by_sink(cg, f"{prefix}.request_running")
         if starts and not _written_by_sink(cg, f"{prefix}.request_cleaning"):
             yield Diagnostic("thread-never-cleaned", f"the nets start thread '{node[1]}' but never clean it: no flag "
-                             f"map writes '{prefix}.request_cleaning', so the nets' shutdown never ends it", starts[0]["path"],
+                             f"map writes '{prefix}.request_cleaning', so the nets' shutdown never ends it",
+                             starts[0]["path"],
                              hint=f"add a converting sink for '{prefix}.request_cleaning' to the net that cleans the "
                              "threads (coordination.standard does it for the threads it starts)")
 
