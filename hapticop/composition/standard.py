@@ -18,7 +18,7 @@ from typing import Any
 
 from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
-from hapticop.composition.description import Composition, Coordination, FlagMap, PetriNet
+from hapticop.composition.description import Composition, Coordination, FlagMap, PetriNet, StandardCoordination
 from hapticop.composition.diagnostics import Diagnostic, Path
 
 STANDARD: Path = ("coordination", "standard")
@@ -135,7 +135,7 @@ def expand(composition: Composition) -> Expansion:
     return w.out
 
 
-def _mediator(w: _Writer, spec, threads: list[str], selects: bool) -> None:
+def _mediator(w: _Writer, spec: StandardCoordination, threads: list[str], selects: bool) -> None:
     """Start, select, wait, operate; on an end, clean stage by stage, then the threads, then exit."""
     net, S = MEDIATOR, STANDARD
     w.net(net, "the standard start and ordered shutdown (coordination.standard)", "START", "EXIT")
