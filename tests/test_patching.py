@@ -220,7 +220,9 @@ def test_validate_patched_returns_the_validated_composition(hallway):
         ("threads: {lidar: {period: 20Hz}}", ("threads", "lidar", "period")),
         ("threads: {fieldbus: {priority: 38}}", ("threads", "fieldbus", "priority")),
         ("- {op: add, path: /threads/lidar/cpus, value: [1]}", ("threads", "lidar", "cpus")),
-        ("coordination: {nets: {mediator: {marking: {START: 2}}}}", ("coordination", "nets", "mediator")),
+        # one cleaning stage instead of two: the written-out mediator net changes, its flag map does not
+        ("coordination: {standard: {clean: {haptic: null, devices: [haptic, falcon, lidar, ethercat, ropod, "
+         "ethercat_watchdog]}}}", ("coordination", "nets", "mediator")),
         ("streams: {scan_ranges: {policy: {kind: queue}}}", ("streams", "scan_ranges", "policy")),
     ],
 )
@@ -246,7 +248,7 @@ def test_plan_lists_unsupported_changes_without_refusing(hallway):
 def test_doc_changes_are_not_changes(hallway):
     tree, old = hallway
     new_tree = apply_patch(tree, {"threads": {"lidar": {"doc": "x"}},
-                                  "coordination": {"nets": {"mediator": {"doc": "y"}}}})
+                                  "coordination": {"standard": {"doc": "y"}}})
     assert plan_changes(old, validate_patched(new_tree).composition).empty
     assert ChangePlan().empty
 

@@ -230,6 +230,22 @@ def status(
 
 
 @app.command()
+def expand(file: Path = typer.Argument(..., help="composition file")) -> None:
+    """Print a composition as YAML with its standard coordination written out as nets and flag maps;
+    exit 1 if the file has errors."""
+    from hapticop.composition.documents import dump
+    from hapticop.composition.standard import expanded_tree
+
+    validated = validate_path(file)
+    for diagnostic in validated.report.sorted():
+        typer.echo(diagnostic.to_text(), err=True)
+    if not validated.report.ok:
+        typer.echo(f"{file}: not expanded: {len(validated.report.errors)} errors", err=True)
+        raise typer.Exit(1)
+    typer.echo(dump(expanded_tree(validated.source.tree, validated.graph.loaded.expansion)), nl=False)
+
+
+@app.command()
 def graph(
     file: Path = typer.Argument(..., help="composition file"),
     output: Path | None = typer.Option(None, "-o", "--output",

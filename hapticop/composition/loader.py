@@ -1,5 +1,8 @@
 """From a YAML tree to a typed composition with every block resolved.
 
+The standard coordination a file declares is written out here, as nets and flag maps beside
+the hand-written ones (`standard`), so the checks and the runtime see only ordinary nets.
+
 Schema errors do not stop the checking: a broken entry (one thread, one activity...) is
 set aside and the rest is validated, so the user sees all mistakes at once. References to
 set-aside entries are not reported again as "unknown".
@@ -18,6 +21,7 @@ from hapticop.blocks.registry import UnknownBlock, resolve
 from hapticop.composition.description import COLLECTIONS, VERSION, Activity, Composition
 from hapticop.composition.diagnostics import Diagnostic, Path, Severity
 from hapticop.composition.model_errors import diagnostics_from
+from hapticop.composition.standard import Expansion, clashes, expand
 
 
 @dataclass
@@ -37,6 +41,7 @@ class Loaded:
     activities: dict[str, ResolvedActivity] = field(default_factory=dict)
     broken: set[tuple[str, str]] = field(default_factory=set)  # (collection, name) set aside
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    expansion: Expansion = field(default_factory=Expansion)  # what coordination.standard was written out as
 
     def is_broken(self, collection: str, name: str) -> bool:
         return (collection, name) in self.broken
@@ -63,8 +68,22 @@ def load_tree(tree: dict) -> Loaded:
                 break
     loaded = Loaded(composition=composition, broken=broken, diagnostics=diagnostics)
     if composition is not None:
+        _expand_standard(loaded)
         _resolve_activities(loaded)
     return loaded
+
+
+def _expand_standard(loaded: Loaded) -> None:
+    """Merge what `coordination.standard` stands for; with a clash, merge nothing and check the rest."""
+    coordination = loaded.composition.coordination
+    expansion = expand(loaded.composition)
+    refused = expansion.diagnostics + clashes(expansion, coordination)
+    loaded.diagnostics.extend(refused)
+    if refused:  # the coordination is incomplete: its checks would only report follow-on findings
+        loaded.broken.add(("coordination.standard", "standard"))
+        return
+    loaded.expansion = expansion
+    loaded.composition.coordination = expansion.merged_into(coordination)
 
 
 def _set_aside(work: dict, found: list[Diagnostic], broken: set[tuple[str, str]]) -> bool:
