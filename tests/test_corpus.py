@@ -29,7 +29,7 @@ CASES = [
     ("invalid-mediator-off-main.yaml", "mediator", 12, "scheduled on thread 'sensors'", None),
     ("invalid-net-unbounded.yaml", "net-unbounded", 18, "place 'COUNT' is unbounded", None),
     ("invalid-period-param-mismatch.yaml", "period-mismatch", 15, "'centring.period_s' is 0.002 s", None),
-    ("invalid-mode-not-live.yaml", "mode-not-live", 41, "changes 'scan_points' of 'haptic'", "retunes live: blind"),
+    ("invalid-mode-not-live.yaml", "mode-not-live", 42, "changes 'scan_points' of 'haptic'", "retunes live: blind"),
     ("invalid-period-no-unit.yaml", "bad-duration", 10, "a duration needs a unit", None),
     ("invalid-sink-owner-writes.yaml", "flag-two-writers", 30, "is written by activity 'mediator'", None),
     ("invalid-stream-reader-twice.yaml", "stream-reader-twice", 18, "'haptic.handle_velocity' is listed twice", None),

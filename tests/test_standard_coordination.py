@@ -26,7 +26,8 @@ def _nets(coordination: Coordination, renamed: dict[str, dict[str, str]]) -> dic
     for name, spec in coordination.nets.items():
         net, rename = Net.from_spec(spec, name), renamed.get(name, {})
         places = [rename.get(p, p) for p in net.places]
-        arcs = [({places[i]: w for i, w in inputs}, {places[i]: w for i, w in outputs}) for inputs, outputs in net.arcs]
+        arcs = [({places[i]: w for i, w in inputs}, {places[i]: w for i, w in outputs}, {places[i] for i in empty})
+                for inputs, outputs, empty in net.arcs]
         out[name] = (list(net.transitions), arcs, {places[i]: int(n) for i, n in enumerate(net.initial) if n},
                      sorted(rename.get(p, p) for p in spec.terminal), sorted(places))
     return out
