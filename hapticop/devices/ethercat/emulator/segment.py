@@ -4,7 +4,9 @@ EtherCAT frames pass every slave in order; each reads and writes the datagrams a
 to it on the fly and raises their working counters. This walks the datagram chain of one
 frame (EtherType 0x88A4, type 1 = datagrams) through the present slaves in bus order.
 Auto-increment addressing counts positions among the slaves that are there, as on a wire
-where a powered-off slave's port is closed.
+where a powered-off slave's port is closed. An access the ESC refuses (a full or empty
+mailbox) does not count. ARMW/FRMW (the system-time distribution a DC master appends to
+its cyclic frame): the addressed slave reads, every other one writes what it read.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
+from hapticop.devices.ethercat.emulator.clocks import SegmentTiming
 from hapticop.devices.ethercat.emulator.esc import Esc
 
 __all__ = ["Segment", "ETHERTYPE", "COMMANDS", "parse_datagrams"]
@@ -47,6 +50,7 @@ class Segment:
     def __init__(self, slaves: Sequence[Esc]):
         self.slaves = list(slaves)
         self.frames = 0
+        self.timing = SegmentTiming()
 
     def present(self) -> list[Esc]:
         return [s for s in self.slaves if s.present]
@@ -55,6 +59,7 @@ class Segment:
         """Process an EtherCAT payload (after the EtherType); False if it is not one."""
         handled = False
         slaves = self.present()
+        self.timing.frame_arrives(slaves, now_ns)
         for at, cmd, _, address, length in parse_datagrams(payload):
             handled = True
             data = payload[at + _HEADER:at + _HEADER + length]
@@ -80,14 +85,10 @@ class Segment:
     def _physical(s: Esc, cmd: int, adp: int, ado: int, data: memoryview, now_ns: int) -> int:
         if cmd in (BRD, BWR, BRW):
             if cmd == BRD:
-                s.read(ado, data, combine=True)
-                return 1
+                return int(s.read(ado, data, combine=True))
             if cmd == BWR:
-                s.write(ado, data, now_ns)
-                return 1
-            s.read(ado, data, combine=True)
-            s.write(ado, data, now_ns)
-            return 3
+                return int(s.write(ado, data, now_ns))
+            return int(s.read(ado, data, combine=True)) + 2 * int(s.write(ado, data, now_ns))
         if cmd in (APRD, APWR, APRW, ARMW):
             addressed = adp == 0
         elif cmd in (FPRD, FPWR, FPRW, FRMW):
@@ -95,20 +96,12 @@ class Segment:
         else:
             return 0
         if cmd in (ARMW, FRMW):  # the addressed slave reads, every other one writes
-            if addressed:
-                s.read(ado, data)
-            else:
-                s.write(ado, data, now_ns)
-            return 1
+            return int(s.read(ado, data) if addressed else s.write(ado, data, now_ns))
         if not addressed:
             return 0
         if cmd in (APRD, FPRD):
-            s.read(ado, data)
-            return 1
+            return int(s.read(ado, data))
         if cmd in (APWR, FPWR):
-            s.write(ado, data, now_ns)
-            return 1
+            return int(s.write(ado, data, now_ns))
         incoming = bytes(data)
-        s.read(ado, data)
-        s.write(ado, memoryview(incoming), now_ns)
-        return 3
+        return int(s.read(ado, data)) + 2 * int(s.write(ado, memoryview(incoming), now_ns))
