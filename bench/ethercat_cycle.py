@@ -29,6 +29,7 @@ import numpy as np
 
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC
 from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
+from hapticop.blocks.ethercat import SMARTWHEEL_LAYOUT
 from hapticop.devices.ethercat.master import ExpectedSlave, SoemMaster
 from hapticop.devices.ethercat.recovery import SlaveCheck
 from hapticop.devices.ropod import PlatformVelocityController
@@ -87,7 +88,7 @@ class Watchdog(threading.Thread):
 
 def run(seconds: float, losses: int) -> dict:
     clock = RealtimeClock()
-    expected = [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
+    expected = [ExpectedSlave(n, p, *SMARTWHEEL_LAYOUT) if p == SWMC else ExpectedSlave(n, p)
                 for n, p in zip(NAMES, PRODUCTS)]
     with Sandbox() as box:
         master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=2000)

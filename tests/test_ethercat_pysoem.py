@@ -18,6 +18,7 @@ from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_proble
 PROBLEM = namespace_problem()
 pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"EtherCAT over veth: {PROBLEM}")
 
+from hapticop.blocks.ethercat import SMARTWHEEL_LAYOUT  # noqa: E402
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC  # noqa: E402
 from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES  # noqa: E402
@@ -28,7 +29,7 @@ WHEELS = [2, 3, 5, 6]
 
 
 def expected(products=PRODUCTS, names=NAMES):
-    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
+    return [ExpectedSlave(n, p, *SMARTWHEEL_LAYOUT) if p == SWMC else ExpectedSlave(n, p)
             for n, p in zip(names, products)]
 
 

@@ -172,3 +172,4 @@ class ActivityContext:
     run_dir: Path  # where the activity may leave results (logs live there too)
     simulation: SimulationTimer = field(default_factory=SimulationTimer)
     coordination: Any = None  # the mediator's handle in the main process: start_threads(), step()
+    period_ns: int = 0  # the period of the thread that cycles it (0: not scheduled on a thread)

@@ -127,11 +127,12 @@ class SdoServer:
             return self._abort(index, subindex, abort.code)
 
     @staticmethod
-    def _response(command: int, index: int, subindex: int, data: bytes) -> bytes:
-        return struct.pack("<HBHB", 3 << 12, command, index, subindex) + data  # service 3: SDO response
+    def _response(command: int, index: int, subindex: int, data: bytes, service: int = 3) -> bytes:
+        return struct.pack("<HBHB", service << 12, command, index, subindex) + data  # service 3: SDO response
 
     def _abort(self, index: int, subindex: int, code: int) -> bytes:
-        return self._response(0x80, index, subindex, struct.pack("<I", code))
+        """An abort travels as an SDO request (CoE service 2), not as a response."""
+        return self._response(0x80, index, subindex, struct.pack("<I", code), service=2)
 
     def _upload(self, index: int, subindex: int) -> bytes:
         value = self.objects.entry(index, subindex).encode()
