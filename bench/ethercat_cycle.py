@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
+from hapticop.blocks.ethercat import SMARTWHEEL_LAYOUT
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC
 from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
-from hapticop.blocks.ethercat import SMARTWHEEL_LAYOUT
 from hapticop.devices.ethercat.master import ExpectedSlave, SoemMaster
 from hapticop.devices.ethercat.recovery import SlaveCheck
 from hapticop.devices.ropod import PlatformVelocityController
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, new_rx_image, new_tx_image
+from hapticop.devices.ropod.pdo import new_rx_image, new_tx_image
 from hapticop.runtime.clock import RealtimeClock
 
 PERIOD_NS = 1_000_000

@@ -173,11 +173,12 @@ def _mapping(pdo: Pdo) -> list[int]:
 
 def object_dictionary(identity: SlaveIdentity, device_type: int = 0) -> ObjectDictionary:
     """The objects a master reads from a slave with CoE: device type (0: no standard device
-    profile) and name, identity, the SM types, the PDO mappings of its SII PDOs and their
+    profile), name and software version, identity, the SM types, the PDO mappings of its SII PDOs and their
     assignment to the process-data SMs."""
     od = ObjectDictionary()
     od.add(0x1000, ObjectEntry(UNSIGNED32, device_type))
     od.add(0x1008, ObjectEntry(VISIBLE_STRING, identity.name.encode("ascii")))
+    od.add(0x100A, ObjectEntry(VISIBLE_STRING, b"hapticop emulator"))  # software version: this one
     od.add_record(0x1018, UNSIGNED32, [identity.vendor, identity.product, identity.revision, identity.serial])
     for pdo in identity.rx_pdos + identity.tx_pdos:
         od.add_record(pdo.index, UNSIGNED32, _mapping(pdo))

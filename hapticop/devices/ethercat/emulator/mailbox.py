@@ -52,7 +52,8 @@ class Mailbox:
 
     def check_config(self) -> int:
         """INIT -> PRE-OP: SM0/SM1 must be the SII's mailbox, in mailbox mode, enabled (else 0x0016)."""
-        expected = ((self.spec.receive_at, self.spec.receive_size, 0x04), (self.spec.send_at, self.spec.send_size, 0x00))
+        spec = self.spec
+        expected = ((spec.receive_at, spec.receive_size, 0x04), (spec.send_at, spec.send_size, 0x00))
         for n, (start, length, direction) in enumerate(expected):
             at, size, enabled = self._sm(n)
             control = self.mem[REG_SM + 8 * n + 4]
