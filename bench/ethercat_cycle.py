@@ -91,7 +91,7 @@ def run(seconds: float, losses: int) -> dict:
     expected = [ExpectedSlave(n, p, *SMARTWHEEL_LAYOUT) if p == SWMC else ExpectedSlave(n, p)
                 for n, p in zip(NAMES, PRODUCTS)]
     with Sandbox() as box:
-        master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=2000)
+        master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=2000, cycle_ns=PERIOD_NS)
         master.open()
         rx, tx = new_rx_image(4), new_tx_image(4)
 

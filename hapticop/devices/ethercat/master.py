@@ -81,6 +81,8 @@ class SoemMaster:
         self.state_timeout_s = state_timeout_s
         self.cycle_ns = cycle_ns  # SYNC0 cycle: the cycle the process data is exchanged at
         self.distributed_clocks = False
+        self.coe_checked: list[str] = []  # the slaves whose PDO assignment was read over CoE
+        self.sync0: list[str] = []  # the slaves given SYNC0
         self.master = pysoem.Master()
         self.slaves: list = []
         self.expected_wkc = 0
@@ -146,9 +148,11 @@ class SoemMaster:
     def _check_coe_layouts(self) -> None:
         """Each slave offering CoE: its PDO assignment, read as SOEM's config_map reads it, must
         give the byte counts (and entry sizes, if known) the driver expects."""
+        self.coe_checked = []
         for slave, spec in zip(self.slaves, self.expected):
             if not self._offers_coe(slave):
                 continue
+            self.coe_checked.append(spec.name)
             try:
                 layout = self._read_pdo_layout(slave)
             except (self.pysoem.SdoError, self.pysoem.MailboxError, self.pysoem.WkcError,
@@ -198,11 +202,13 @@ class SoemMaster:
         """Measure the clocks (before the mapping, so SYNC0 start times are in system time)
         and give each SYNC0 slave its pulse in the PRE-OP -> SAFE-OP hook."""
         self.distributed_clocks = bool(self.master.config_dc())
+        self.sync0 = []
         if not self.distributed_clocks:
             return
         for slave, spec in zip(self.slaves, self.expected):
             if spec.sync0:
                 slave.setup_func = self._start_sync0
+                self.sync0.append(spec.name)
 
     def _start_sync0(self, slave) -> None:
         slave.dc_sync(True, self.cycle_ns)
@@ -308,6 +314,10 @@ class SoemLink:
                 raise
             self.log.info("EtherCAT segment on %s in OP: %s; IOmap working counter %d", m.interface,
                           ", ".join(s.name for s in m.slaves), m.expected_wkc)
+            if m.coe_checked:
+                self.log.info("PDO assignment read over CoE as expected: %s", ", ".join(m.coe_checked))
+            if m.sync0:
+                self.log.info("distributed clocks: SYNC0 every %d us on %s", m.cycle_ns // 1000, ", ".join(m.sync0))
         self.receive(inputs, self.states)
         self.send(outputs)  # in flight: the first cycle receives it
         if self.ready(inputs):
