@@ -113,13 +113,17 @@ class DistributedClock:
 
     # --- the master's accesses (hooks of the ESC's read and write) ----------------------
     def before_read(self, start: int, end: int) -> None:
+        if end <= REG_SYSTEM_TIME or start >= REG_START_TIME + 8:
+            return
         if start < REG_SYSTEM_TIME + 8 and end > REG_SYSTEM_TIME:
             struct.pack_into("<Q", self.mem, REG_SYSTEM_TIME, self.system_time())
         if self.next_sync0 is not None and start < REG_START_TIME + 8 and end > REG_START_TIME:
             struct.pack_into("<Q", self.mem, REG_START_TIME, self._next_pulse(self.system_time()))
 
-    def after_write(self, start: int, end: int, written: bytes) -> None:
+    def after_write(self, start: int, end: int, written: bytes | memoryview) -> None:
         """`written`: the datagram's data, which started at `start`."""
+        if end <= REG_RECEIVE_TIMES or start > REG_ACTIVATION:
+            return
         if start <= REG_RECEIVE_TIMES < end:  # latch this frame's receive times
             struct.pack_into("<4I", self.mem, REG_RECEIVE_TIMES,
                              *((self.arrival_ns - self.ports[0] + t) & 0xFFFFFFFF for t in self.ports))
@@ -129,7 +133,7 @@ class DistributedClock:
         if start <= REG_ACTIVATION < end:
             self._activation()
 
-    def _compare_system_time(self, start: int, end: int, written: bytes) -> None:
+    def _compare_system_time(self, start: int, end: int, written: bytes | memoryview) -> None:
         """A written system time is compared, not stored: the difference goes to 0x092C."""
         lo, hi = max(start, REG_SYSTEM_TIME), min(end, REG_SYSTEM_TIME + 8)
         ours = self.system_time()

@@ -171,7 +171,7 @@ class Esc:
         self.outputs_sm = None
         for n, spec in enumerate(self.identity.sync_managers):
             start, length, control, _, enable = struct.unpack_from("<HHBBB", self.mem, REG_SM + 8 * n)
-            expected = spec.length if self.mailbox is None else self.mailbox.sdo.objects.assigned_bits(n) // 8
+            expected = spec.length if self.mailbox is None else self.mailbox.assigned_bytes(n)
             ok = start == spec.start and length == expected and enable & 1
             if spec.kind == SM_OUTPUTS:
                 if not ok:
@@ -285,7 +285,7 @@ class Esc:
         if self.mailbox is not None:
             self.mailbox.written(ado, end)
         if self.clock is not None:
-            self.clock.after_write(ado, end, bytes(data))
+            self.clock.after_write(ado, end, data)
         return True
 
     def _note_output_write(self, start: int, end: int, now_ns: int) -> None:

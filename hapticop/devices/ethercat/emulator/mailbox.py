@@ -26,7 +26,7 @@ MBX_ERROR, MBX_COE = 0x00, 0x03  # mailbox header type
 MBXERR_UNSUPPORTED_PROTOCOL, MBXERR_SERVICE_NOT_SUPPORTED, MBXERR_INVALID_SIZE = 0x0002, 0x0004, 0x0008
 AL_CODE_INVALID_MAILBOX_CONFIG = 0x0016
 SM_FULL = 0x08  # SM status register: mailbox full
-REG_SM = 0x0800
+REG_SM, REG_AL_CONTROL = 0x0800, 0x0120
 _HEADER = 6  # length, address, channel/priority, type/counter
 AL_INIT, AL_PREOP, AL_BOOT = 0x01, 0x02, 0x03
 
@@ -39,6 +39,10 @@ class Mailbox:
         self.sdo = SdoServer(objects, state, spec.send_size - _HEADER - 10)
         self.counter = 0
         self.reset()
+
+    def assigned_bytes(self, sm: int) -> int:
+        """The length of process-data SM `sm` as the CoE PDO assignment says (what SAFE-OP checks)."""
+        return self.sdo.objects.assigned_bits(sm) // 8
 
     def reset(self) -> None:
         """Both buffers empty (power-on, INIT)."""
@@ -85,15 +89,16 @@ class Mailbox:
         return self.answer_full or not self._touches(1, start, end)[0]
 
     def written(self, start: int, end: int) -> None:
-        if self._touches(0, start, end)[1]:
+        touched, completed = self._touches(0, start, end)
+        if completed:
             self.request_full = True
-        self.serve()
+        if touched or start <= REG_AL_CONTROL < end:  # a request, or a state the application acts on
+            self.serve()
 
     def read_done(self, start: int, end: int) -> None:
         if self.answer_full and self._touches(1, start, end)[1]:
             self.answer_full = False
             self.serve()
-        self._publish()
 
     # --- the slave's application ------------------------------------------------------
     def serve(self) -> None:
