@@ -137,13 +137,16 @@ class DistributedClock:
         """A written system time is compared, not stored: the difference goes to 0x092C."""
         lo, hi = max(start, REG_SYSTEM_TIME), min(end, REG_SYSTEM_TIME + 8)
         ours = self.system_time()
-        value = bytearray(struct.pack("<Q", ours))
-        value[lo - REG_SYSTEM_TIME:hi - REG_SYSTEM_TIME] = written[lo - start:hi - start]
+        received = written[lo - start:hi - start]
+        if lo != REG_SYSTEM_TIME or hi - lo not in (4, 8):  # a part of it: the rest as ours
+            value = bytearray(struct.pack("<Q", ours))
+            value[lo - REG_SYSTEM_TIME:hi - REG_SYSTEM_TIME] = received
+            received = value
         bits = 32 if hi - REG_SYSTEM_TIME <= 4 else 64
         mask = (1 << bits) - 1
-        difference = ((struct.unpack("<Q", value)[0] - ours) & mask)
+        difference = (int.from_bytes(received[:bits // 8], "little") - ours) & mask
         if difference >> (bits - 1):  # the local copy is ahead
-            magnitude, sign = ((-difference) & mask), 0x80000000
+            magnitude, sign = (-difference) & mask, 0x80000000
         else:
             magnitude, sign = difference, 0
         struct.pack_into("<I", self.mem, REG_DIFFERENCE, min(magnitude, 0x7FFFFFFF) | sign)
