@@ -93,11 +93,11 @@ class DistributedClock:
         struct.pack_into("<H", self.mem, REG_SPEED_START, 0x1000)
         self.mem[REG_FILTER_DEPTH], self.mem[REG_SPEED_FILTER_DEPTH] = 0x04, 0x0C
         self.arrival_ns = 0
-        self.ports = [0, 0, 0, 0]
+        self.port_times_ns: Sequence[int] = (0, 0, 0, 0)  # when this frame passed each port
         self.next_sync0: int | None = None  # system time of the next SYNC0 pulse while active
 
     def frame(self, now_ns: int, times: Sequence[int]) -> None:
-        self.arrival_ns, self.ports = now_ns + times[0], times
+        self.arrival_ns, self.port_times_ns = now_ns + times[0], times
 
     # --- time ---------------------------------------------------------------------------
     @property
@@ -126,7 +126,7 @@ class DistributedClock:
             return
         if start <= REG_RECEIVE_TIMES < end:  # latch this frame's receive times
             struct.pack_into("<4I", self.mem, REG_RECEIVE_TIMES,
-                             *((self.arrival_ns - self.ports[0] + t) & 0xFFFFFFFF for t in self.ports))
+                             *((self.arrival_ns - self.port_times_ns[0] + t) & 0xFFFFFFFF for t in self.port_times_ns))
             struct.pack_into("<Q", self.mem, REG_RECEIVE_TIME_UNIT, self.arrival_ns)
         if start < REG_SYSTEM_TIME + 8 and end > REG_SYSTEM_TIME:
             self._compare_system_time(start, end, written)
