@@ -113,7 +113,9 @@ class SoemMaster:
             raise BringUpError(f"no EtherCAT slave answers on '{self.interface}'")
         self.slaves = list(self.master.slaves)
         self._check_slaves()
-        self.master.state_check(AL_PREOP, 50_000)
+        if self.master.state_check(AL_PREOP, 50_000) != AL_PREOP:  # the mailboxes answer from PRE-OP on
+            self.master.read_state()
+            raise BringUpError("not every slave reached PRE-OP: " + self.describe_states())
         self._check_coe_layouts()
         self._configure_clocks()
         try:
