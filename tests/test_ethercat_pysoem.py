@@ -397,3 +397,5 @@ def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
         run / "ethercat.log").read_text()
     assert "back in INIT" in (run / "ethercat.log").read_text()
     assert "all 7 slaves operational" in (run / "ethercat_watchdog.log").read_text()
+    pose = np.load(run / "trajectory.npz")["pose"]  # the world's pose is the emulated robot's
+    assert pose[-1, 0] - pose[0, 0] > 0.05  # the wheels, on SYNC0, drove it down the hallway
