@@ -93,7 +93,9 @@ def test_the_sii_identifies_each_slave_through_the_eeprom_registers(seg):
     assert products == [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
     vendor = struct.unpack_from("<I", eeprom_read(seg, 0x1001, 0x08))[0]
     assert vendor == 2  # Beckhoff
-    assert eeprom_read(seg, 0x1003, 0x18)[:4] == bytes(4)  # no mailbox on the wheels here
+    assert eeprom_read(seg, 0x1001, 0x18)[:4] == bytes(4)  # the coupler has no mailbox
+    assert struct.unpack("<4H", eeprom_read(seg, 0x1003, 0x18)) == (0x1000, 128, 0x1080, 128)  # the wheels do
+    assert struct.unpack_from("<H", eeprom_read(seg, 0x1003, 0x1C))[0] == 0x0004  # CoE
 
 
 def _categories(eeprom: bytes) -> dict[int, bytes]:
@@ -112,9 +114,11 @@ def test_the_wheel_sii_categories_describe_the_ropod_pdo_layout(seg):
     assert strings[0] >= 1 and strings[2:2 + strings[1]] == b"SWMC"  # string 1 is the name
     assert cats[30][3] == 1  # general: name index
     assert list(cats[40][:2]) == [1, 2]  # FMMU 0 outputs, FMMU 1 inputs
-    sms = [struct.unpack_from("<HHBBBB", cats[41], 8 * i) for i in range(2)]
-    assert sms == [(0x1000, RXPDO_BYTES, 0x64, 0, 1, 3), (0x1100, TXPDO_BYTES, 0x20, 0, 1, 4)]
-    for kind, sm, nbytes, entries in ((51, 0, RXPDO_BYTES, 9), (50, 1, TXPDO_BYTES, 40)):
+    assert cats[30][5] == 0x05  # general: CoE details, SDO and PDO assignment
+    sms = [struct.unpack_from("<HHBBBB", cats[41], 8 * i) for i in range(4)]
+    assert sms == [(0x1000, 128, 0x26, 0, 1, 1), (0x1080, 128, 0x22, 0, 1, 2),  # mailbox out, in
+                   (0x1100, RXPDO_BYTES, 0x64, 0, 1, 3), (0x1180, TXPDO_BYTES, 0x20, 0, 1, 4)]
+    for kind, sm, nbytes, entries in ((51, 2, RXPDO_BYTES, 9), (50, 3, TXPDO_BYTES, 40)):
         index, count, sync = struct.unpack_from("<HBB", cats[kind])
         bits = sum(cats[kind][8 + 8 * i + 5] for i in range(count))
         assert (count, sync, bits) == (entries, sm, 8 * nbytes)
@@ -130,8 +134,16 @@ def test_the_pdo_layout_matches_the_shared_data(seg):
     assert [cats[50][8 + 8 * i + 5] for i in range(len(fields))] == [8 * f["size"] for f in fields]
 
 
+def program_mailboxes(seg):
+    """What SOEM's config_init writes to a slave with a mailbox before PRE-OP: SM0 and SM1 in one datagram."""
+    for position in (2, 3, 5, 6):
+        send(seg, (FPWR, 0x1001 + position, 0x0800, struct.pack("<HHBBBBHHBBBB", 0x1000, 128, 0x26, 0, 1, 0,
+                                                                 0x1080, 128, 0x22, 0, 1, 0)))
+
+
 def test_the_al_state_machine_refuses_illegal_requests_until_acknowledged(seg):
     address(seg)
+    program_mailboxes(seg)
     assert request(seg, 0x1003, 0x08) == (0x01 | 0x10, AL_CODE_INVALID_STATE_CHANGE)  # INIT -> OP
     assert request(seg, 0x1003, 0x02) == (0x11, AL_CODE_INVALID_STATE_CHANGE)  # ignored: not acknowledged
     assert request(seg, 0x1003, 0x12) == (0x02, 0)  # PRE-OP with ACK
@@ -139,19 +151,28 @@ def test_the_al_state_machine_refuses_illegal_requests_until_acknowledged(seg):
 
 
 def program_wheel(seg, station, logical_out, logical_in):
-    """What SOEM's config_map writes: SM0/SM1 from the SII, FMMU0 outputs, FMMU1 inputs."""
-    send(seg, (FPWR, station, 0x0800, struct.pack("<HHBBBB", 0x1000, RXPDO_BYTES, 0x64, 0, 1, 0)),
-         (FPWR, station, 0x0808, struct.pack("<HHBBBB", 0x1100, TXPDO_BYTES, 0x20, 0, 1, 0)),
-         (FPWR, station, 0x0600, struct.pack("<IHBBHBBB3x", logical_out, RXPDO_BYTES, 0, 7, 0x1000, 0, 2, 1)),
-         (FPWR, station, 0x0610, struct.pack("<IHBBHBBB3x", logical_in, TXPDO_BYTES, 0, 7, 0x1100, 0, 1, 1)))
+    """What SOEM's config_map writes: SM2/SM3 from the SII, FMMU0 outputs, FMMU1 inputs."""
+    send(seg, (FPWR, station, 0x0810, struct.pack("<HHBBBB", 0x1100, RXPDO_BYTES, 0x64, 0, 1, 0)),
+         (FPWR, station, 0x0818, struct.pack("<HHBBBB", 0x1180, TXPDO_BYTES, 0x20, 0, 1, 0)),
+         (FPWR, station, 0x0600, struct.pack("<IHBBHBBB3x", logical_out, RXPDO_BYTES, 0, 7, 0x1100, 0, 2, 1)),
+         (FPWR, station, 0x0610, struct.pack("<IHBBHBBB3x", logical_in, TXPDO_BYTES, 0, 7, 0x1180, 0, 1, 1)))
+
+
+def start_sync0(seg, station, start_ns=NS, cycle_ns=NS, now=0):
+    """What SOEM's dcsync0 writes: cyclic unit off, ECAT control, start time, cycle, then SYNC0 on."""
+    send(seg, (FPWR, station, 0x0981, bytes(1)), (FPWR, station, 0x0980, bytes(1)),
+         (FPWR, station, 0x0990, struct.pack("<Q", start_ns)), (FPWR, station, 0x09A0, struct.pack("<I", cycle_ns)),
+         (FPWR, station, 0x0981, bytes([0x03])), now=now)
 
 
 def bring_up(seg):
     address(seg)
+    program_mailboxes(seg)
     send(seg, (BWR, 0, 0x0120, u16(0x12)))  # PRE-OP with ACK, every slave
     for n, position in enumerate((2, 3, 5, 6)):
         station = 0x1001 + position
         program_wheel(seg, station, n * (RXPDO_BYTES + TXPDO_BYTES), n * (RXPDO_BYTES + TXPDO_BYTES) + RXPDO_BYTES)
+        start_sync0(seg, station)
     send(seg, (BWR, 0, 0x0120, u16(0x04)))
     send(seg, (BWR, 0, 0x0120, u16(0x08)))
 

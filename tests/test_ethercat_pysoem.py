@@ -18,6 +18,7 @@ from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_proble
 PROBLEM = namespace_problem()
 pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"EtherCAT over veth: {PROBLEM}")
 
+from hapticop.blocks.ethercat import SMARTWHEEL_LAYOUT  # noqa: E402
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC  # noqa: E402
 from hapticop.devices.ethercat.master import BringUpError, ExpectedSlave, SoemMaster  # noqa: E402
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, new_rx_image, rxpdo_view  # noqa: E402
@@ -28,7 +29,7 @@ WHEELS = [2, 3, 5, 6]
 
 
 def expected(products=PRODUCTS, names=NAMES):
-    return [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
+    return [ExpectedSlave(n, p, *SMARTWHEEL_LAYOUT) if p == SWMC else ExpectedSlave(n, p)
             for n, p in zip(names, products)]
 
 
@@ -207,6 +208,96 @@ def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box
     assert process.poll() is not None  # the emulator is gone
     assert not _interface_here("hapticop-ecat7") and not _interface_here("hapticop-esc7")
     assert os.readlink("/proc/thread-self/ns/net") == home
+
+
+# --- CoE and distributed clocks, as SOEM's own tools use them --------------------------------
+
+def _register(slave, address: int, size: int) -> int:
+    return int.from_bytes(slave._fprd(address, size), "little")
+
+
+def test_sdo_reads_give_the_wheels_identity_and_pdo_assignment(master):
+    import pysoem
+
+    master.master.config_init()
+    master.master.state_check(2, 50_000)
+    for position, slave in enumerate(master.master.slaves):
+        if position not in WHEELS:
+            continue
+        assert int.from_bytes(slave.sdo_read(0x1018, 2), "little") == SWMC
+        assert slave.sdo_read(0x1018, 0) == b"\x04"
+        assert int.from_bytes(slave.sdo_read(0x1C12, 1), "little") == 0x1600
+        assert int.from_bytes(slave.sdo_read(0x1C13, 1), "little") == 0x1A00
+        assert slave.sdo_read(0x100A, 0) == b"hapticop emulator"  # a normal (not expedited) upload
+    wheel = master.master.slaves[WHEELS[0]]
+    with pytest.raises(pysoem.SdoError) as aborted:
+        wheel.sdo_read(0x2000, 0)
+    assert aborted.value.abort_code == 0x06020000
+    wheel.sdo_write(0x1C12, 0, b"\x00")  # writable in PRE-OP
+    assert wheel.sdo_read(0x1C12, 0) == b"\x00"
+    wheel.sdo_write(0x1C12, 0, b"\x01")
+    with pytest.raises(pysoem.SdoError) as aborted:
+        wheel.sdo_write(0x1C12, 1, b"\x01\x16\x00\x00")
+    assert aborted.value.abort_code == 0x06070012  # four bytes for an UNSIGNED16
+
+
+def test_config_dc_finds_the_wheels_clocks_and_dc_sync_starts_sync0(master):
+    master.master.config_init()
+    assert master.master.config_dc()
+    slaves = master.master.slaves
+    assert [bool(_register(s, 0x0008, 2) & 0x04) for s in slaves] == [p == SWMC for p in PRODUCTS]
+    offsets = [_register(slaves[p], 0x0920, 8) for p in WHEELS]
+    assert all(o > 0 for o in offsets)  # system time since 2000, from the master's clock
+    wheel = slaves[WHEELS[0]]
+    wheel.dc_sync(True, 2_000_000)
+    assert (_register(wheel, 0x0980, 1), _register(wheel, 0x0981, 1)) == (0, 0x03)
+    assert _register(wheel, 0x09A0, 4) == 2_000_000
+    assert _register(wheel, 0x0990, 8) > _register(wheel, 0x0910, 8)  # the first pulse is ahead
+    assert _register(wheel, 0x0984, 1) == 0x01  # pending, not refused as past
+
+
+def test_the_bring_up_runs_sync0_at_the_cycle_and_the_dc_frame_keeps_the_working_counter(box):
+    m = SoemMaster(box.interface, expected(), receive_timeout_us=20_000, cycle_ns=2_000_000)
+    m.open()
+    try:
+        m.bring_up()
+        assert m.distributed_clocks and m.coe_checked == m.sync0 == ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
+        for position in WHEELS:
+            assert _register(m.slaves[position], 0x0981, 1) == 0x03
+            assert _register(m.slaves[position], 0x09A0, 4) == 2_000_000
+        assert m.exchange() == 12  # the LRW's count: SOEM reads the appended FRMW apart
+        first = m.master.dc_time
+        assert m.exchange() == 12
+        assert m.master.dc_time > first > 0  # the reference wheel's system time came back in the FRMW
+    finally:
+        m.close()
+
+
+def test_without_sync0_the_wheels_refuse_safe_op_with_0x0030(box):
+    specs = [ExpectedSlave(n, p, RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else ExpectedSlave(n, p)
+             for n, p in zip(NAMES, PRODUCTS)]
+    m = SoemMaster(box.interface, specs, receive_timeout_us=20_000)
+    m.open()
+    try:
+        with pytest.raises(BringUpError, match=r"wheel_1 PRE-OP\+ERR \(AL code 0x0030 Invalid DC SYNC config"):
+            m.bring_up()
+    finally:
+        m.close()
+
+
+def test_a_pdo_assignment_other_than_the_drivers_fails_bring_up_in_one_message(box):
+    specs = [ExpectedSlave(n, p, RXPDO_BYTES, 172, sync0=True) if p == SWMC else ExpectedSlave(n, p)
+             for n, p in zip(NAMES, PRODUCTS)]  # a KELO drive's 172-byte sensors
+    m = SoemMaster(box.interface, specs, receive_timeout_us=20_000)
+    m.open()
+    try:
+        with pytest.raises(BringUpError, match=r"^slave wheel_1 \(SWMC\) assigns over CoE outputs 0x1600 \(9 entries, "
+                                               r"36 bytes\) and inputs 0x1A00 \(40 entries, 168 bytes\); the driver "
+                                               r"expects 36 output bytes and 172 input bytes$"):
+            m.bring_up()
+        assert [s["state"] for s in box.fault("status")["slaves"]] == [2] * 7  # stopped before mapping
+    finally:
+        m.close()
 
 
 # --- the watchdog's recovery, with the runtime --------------------------------------------
@@ -416,5 +507,11 @@ def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
                      "systems/hallway_ethercat.yaml", "--duration", "4s", "--run-dir", str(run))
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert "in OP: EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC" in (run / "ethercat.log").read_text()
+    assert ("PDO assignment read over CoE as expected: wheel_1, wheel_2, wheel_3, wheel_4"
+            in (run / "ethercat.log").read_text())
+    assert "distributed clocks: SYNC0 every 1000 us on wheel_1, wheel_2, wheel_3, wheel_4" in (
+        run / "ethercat.log").read_text()
     assert "back in INIT" in (run / "ethercat.log").read_text()
     assert "all 7 slaves operational" in (run / "ethercat_watchdog.log").read_text()
+    pose = np.load(run / "trajectory.npz")["pose"]  # the world's pose is the emulated robot's
+    assert pose[-1, 0] - pose[0, 0] > 0.05  # the wheels, on SYNC0, drove it down the hallway

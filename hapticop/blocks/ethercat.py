@@ -21,10 +21,13 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import DeviceParams, Interface, Params, Port, RateRange
 from hapticop.devices.ethercat.link import DatagramSegment, SegmentLink
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, RXPDO_ENTRY_BITS, TXPDO_BYTES, TXPDO_ENTRY_BITS
 
 SMARTWHEEL_INPUT_BYTES = TXPDO_BYTES
 SMARTWHEEL_OUTPUT_BYTES = RXPDO_BYTES
+# What the master checks a smart wheel against: its process data (bytes, and entry sizes over
+# CoE) and that it runs on SYNC0.
+SMARTWHEEL_LAYOUT = (RXPDO_BYTES, TXPDO_BYTES, RXPDO_ENTRY_BITS, TXPDO_ENTRY_BITS, True)
 
 EK1100 = 0x044C2C52
 EK1122 = 0x04622C52
@@ -116,11 +119,11 @@ class EthercatMaster(Block):
                                    len(p.slaves))
         from hapticop.devices.ethercat.master import ExpectedSlave, SoemLink, SoemMaster
 
-        expected = [ExpectedSlave(name, spec.product, *((SMARTWHEEL_OUTPUT_BYTES, SMARTWHEEL_INPUT_BYTES)
-                                                         if spec.wheel is not None else (0, 0)))
-                    for name, spec in p.slaves.items()]
+        expected = [ExpectedSlave(name, spec.product, *SMARTWHEEL_LAYOUT) if spec.wheel is not None
+                    else ExpectedSlave(name, spec.product) for name, spec in p.slaves.items()]
         wheels = [(spec.wheel, i) for i, spec in enumerate(p.slaves.values()) if spec.wheel is not None]
-        master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s, p.frame_timeout_us)
+        master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s, p.frame_timeout_us,
+                            cycle_ns=self.context.period_ns or 1_000_000)
         return SoemLink(master, wheels, _encoders_ready, self.clock.now_ns, self.log)
 
     def compute(self) -> None:

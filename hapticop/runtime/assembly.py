@@ -135,8 +135,10 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
+    thread = thread_of(composition).get(name)
+    period_ns = composition.threads[thread].period if thread else 0
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination,
+                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination, period_ns,
                               region.waiting[region.layout.activity_index[name]])
     block = resolved.block(context)
     return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)

@@ -9,6 +9,9 @@ junction's branch comes before the rest of the line). A frame reaches a slave on
 slave between it and the master has power and no cable on the way is cut: a powered-off
 slave, or a cut cable, takes everything wired behind it off the segment, as the port before
 it closes its loop. Auto-increment addressing counts positions among the slaves it reaches.
+An access the ESC refuses (a full or empty mailbox) does not count. ARMW/FRMW (the system-time
+distribution a DC master appends to its cyclic frame): the addressed slave reads, every other
+one writes what it read.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
+from hapticop.devices.ethercat.emulator.clocks import SegmentTiming
 from hapticop.devices.ethercat.emulator.esc import Esc
 
 __all__ = ["Segment", "ETHERTYPE", "COMMANDS", "parse_datagrams", "upstream_of"]
@@ -70,6 +74,7 @@ class Segment:
         self.upstream = upstream_of(self.slaves)
         self.cut: set[int] = set()
         self.frames = 0
+        self.timing = SegmentTiming()
 
     def reached(self) -> list[bool]:
         """Whether a frame reaches each slave: it has power, its cable is whole, and so is the way there."""
@@ -91,6 +96,7 @@ class Segment:
         """Process an EtherCAT payload (after the EtherType); False if it is not one."""
         handled = False
         slaves = [s for s, reached in zip(self.slaves, self.reached()) if reached]
+        self.timing.frame_arrives(slaves, now_ns)
         for at, cmd, _, address, length in parse_datagrams(payload):
             handled = True
             data = payload[at + _HEADER:at + _HEADER + length]
@@ -116,14 +122,10 @@ class Segment:
     def _physical(s: Esc, cmd: int, adp: int, ado: int, data: memoryview, now_ns: int) -> int:
         if cmd in (BRD, BWR, BRW):
             if cmd == BRD:
-                s.read(ado, data, combine=True)
-                return 1
+                return int(s.read(ado, data, combine=True))
             if cmd == BWR:
-                s.write(ado, data, now_ns)
-                return 1
-            s.read(ado, data, combine=True)
-            s.write(ado, data, now_ns)
-            return 3
+                return int(s.write(ado, data, now_ns))
+            return int(s.read(ado, data, combine=True)) + 2 * int(s.write(ado, data, now_ns))
         if cmd in (APRD, APWR, APRW, ARMW):
             addressed = adp == 0
         elif cmd in (FPRD, FPWR, FPRW, FRMW):
@@ -131,20 +133,12 @@ class Segment:
         else:
             return 0
         if cmd in (ARMW, FRMW):  # the addressed slave reads, every other one writes
-            if addressed:
-                s.read(ado, data)
-            else:
-                s.write(ado, data, now_ns)
-            return 1
+            return int(s.read(ado, data) if addressed else s.write(ado, data, now_ns))
         if not addressed:
             return 0
         if cmd in (APRD, FPRD):
-            s.read(ado, data)
-            return 1
+            return int(s.read(ado, data))
         if cmd in (APWR, FPWR):
-            s.write(ado, data, now_ns)
-            return 1
+            return int(s.write(ado, data, now_ns))
         incoming = bytes(data)
-        s.read(ado, data)
-        s.write(ado, memoryview(incoming), now_ns)
-        return 3
+        return int(s.read(ado, data)) + 2 * int(s.write(ado, memoryview(incoming), now_ns))
