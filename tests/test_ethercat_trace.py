@@ -18,7 +18,7 @@ import struct
 import numpy as np
 import pytest
 
-from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC, RopodSegment
+from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC, RopodSegment, smart_wheel_identity
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1
 
 from .conftest import FIXTURES, SHARED_TESTDATA
@@ -59,7 +59,8 @@ class Replay:
 
     def __init__(self, facts: dict):
         self.facts = facts
-        self.model = RopodSegment(rng=np.random.default_rng(0))
+        # the trace was taken from wheels without a mailbox or distributed clocks (its 'what' says so)
+        self.model = RopodSegment(rng=np.random.default_rng(0), wheel=smart_wheel_identity(mailbox=False))
         self.kinds = {(d["cmd"], int(d["ado"], 16), d["len"]): d["count"] for d in facts["datagrams"]}
         self.sent: set[tuple[str, int, int]] = set()
         self.lrw_sent = 0

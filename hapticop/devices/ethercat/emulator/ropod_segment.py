@@ -42,6 +42,7 @@ EK1100, EK1122, SWMC = 0x044C2C52, 0x04622C52, 0x01705011
 SWMC_VENDOR = 0x00000000  # not published: masters match the smart wheels on product code only
 MAILBOX_OUT_AT, MAILBOX_IN_AT, MAILBOX_BYTES = 0x1000, 0x1080, 128
 OUTPUTS_AT, INPUTS_AT = 0x1100, 0x1180
+PLAIN_OUTPUTS_AT, PLAIN_INPUTS_AT = 0x1000, 0x1100  # the wheel without a mailbox: process data on SM0/SM1
 _TYPES = {"<u2": 0x0006, "<u8": 0x001B, "<f4": 0x0008}  # CoE data types UINT16, UINT64, REAL32
 
 
@@ -50,7 +51,20 @@ def _entries(dtype: np.dtype, index: int) -> tuple[PdoEntry, ...]:
                  for sub, name in enumerate(dtype.names))
 
 
-def smart_wheel_identity() -> SlaveIdentity:
+def smart_wheel_identity(mailbox: bool = True) -> SlaveIdentity:
+    """The smart wheel as ropod's firmware presents it: a CoE mailbox and distributed clocks with
+    SYNC0 required. `mailbox=False`: the plainer slave of the recorded SOEM bring-up trace, its
+    process data on SM0/SM1 and its PDOs in the SII only."""
+    if not mailbox:
+        return SlaveIdentity(
+            name="SWMC", vendor=SWMC_VENDOR, product=SWMC, revision=0x00000001,
+            sync_managers=(SyncManagerSpec(PLAIN_OUTPUTS_AT, RXPDO_BYTES, 0x64, SM_OUTPUTS),
+                           SyncManagerSpec(PLAIN_INPUTS_AT, TXPDO_BYTES, 0x20, SM_INPUTS)),
+            fmmus=(FMMU_OUTPUTS, FMMU_INPUTS),
+            rx_pdos=(Pdo(0x1600, 0, _entries(RXPDO_DTYPE, 0x7000)),),
+            tx_pdos=(Pdo(0x1A00, 1, _entries(TXPDO_DTYPE, 0x6000)),),
+            ebus_current_ma=0,
+        )
     return SlaveIdentity(
         name="SWMC", vendor=SWMC_VENDOR, product=SWMC, revision=0x00000001,
         sync_managers=(SyncManagerSpec(MAILBOX_OUT_AT, MAILBOX_BYTES, 0x26, SM_MAILBOX_OUT),  # mailbox, write
@@ -82,8 +96,9 @@ class RopodSegment:
 
     max_step_s = 0.005  # a late step is not a leap in time
 
-    def __init__(self, plant: PlantParams = PlantParams(), rng: np.random.Generator | None = None):
-        wheel = smart_wheel_identity()
+    def __init__(self, plant: PlantParams = PlantParams(), rng: np.random.Generator | None = None,
+                 wheel: SlaveIdentity | None = None):
+        wheel = wheel or smart_wheel_identity()
         self.wheels = [Esc(wheel, ports=(0, 1)), Esc(wheel, ports=(0,)), Esc(wheel, ports=(0, 1)),
                        Esc(wheel, ports=(0,))]
         self.slaves = [Esc(_coupler(), ports=(0, 1)), Esc(_junction(), ports=(0, 1, 3)), self.wheels[0], self.wheels[1],
