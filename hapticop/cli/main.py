@@ -319,7 +319,8 @@ def main() -> None:
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # before the run's own handler (validating, starting): nothing was left running
+        print("hapticop: interrupted", file=sys.stderr)
         sys.exit(130)
     except RunDirectoryError as error:  # a run directory that is not safely ours: said, not traced
         print(f"hapticop: {error}", file=sys.stderr)

@@ -204,12 +204,12 @@ class Region:
         for name in self.layout.sections:
             if hasattr(self, name):
                 delattr(self, name)
-        try:
-            self.memory.close()
-        except BufferError:
-            return  # a view is still referenced somewhere; the OS frees it at exit
-        if self.owner:
+        if self.owner:  # the name goes first: it must go even if a view below keeps the mapping
             try:
                 self.memory.unlink()
             except FileNotFoundError:
                 pass
+        try:
+            self.memory.close()
+        except BufferError:
+            pass  # a view is still referenced somewhere (an exception's frames): the mapping goes at exit

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import heapq
 import multiprocessing
+import signal
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,7 +77,13 @@ class Scheduler:
                       seed, receiving),
                 name=f"hapticop-{process_name}", daemon=True,
             )
-            process.start()
+            # Ctrl+C reaches the whole foreground process group: a child still loading would die
+            # of it with a traceback. It starts with SIGINT blocked, and ignores it before unblocking.
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                process.start()
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             receiving.close()
             child = ChildProcess(process_name, process, sending, threads)
             for thread in threads:

@@ -64,6 +64,7 @@ class Supervisor:
         self.exit_by_flag = _written_by_flag_map(composition, "system.exit")
         self.reasons: list[str] = []  # why the run failed, if it did
         self.interrupted: ExitStatus | None = None
+        self.left_at_once = False  # a second Ctrl+C or SIGTERM: the run is being left at once
         self.shutdown_at: int | None = None
         self.forced = False
         self.operating_ns: int | None = None
@@ -145,10 +146,13 @@ class Supervisor:
         composition, owner_thread = description.composition, description.owner_thread
         others = [n for n in description.activities if owner_thread.get(n) and
                   composition.activities[n].block != "mediator"]
-        for name in others:
-            if region.state_of(name) is not State.DONE and not lost(owner_thread[name]):
-                region.set_flag(f"{name}.lcsm.request_cleaning")
-        if any(region.state_of(n) is not State.DONE and not lost(owner_thread[n]) for n in others):
+        # Still to clean: not done, on a thread that lives, and created (an activity whose thread
+        # never ran it, as after a Ctrl+C during start-up, holds nothing to give back).
+        pending = [n for n in others if region.state_of(n) not in (State.DONE, State.CREATION)
+                   and not lost(owner_thread[n])]
+        for name in pending:
+            region.set_flag(f"{name}.lcsm.request_cleaning")
+        if pending:
             return
         threads = [t for t in composition.threads if t != self.scheduler.main_name]
         for name in threads:
@@ -192,6 +196,9 @@ class Supervisor:
         def handler(signum, _frame):
             if self.interrupted is not None:  # the second one: leave now
                 self.region.system[Region.TERMINATE] = 1
+                for other in (signal.SIGINT, signal.SIGTERM):  # a third would cut the cleaning short
+                    signal.signal(other, signal.SIG_IGN)
+                self.left_at_once = True
                 raise ForcedExit(self.interrupted)
             self.interrupted = ExitStatus.INTERRUPTED if signum == signal.SIGINT else ExitStatus.TERMINATED
             self.log.always("%s: shutting down (again to force)", signal.Signals(signum).name)
@@ -199,8 +206,9 @@ class Supervisor:
 
         return {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
 
-    @staticmethod
-    def restore_signals(previous) -> None:
+    def restore_signals(self, previous) -> None:
+        if self.left_at_once:
+            return  # signals stay ignored until the process has released everything and exits
         for signum, handler in (previous or {}).items():
             signal.signal(signum, handler)
 

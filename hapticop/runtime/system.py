@@ -10,8 +10,11 @@ own thread (`service.py`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import signal
 import sys
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -83,9 +86,20 @@ class System:
         self.run_dir = options.run_dir or new_run_directory(self.name)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
+        self.region = self.scheduler = self.built = None
+        self.finished = False
+        try:
+            self._build(validated, loaded, composition, options)
+        except BaseException:  # Ctrl+C while processes start, a block that cannot be built: nothing stays
+            self.close()
+            raise
+
+    def _build(self, validated: Validated, loaded: Loaded, composition: Composition, options: RunOptions) -> None:
+        source = validated.source
         self.description = Description.of(source.tree, loaded)
         self.layout = layout_of(loaded, validated.flags)
         self.region = Region.create(self.layout)
+        self.log.info("shared memory %s, %d bytes", self.region.name, self.layout.size)
         self.flag_index = self.layout.flag_index
         self.coordinator = Coordinator(composition.coordination, self.region.flags, self.flag_index)
         self.scheduler = Scheduler(composition, self.region, self.clock, self.log)
@@ -101,7 +115,6 @@ class System:
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
-        self.finished = False
         if not self.virtual:
             self.scheduler.spawn_processes(source.tree, self.run_dir, options.seed)
             realtime.prepare_process([composition.threads[t] for t in local], self.log)
@@ -185,10 +198,31 @@ class System:
         return Outcome(self.supervisor.exit_status(), self.run_dir, self.supervisor.reasons)
 
     def close(self) -> None:
-        self.writer.stop()
-        self.built = None  # drop the views into the region before it is released
-        self.main = None
-        self.region.close()
+        """Release everything, whether the system ran, was interrupted, or was half built. Another
+        Ctrl+C meanwhile is ignored: it would leave the shared memory and the children behind."""
+        with _uninterrupted():
+            if self.scheduler is not None and not self.finished:
+                self.finished = True
+                self.scheduler.stop()  # processes started but never run leave before the region goes
+            self.writer.stop()
+            self.built = None  # drop the views into the region before it is released
+            self.main = None
+            if self.region is not None:
+                self.region.close()
+
+
+@contextlib.contextmanager
+def _uninterrupted():
+    """SIGINT and SIGTERM ignored for a bounded piece of cleaning (on the main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 @dataclass
