@@ -81,6 +81,13 @@ class Block:
         return dataclasses.replace(cls.interface(params), needs=cls.needs_of(params), provides=cls.provides)
 
     @classmethod
+    def promises(cls, params: Params) -> tuple[str, ...]:
+        """Files an activity that ran leaves in the run directory when it cleans (its results: a
+        recording, metrics, a picture). A run that ends without one of them has lost results, and
+        its exit status says so."""
+        return ()
+
+    @classmethod
     def needs_of(cls, params: Params) -> tuple[Need, ...]:
         """The activities these parameters name, from the `needs` declaration."""
         found = []

@@ -83,8 +83,10 @@ def _leave_with_parent(parent: int, region: Region, threads: list[str]) -> None:
     def orphaned(_signum=None, _frame=None) -> None:
         for thread in threads:
             region.set_flag(f"threads.{thread}.lcsm.request_cleaning")
-        threading.Timer(0.8 * ORPHAN_BOUND_S, _terminate, args=(region,)).start()
-        threading.Timer(ORPHAN_BOUND_S, os._exit, args=(1,)).start()
+        for delay, action, args in ((0.8 * ORPHAN_BOUND_S, _terminate, (region,)), (ORPHAN_BOUND_S, os._exit, (1,))):
+            timer = threading.Timer(delay, action, args=args)
+            timer.daemon = True  # a process that finished cleaning in time does not wait for it
+            timer.start()
 
     signal.signal(signal.SIGTERM, orphaned)
     libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
@@ -94,7 +96,9 @@ def _leave_with_parent(parent: int, region: Region, threads: list[str]) -> None:
 
 
 def _terminate(region: Region) -> None:
-    region.system[Region.TERMINATE] = 1  # every loop of this process leaves at once
+    system = getattr(region, "system", None)  # None: the process has already let the region go
+    if system is not None:
+        system[Region.TERMINATE] = 1  # every loop of this process leaves at once
 
 
 class _LiveChanges:

@@ -115,6 +115,7 @@ class Layout:
         section("flags", (len(layout.flags) + SPARE_FLAGS,), "uint8")
         section("state", (owners,), "uint8")
         section("failed", (owners,), "uint8")
+        section("reached", (owners,), "uint8")  # a bit per LCSM state the owner has entered (1 << state)
         section("selected", (threads,), "int64")
         section("cycles", (threads,), "int64")
         section("missed", (threads,), "int64")

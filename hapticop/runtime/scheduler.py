@@ -9,6 +9,7 @@ first, ties in file order, so one composition and seed always give the same run.
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import multiprocessing
 import signal
@@ -39,6 +40,30 @@ class ChildProcess:
 
 def _never() -> bool:
     return False
+
+
+@contextlib.contextmanager
+def _sigint_held():
+    """Ctrl+C held back while a child process is started, then answered.
+
+    Ctrl+C reaches the whole foreground process group: a child still loading would die of it
+    with a traceback, so it starts with SIGINT blocked (the mask is inherited) and ignores it
+    before unblocking. The parent's own handler, which may run on any thread's signal, only
+    notes it meanwhile: raised halfway through `start`, it would leave a child reading half a
+    handover.
+    """
+    noted: list[int] = []
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: noted.append(signum)) if main else None
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        if main:
+            signal.signal(signal.SIGINT, previous)
+            if noted and callable(previous):
+                previous(signal.SIGINT, None)
 
 
 class Scheduler:
@@ -77,13 +102,8 @@ class Scheduler:
                       seed, receiving),
                 name=f"hapticop-{process_name}", daemon=True,
             )
-            # Ctrl+C reaches the whole foreground process group: a child still loading would die
-            # of it with a traceback. It starts with SIGINT blocked, and ignores it before unblocking.
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-            try:
+            with _sigint_held():
                 process.start()
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             receiving.close()
             child = ChildProcess(process_name, process, sending, threads)
             for thread in threads:

@@ -12,6 +12,7 @@ import signal
 import threading
 from collections.abc import Callable
 from enum import IntEnum
+from pathlib import Path
 
 from hapticop.composition.description import Composition
 from hapticop.composition.lcsm import State
@@ -23,6 +24,7 @@ from hapticop.runtime.region import Region
 from hapticop.runtime.scheduler import Scheduler
 
 SECOND = 1_000_000_000
+STARTUP_BOUND_NS = 60 * SECOND  # a thread's process gets this long to load before the run goes on without it
 WATCH_PROCESSES_NS = 10_000_000  # a lost process is noticed within 10 ms (the streams' ages tell sooner)
 
 
@@ -89,6 +91,8 @@ class Supervisor:
             self.log.info("duration %s reached", format_duration(self.duration_ns))
             self.request_shutdown()
         self._watch_processes()
+        if self.shutdown_at is not None and self._processes_loading(now, started):
+            self.shutdown_at = now  # the shutdown's time runs from when every thread can take part in it
         if self.shutdown_at is None and self.region.flag("system.stop"):
             self.log.info("the coordination asked to stop")
             self.request_shutdown()
@@ -123,7 +127,7 @@ class Supervisor:
         counts from this moment. A thread that never starts does not hold this up past a minute.
         """
         region = self.region
-        if not (region.cycles > 0).all() and now - started < 60 * SECOND:
+        if not (region.cycles > 0).all() and now - started < STARTUP_BOUND_NS:
             return
         self.operating_ns = now
         for name in ("latency", "latency_max", "compute", "compute_max", "missed", "e2e", "e2e_max", "sim_ns"):
@@ -132,6 +136,13 @@ class Supervisor:
         region.cpu_base[:] = region.cpu_ns
         region.system[Region.OPERATING_NS] = now
         self.log.info("every thread runs, %.1f s after start: timing is counted from here", (now - started) / SECOND)
+
+    def _processes_loading(self, now: int, started: int) -> bool:
+        """Threads started in processes of their own that have not run a cycle yet: still loading
+        (seconds on a busy machine). A shutdown asked meanwhile (Ctrl+C during start-up) waits
+        for them, within the start-up bound, rather than forcing them."""
+        region = self.region
+        return now - started < STARTUP_BOUND_NS and bool(((region.go != 0) & (region.cycles == 0)).any())
 
     def request_shutdown(self) -> None:
         if self.shutdown_at is not None:
@@ -212,14 +223,43 @@ class Supervisor:
         for signum, handler in (previous or {}).items():
             signal.signal(signum, handler)
 
-    def exit_status(self) -> ExitStatus:
-        """After the run: failure with its reasons, an interruption, or success."""
-        layout = self.region.layout
-        failed = [owner for owner, index in layout.owner_index.items() if self.region.failed[index] != OK]
+    def exit_status(self, description: Description, run_dir: Path) -> ExitStatus:
+        """After the run: failure with its reasons, an interruption, or success.
+
+        A run is a failure when an owner failed, a thread was lost or the shutdown was forced,
+        and also when it is incomplete: an activity that started never reached running, or one
+        that ran did not leave the results it promises. An interrupted run is incomplete by
+        the user's choice: it says what is missing and keeps the interrupted status.
+        """
+        layout, region = self.region.layout, self.region
+        failed = [owner for owner, index in layout.owner_index.items() if region.failed[index] != OK]
         for owner in failed:
-            self.reasons.append(f"'{owner}' failed ({failure(self.region, owner)})")
-        if self.reasons:  # forced shutdown, lost thread, refused scripted patch, failed owner...
-            return ExitStatus.FAILURE
+            self.reasons.append(f"'{owner}' failed ({failure(region, owner)})")
+        missing = self._incomplete(description, run_dir, set(failed))
+        self.reasons.extend(missing)
+        if self.reasons and not (self.interrupted is not None and len(self.reasons) == len(missing)):
+            return ExitStatus.FAILURE  # forced shutdown, lost thread, refused scripted patch, failed owner...
         if self.interrupted is not None:
             return self.interrupted
         return ExitStatus.SUCCESS
+
+    def _incomplete(self, description: Description, run_dir: Path, failed: set[str]) -> list[str]:
+        """Activities that started but never ran, and results promised but not left."""
+        region, reasons = self.region, []
+        for name, resolved in description.activities.items():
+            index = region.layout.owner_index.get(name)
+            thread = description.owner_thread.get(name)
+            if index is None or name in failed or (thread and self.scheduler.lost(thread)):
+                continue  # said already
+            reached = int(region.reached[index])
+            if not reached & (1 << State.RUNNING):
+                if reached & (1 << State.CREATION):  # its thread started it
+                    furthest = max(s for s in (State.CREATION, State.RESOURCE_CONFIGURATION,
+                                               State.CAPABILITY_CONFIGURATION, State.PAUSING) if reached & (1 << s))
+                    reasons.append(f"'{name}' never reached running (it got as far as "
+                                   f"{furthest.flag_name.replace('_', ' ')})")
+                continue
+            lost = [f for f in resolved.block.promises(resolved.params) if not (run_dir / f).exists()]
+            if lost:
+                reasons.append(f"'{name}' ran but left no {', '.join(lost)} in {run_dir}: results lost")
+        return reasons

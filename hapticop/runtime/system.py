@@ -195,7 +195,8 @@ class System:
             self.supervisor.restore_signals(previous)
             self.service.stop()
             self.scheduler.stop()
-        return Outcome(self.supervisor.exit_status(), self.run_dir, self.supervisor.reasons)
+        return Outcome(self.supervisor.exit_status(self.description, self.run_dir), self.run_dir,
+                       self.supervisor.reasons)
 
     def close(self) -> None:
         """Release everything, whether the system ran, was interrupted, or was half built. Another
