@@ -311,8 +311,9 @@ def schema(
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
+    from hapticop.runtime.preflight import DevicesMissing
     from hapticop.runtime.rundirs import RunDirectoryError
-    from hapticop.runtime.supervisor import ForcedExit
+    from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
         app()
@@ -325,6 +326,9 @@ def main() -> None:
     except RunDirectoryError as error:  # a run directory that is not safely ours: said, not traced
         print(f"hapticop: {error}", file=sys.stderr)
         sys.exit(2)
+    except DevicesMissing as error:  # the hardware is not there: nothing was started
+        print(f"hapticop: {error}", file=sys.stderr)
+        sys.exit(int(ExitStatus.UNAVAILABLE))
     except Exception as error:  # noqa: BLE001 - the last line of defence for the user interface
         if os.environ.get("HAPTICOP_DEBUG"):
             raise

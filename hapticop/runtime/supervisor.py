@@ -35,6 +35,7 @@ class ForcedExit(BaseException):
 class ExitStatus(IntEnum):
     SUCCESS = 0
     FAILURE = 1
+    UNAVAILABLE = 69  # devices the composition needs are not there: not started (sysexits' EX_UNAVAILABLE)
     INTERRUPTED = 130
     TERMINATED = 143
 

@@ -30,6 +30,7 @@ from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.described import Description
 from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
+from hapticop.runtime.preflight import DevicesMissing, missing_devices
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.rundirs import new_run_directory
@@ -82,6 +83,9 @@ class System:
         self.file, self.options = source.file, options
         self.name = composition.name or Path(self.file).stem
         self.virtual = options.clock == "virtual"
+        missing = missing_devices(loaded)
+        if missing:  # before anything is made: nothing is left behind
+            raise DevicesMissing(self.name, missing)
         self.clock = VirtualClock() if self.virtual else RealtimeClock()
         self.run_dir = options.run_dir or new_run_directory(self.name)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
