@@ -120,6 +120,7 @@ class System:
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
         if not self.virtual:
+            realtime.warn_missing(list(composition.threads.values()), composition.cpu_dma_latency, self.log)
             self.scheduler.spawn_processes(source.tree, self.run_dir, options.seed)
             realtime.prepare_process([composition.threads[t] for t in local], self.log)
             if self.live.scripted:
