@@ -33,9 +33,9 @@ from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.preflight import DevicesMissing, missing_devices
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
-from hapticop.runtime.rundirs import new_run_directory
+from hapticop.runtime.rundirs import directory_mode, new_run_directory
 from hapticop.runtime.scheduler import Scheduler
-from hapticop.runtime.service import ControlService
+from hapticop.runtime.service import ControlService, control_path
 from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 from hapticop.validation import Validated
@@ -53,6 +53,7 @@ class RunOptions:
     shutdown_timeout_ns: int = 5 * SECOND
     echo: bool = True  # errors and warnings to the console
     control: str | None = None  # control socket name or path (default: the composition's name)
+    group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
 
 
 @dataclass
@@ -86,8 +87,13 @@ class System:
         missing = missing_devices(loaded)
         if missing:  # before anything is made: nothing is left behind
             raise DevicesMissing(self.name, missing)
+        self.control_path = None if self.virtual else control_path(options.control, self.name)
         self.clock = VirtualClock() if self.virtual else RealtimeClock()
-        self.run_dir = options.run_dir or new_run_directory(self.name)
+        if options.run_dir is None:
+            self.run_dir = new_run_directory(self.name, group=options.group_readable)
+        else:
+            self.run_dir = options.run_dir
+            self.run_dir.mkdir(mode=directory_mode(options.group_readable), parents=True, exist_ok=True)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
         self.region = self.scheduler = self.built = None
@@ -189,7 +195,7 @@ class System:
     def run(self) -> Outcome:
         previous = self.supervisor.install_signals()
         if not self.virtual:
-            self.service.start(self.options.control)
+            self.service.start(self.control_path)
         try:
             if not self.virtual:
                 self.scheduler.run_realtime(self.main)
