@@ -60,7 +60,8 @@ def _sigint_held():
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        if main:
+        if main:  # None: a handler not set from Python; Python's own is the nearest
+            previous = signal.default_int_handler if previous is None else previous
             signal.signal(signal.SIGINT, previous)
             if noted and callable(previous):
                 previous(signal.SIGINT, None)
