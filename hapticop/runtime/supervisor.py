@@ -142,8 +142,11 @@ class Supervisor:
         """Threads started in processes of their own that have not run a cycle yet: still loading
         (seconds on a busy machine). A shutdown asked meanwhile (Ctrl+C during start-up) waits
         for them, within the start-up bound, rather than forcing them."""
-        region = self.region
-        return now - started < STARTUP_BOUND_NS and bool(((region.go != 0) & (region.cycles == 0)).any())
+        if now - started >= STARTUP_BOUND_NS:
+            return False
+        region, index = self.region, self.region.layout.thread_index
+        return any(region.go[index[thread]] and not region.cycles[index[thread]] and child.process.is_alive()
+                   for thread, child in self.scheduler.processes.items())  # a dead one is lost, not loading
 
     def request_shutdown(self) -> None:
         if self.shutdown_at is not None:
