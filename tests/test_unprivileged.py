@@ -74,6 +74,8 @@ def test_an_ordinary_user_runs_after_root_with_one_warning_about_real_time():
     root_runs.mkdir(mode=0o700, exist_ok=True)  # as a run by root leaves it: the ordinary user cannot enter it
     place = Path(tempfile.mkdtemp(prefix="hapticop-unprivileged-"))
     run_dir = None
+    theirs = [Path(f"/dev/shm/hapticop-{NOBODY}"), Path(f"/tmp/hapticop-{NOBODY}")]
+    made = [path for path in theirs if not path.exists()]  # removed at the end: nobody ran here before
     try:
         os.chmod(place, 0o755)
         composition = place / "unprivileged.yaml"
@@ -103,3 +105,5 @@ def test_an_ordinary_user_runs_after_root_with_one_warning_about_real_time():
         shutil.rmtree(place, ignore_errors=True)
         if run_dir is not None and run_dir.parent.name == f"hapticop-{NOBODY}":
             shutil.rmtree(run_dir, ignore_errors=True)
+        for path in made:
+            shutil.rmtree(path, ignore_errors=True)
