@@ -93,6 +93,15 @@ class EthercatMaster(Block):
             rate=RateRange(100.0, 4000.0, "smart-wheel drives expect a steady cycle near 1 kHz"),
         )
 
+    @classmethod
+    def preflight(cls, params: EthercatMasterParams, timeout_s: float) -> str | None:
+        """The real master: its network interface, and the right to open it raw."""
+        if params.driver != "pysoem":
+            return None
+        from hapticop.devices.ethercat.probe import interface_problem
+
+        return interface_problem(params.interface)
+
     def create(self) -> None:
         self.link: SegmentLink | None = None
 

@@ -124,6 +124,9 @@ def compose(
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
+    group_readable: bool = typer.Option(
+        False, "--group-readable", envvar="HAPTICOP_GROUP_READABLE",
+        help="let your group read the run's logs and results (directories 0750, files 0640; default: yours alone)"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -132,10 +135,12 @@ def compose(
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = _valid_or_exit(file, "not started")
-    os.umask(0o077)  # what the run writes (logs, results, recordings) is its owner's alone, children included
+    # What the run writes (logs, results, recordings) is its owner's alone, or also their group's
+    # to read; its child processes inherit the mask.
+    os.umask(0o027 if group_readable else 0o077)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
-                         control=control)
+                         control=control, group_readable=group_readable)
     console = Console(stderr=True)
     if not console.is_terminal:
         console.width = 160  # a log or a pipe: no need to wrap the tables
@@ -334,19 +339,25 @@ def schema(
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
+    from hapticop.runtime.control import ControlError
+    from hapticop.runtime.preflight import DevicesMissing
     from hapticop.runtime.rundirs import RunDirectoryError
-    from hapticop.runtime.supervisor import ForcedExit
+    from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
         app()
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # before the run's own handler (validating, starting): nothing was left running
+        print("hapticop: interrupted", file=sys.stderr)
         sys.exit(130)
-    except RunDirectoryError as error:  # a run directory that is not safely ours: said, not traced
+    except (RunDirectoryError, ControlError) as error:  # a directory not safely ours, a socket name that is none
         print(f"hapticop: {error}", file=sys.stderr)
         sys.exit(2)
+    except DevicesMissing as error:  # the hardware is not there: nothing was started
+        print(f"hapticop: {error}", file=sys.stderr)
+        sys.exit(int(ExitStatus.UNAVAILABLE))
     except Exception as error:  # noqa: BLE001 - the last line of defence for the user interface
         if os.environ.get("HAPTICOP_DEBUG"):
             raise

@@ -49,7 +49,7 @@ def socket_path(system: str) -> Path:
     name: `$XDG_RUNTIME_DIR/hapticop/NAME.sock`, or `/run/hapticop/NAME.sock` for root
     without XDG_RUNTIME_DIR, or `/tmp/hapticop-UID/NAME.sock`.
     """
-    if "/" in system or system.endswith(".sock"):
+    if not is_system_name(system):
         return Path(system)
     if not system or system in (".", ".."):
         raise ControlError(f"{system!r} is not a system name")
@@ -60,6 +60,11 @@ def socket_path(system: str) -> Path:
     if uid == 0:
         return Path("/run/hapticop") / f"{system}.sock"
     return Path(f"/tmp/hapticop-{uid}") / f"{system}.sock"
+
+
+def is_system_name(system: str) -> bool:
+    """A system's name, whose socket goes in the default directory (else: the socket's own path)."""
+    return not ("/" in system or system.endswith(".sock"))
 
 
 def peer_uid(connection: socket.socket) -> int | None:

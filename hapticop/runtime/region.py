@@ -116,6 +116,7 @@ class Layout:
         section("flags", (len(layout.flags) + SPARE_FLAGS,), "uint8")
         section("state", (owners,), "uint8")
         section("failed", (owners,), "uint8")
+        section("reached", (owners,), "uint8")  # a bit per LCSM state the owner has entered (1 << state)
         section("selected", (threads,), "int64")
         section("cycles", (threads,), "int64")
         section("missed", (threads,), "int64")
@@ -211,12 +212,12 @@ class Region:
         for name in self.layout.sections:
             if hasattr(self, name):
                 delattr(self, name)
-        try:
-            self.memory.close()
-        except BufferError:
-            return  # a view is still referenced somewhere; the OS frees it at exit
-        if self.owner:
+        if self.owner:  # the name goes first: it must go even if a view below keeps the mapping
             try:
                 self.memory.unlink()
             except FileNotFoundError:
                 pass
+        try:
+            self.memory.close()
+        except BufferError:
+            pass  # a view is still referenced somewhere (an exception's frames): the mapping goes at exit
