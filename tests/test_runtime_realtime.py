@@ -56,15 +56,16 @@ def test_a_killed_process_is_detected_and_reported(tmp_path):
     assert result.states["threads.main"] is State.DONE  # the rest still shut down cleanly
 
 
-def _compose_process(tmp_path, text):
+def _compose_process(tmp_path, text, ready: str | None = "noise"):
+    """`hapticop compose` in a process of its own, returned once activity `ready` runs."""
     path = tmp_path / "c.yaml"
     path.write_text(text)
     run_dir = tmp_path / "run"
     process = subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", str(path), "--run-dir", str(run_dir)],
                                cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    log = run_dir / "noise.log"
+    log = run_dir / f"{ready}.log"
     deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and not (log.exists() and "-> running" in log.read_text()):
+    while ready and time.monotonic() < deadline and not (log.exists() and "-> running" in log.read_text()):
         time.sleep(0.02)
     return process
 
@@ -255,3 +256,91 @@ def _is_spawned(pid: int) -> bool:
     """A multiprocessing 'spawn' child (not its resource tracker, which must outlive it)."""
     line = _cmdline(pid)
     return "multiprocessing.spawn" in line and "resource_tracker" not in line
+
+
+REALTIME = """
+version: 1
+name: realtime
+threads:
+  main: {period: 1ms, deploy: main, priority: 20, cpus: [FIRST], schedules: {0: [mediator, source, main_probe]}}
+  bus: {period: 2ms, deploy: process, priority: 21, cpus: [LAST], schedules: {0: [relay, bus_probe]}}
+  slow: {period: 10ms, deploy: thread, schedules: {0: [sink]}}
+activities:
+  mediator: {block: mediator}
+  source: {block: counter}
+  relay: {block: echo}
+  sink: {block: echo}
+  main_probe: {block: "tests.blocks:WhatItRunsWith"}
+  bus_probe: {block: "tests.blocks:WhatItRunsWith"}
+streams:
+  count: {from: source.count, to: relay.input}
+  relayed: {from: relay.output, to: sink.input}
+"""
+
+
+def _fifo_refused() -> str | None:
+    """Why this machine will not let a thread use SCHED_FIFO, or None (tried on a thread of our own)."""
+    if os.geteuid() != 0:
+        return "real-time scheduling needs root (or CAP_SYS_NICE and CAP_IPC_LOCK)"
+    refused: list[str] = []
+
+    def attempt() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError as error:
+            refused.append(f"the kernel refuses SCHED_FIFO here: {error.strerror}")
+
+    thread = threading.Thread(target=attempt)
+    thread.start()
+    thread.join()
+    return refused[0] if refused else None
+
+
+def _status(pid: int, field: str) -> int:
+    for line in open(f"/proc/{pid}/status").read().splitlines():
+        if line.startswith(f"{field}:"):
+            return int(line.split()[1])
+    raise AssertionError(f"no {field} in /proc/{pid}/status")
+
+
+def test_real_time_threads_get_their_policy_priority_cpus_locked_memory_and_frozen_gc(tmp_path):
+    """What the composition asks for is what the kernel gives each thread: SCHED_FIFO at its
+    priority on its CPUs, memory locked in every process with a real-time thread, the garbage
+    collector's furniture frozen once running; a thread without a priority keeps normal scheduling."""
+    if reason := _fifo_refused():
+        pytest.skip(reason)
+    cpus = sorted(os.sched_getaffinity(0))
+    text = REALTIME.replace("FIRST", str(cpus[0])).replace("LAST", str(cpus[-1]))
+    process = _compose_process(tmp_path, text, ready=None)
+    run = tmp_path / "run"
+    try:
+        deadline = time.monotonic() + 30
+        while not all((run / f"{p}.runs").exists() for p in ("main_probe", "bus_probe")):
+            assert process.poll() is None, process.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "the probes never ran"
+            time.sleep(0.02)
+        told = {p: [int(n) for n in (run / f"{p}.runs").read_text().split()] for p in ("main_probe", "bus_probe")}
+        (main_pid, main_tid, main_frozen), (bus_pid, bus_tid, bus_frozen) = told["main_probe"], told["bus_probe"]
+        assert main_pid == main_tid == process.pid  # deploy: main is the main process's own thread
+        assert bus_pid != process.pid and bus_pid in _children(process.pid)
+        for pid, tid, priority, cpu in ((main_pid, main_tid, 20, cpus[0]), (bus_pid, bus_tid, 21, cpus[-1])):
+            assert os.sched_getscheduler(tid) == os.SCHED_FIFO
+            assert os.sched_getparam(tid).sched_priority == priority
+            assert os.sched_getaffinity(tid) == {cpu}
+            assert _status(pid, "VmLck") > 0  # mlockall(MCL_CURRENT | MCL_FUTURE) took
+            others = [int(t) for t in os.listdir(f"/proc/{pid}/task") if int(t) != tid]
+            fifo = [t for t in others if _alive(t) and os.sched_getscheduler(t) == os.SCHED_FIFO]
+            assert not fifo, f"threads {fifo} of {pid} are real-time without asking"  # 'slow', the control thread
+        assert main_frozen > 0 and bus_frozen > 0  # gc.freeze() ran in each process before its activities ran
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            _, err = process.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            _, err = process.communicate()
+    assert process.returncode == 130, err[-3000:]
+    said = err + "".join(log.read_text() for log in run.glob("*.log"))
+    assert "SCHED_FIFO priority 21" in said
+    assert not [w for w in ("cannot use SCHED_FIFO", "cannot lock memory", "cannot set CPU") if w in said]
