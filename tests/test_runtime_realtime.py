@@ -9,6 +9,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -171,7 +172,6 @@ def test_the_hallway_in_real_time_scans_from_a_simulation_process_and_leaves_not
     """The simulated scanner on the simulation thread, in a process of its own outside the
     real-time loops, scans for the LIDAR thread in another; all of it gone after the run."""
     import re
-    from pathlib import Path
 
     text = (ROOT / "systems" / "hallway.yaml").read_text()
     result = compose(tmp_path, text, clock="realtime", duration="2s", name="hallway")
@@ -216,7 +216,6 @@ def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
     """SIGKILL leaves the main process no chance to shut down: its children notice, clean their
     activities (a device block would bring its device to a safe state; here the recorder saves
     what it recorded) and end, and the shared memory goes with them."""
-    shm_before = {name for name in os.listdir("/dev/shm") if name.startswith("psm_")}
     process = _compose_process(tmp_path, pipeline("process"))
     run = tmp_path / "run"
     deadline = time.monotonic() + 30
@@ -224,6 +223,8 @@ def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
         time.sleep(0.02)
     children = [pid for pid in _children(process.pid) if "process_main" in _cmdline(pid) or _is_spawned(pid)]
     assert children, "the slow thread's process was not found"
+    shared = _shared_memory(process.pid)  # this run's own segments, not whatever else runs on the machine
+    assert shared, "the run maps no shared memory"
     process.kill()
     process.wait(timeout=10)
     deadline = time.monotonic() + 10
@@ -232,9 +233,16 @@ def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
     assert not any(_alive(pid) for pid in children), "a child outlived its parent"
     assert (run / "recorder.npz").exists()  # the recorder's clean hook ran: its activity was cleaned
     deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and {n for n in os.listdir("/dev/shm") if n.startswith("psm_")} - shm_before:
+    while time.monotonic() < deadline and any(path.exists() for path in shared):
         time.sleep(0.05)
-    assert not {n for n in os.listdir("/dev/shm") if n.startswith("psm_")} - shm_before
+    assert not [path for path in shared if path.exists()]
+
+
+def _shared_memory(pid: int) -> set[Path]:
+    """The /dev/shm files process `pid` maps."""
+    with open(f"/proc/{pid}/maps") as maps:
+        return {Path(line.split(None, 5)[5].strip()) for line in maps
+                if len(line.split(None, 5)) == 6 and line.split(None, 5)[5].startswith("/dev/shm/")}
 
 
 def _read(path) -> str:
