@@ -37,7 +37,7 @@ class Stuck(Block):
 
 
 class NoiseParams(Params):
-    sigma: float = 1.0
+    sigma: float = Field(1.0, ge=0)
 
 
 class Noise(Block):
