@@ -14,6 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hapticop.composition.lcsm import State
+from hapticop.runtime.control import request
 
 from .control_helpers import (
     PATIENCE_S,
@@ -76,6 +77,37 @@ def test_bad_requests_slow_clients_and_a_flood_leave_the_running_system_answerin
 
     while_running(tmp_path, work)
     print("\ncontrol channel figures:", json.dumps(figures))
+
+
+VALID = "activities: {noise: {params: {sigma: 2.0}}}"
+
+
+def test_known_fields_of_the_wrong_type_are_refused_not_guessed(tmp_path):
+    """A `dry_run` of "no" or 0 must not decide whether a running system changes: a patch request
+    whose fields have the wrong type is refused, naming the field, and changes nothing."""
+
+    def work(path, system):
+        noise = system.runners["noise"].block
+        before, params = system.composition.model_dump(), noise.params
+        for fields, error in [
+            ({"dry_run": "no"}, "'dry_run' must be true or false, not a string"),
+            ({"dry_run": 0}, "'dry_run' must be true or false, not a number"),
+            ({"dry_run": None}, "'dry_run' must be true or false, not null"),
+            ({"file": ["a.yaml"]}, "'file' must be a file name, not an array"),
+            ({"text": {"activities": {"noise": {"params": {"sigma": 2.0}}}}}, "'text' must be the patch's text"),
+            ({"text": None}, "'text' must be the patch's text, not null"),
+        ]:
+            reply = request(path, {"op": "patch", "text": VALID, **fields}, timeout=PATIENCE_S)
+            assert reply["ok"] is False and reply["error"].startswith(f"malformed request: {error}"), (fields, reply)
+            assert system.composition.model_dump() == before and noise.params is params
+        missing = request(path, {"op": "patch"}, timeout=PATIENCE_S)
+        assert missing["ok"] is False and "needs 'text'" in missing["error"]
+        dry = request(path, {"op": "patch", "text": VALID, "dry_run": True, "file": "sigma.yaml"}, timeout=PATIENCE_S)
+        assert dry["ok"] is True and dry["applied"] is False and system.composition.model_dump() == before
+        applied = request(path, {"op": "patch", "text": VALID, "dry_run": False}, timeout=PATIENCE_S)
+        assert applied["ok"] is True and applied["applied"] is True and noise.params.sigma == 2.0
+
+    while_running(tmp_path, work)
 
 
 # -- property tests: whatever arrives on the socket, the running system answers and stays as it was ----------
