@@ -38,6 +38,10 @@ BAD_REQUESTS = [
     b'{"op": "explode"}\n',
     b'{"op": "patch", "text": "' + b"a: &a [x]\\n" + b'"}\n',
     b'{"op": "patch", "text": 7}\n',
+    # a few hundred bytes whose aliases would name 10**9 values in a `test` operation (the patch)
+    json.dumps({"op": "patch", "text": "- op: test\n  path: /name\n  value:\n    l0: &l0 [x, x, x, x, x, x, x]\n"
+                + "".join(f"    l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * 10) + "]\n" for i in range(1, 10))}
+               ).encode() + b"\n",
 ]
 
 
