@@ -157,6 +157,38 @@ def test_patches_on_a_live_realtime_system(tmp_path, deploy):
     while_running(tmp_path, work, text=base(deploy), ready="relay")
 
 
+def test_the_haptic_controllers_gain_patched_live_reaches_the_running_controller(tmp_path):
+    """The hallway on the wall clock: `hapticop patch` changes the centring spring of the running haptic
+    controller, whose PD is rebuilt with it; gains it must refuse (NaN, negative, or beside a change it
+    cannot make live) leave the description, the block's parameters and its PD as they were."""
+    from .conftest import SYSTEMS
+
+    def work(path, system):
+        haptic = system.runners["haptic"].block
+        assert haptic.pd.params.kp_n_per_m == 55.0
+
+        applied = hapticop_patch(path, "activities: {haptic: {params: {centring: {kp_n_per_m: 30.0}}}}", tmp_path)
+        assert applied.returncode == 0 and applied.stdout.strip().endswith("applied"), applied.stderr
+        centring = system.composition.activities["haptic"].params["centring"]
+        assert centring == {"kp_n_per_m": 30.0, "kd_ns_per_m": 0.2, "force_limit_n": 10.0}  # merged, not replaced
+        assert haptic.params.centring.kp_n_per_m == 30.0
+        wait_for(lambda: haptic.built_for is haptic.params, "the controller rebuilt its laws with the new gain")
+        assert haptic.pd.params.kp_n_per_m == 30.0 and haptic.pd.params.kd_ns_per_m == 0.2
+
+        before, params, pd = system.composition.model_dump(), haptic.params, haptic.pd
+        for refused in [
+            "activities: {haptic: {params: {centring: {kp_n_per_m: .nan}}}}",
+            "- {op: replace, path: /activities/haptic/params/centring/kp_n_per_m, value: -5.0}",
+            "activities: {haptic: {params: {centring: {kp_n_per_m: 40.0}}}}\nthreads: {main: {period: 2ms}}",
+        ]:
+            reply = request(path, {"op": "patch", "text": refused}, timeout=PATIENCE_S)
+            assert reply["ok"] is False and reply["diagnostics"], (refused, reply)
+            assert system.composition.model_dump() == before, refused
+            assert haptic.params is params and haptic.pd is pd and pd.params.kp_n_per_m == 30.0, refused
+
+    while_running(tmp_path, work, text=(SYSTEMS / "hallway.yaml").read_text(), ready="haptic")
+
+
 NOT_FINITE = [
     "- {op: add, path: /activities/noise/params, value: {sigma: .nan}}",
     "activities: {noise: {params: {sigma: .inf}}}",
