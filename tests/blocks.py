@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import gc
+import os
+import threading
 from typing import Literal
 
 import numpy as np
@@ -39,7 +42,7 @@ class Stuck(Block):
 
 
 class NoiseParams(Params):
-    sigma: float = 1.0
+    sigma: float = Field(1.0, ge=0)
 
 
 class Noise(Block):
@@ -302,3 +305,18 @@ class Gain(Block):
     def clean(self):
         (self.run_dir / f"{self.name}.gains").write_text(" ".join(f"{g:g}" for g in self.seen))
         (self.run_dir / f"{self.name}.retuned").write_text(repr(self.retuned))
+
+
+class WhatItRunsWith(Block):
+    """Writes, once it runs, where it runs and what the garbage collector's permanent generation
+    holds (gc.freeze), for a test to read from outside the process."""
+
+    def create(self):
+        self.told = False
+
+    def compute(self):
+        if not self.told:
+            self.told = True
+            told = self.run_dir / f"{self.name}.runs"
+            told.with_suffix(".part").write_text(f"{os.getpid()} {threading.get_native_id()} {gc.get_freeze_count()}")
+            told.with_suffix(".part").rename(told)  # whole, or not there

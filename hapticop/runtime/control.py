@@ -342,7 +342,7 @@ class ControlServer:
         if depth > MAX_DEPTH:
             return {"ok": False, "error": f"malformed request: nested deeper than {MAX_DEPTH} levels"}
         try:
-            message = json.loads(line, parse_constant=_refuse_constant)
+            message = json.loads(line, parse_constant=_refuse_constant, parse_int=_bounded_int)
         except Exception as error:  # noqa: BLE001 - whatever a parse raises is the client's mistake
             return {"ok": False, "error": f"malformed request: not JSON ({error})"}
         if not isinstance(message, dict):
@@ -390,6 +390,16 @@ def _nesting_depth(line: bytes, limit: int) -> int:
 
 def _refuse_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number a request may carry")
+
+
+MAX_DIGITS = 1000  # an integer a request carries is an id, a count or a parameter, never a bignum
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_DIGITS:
+        raise ValueError(f"an integer of {digits} digits is longer than a request may carry")
+    return int(text)
 
 
 def _encode(reply: dict) -> bytes:

@@ -23,6 +23,7 @@ MCL_CURRENT, MCL_FUTURE = 1, 2
 _lock = threading.Lock()
 _noted: set[str] = set()
 _memory_locked = False
+_process_cpus: set[int] | None = None  # the CPUs the process may use, before any thread was pinned
 
 
 def _note_once(key: str, log: Logger, message: str, *args: object) -> None:
@@ -124,8 +125,42 @@ def prepare_process(threads: list[Thread], log: Logger) -> None:
     mlockall walks every mapped page (tens of milliseconds with numpy loaded), so it is
     done here, once, rather than inside a cycle where it would count as missed deadlines.
     """
+    global _process_cpus
+    if _process_cpus is None:
+        _process_cpus = os.sched_getaffinity(0)
     if any(spec.priority is not None for spec in threads):
         lock_memory(log)
+
+
+def process_cpus() -> set[int]:
+    return _process_cpus if _process_cpus is not None else set(range(os.cpu_count() or 1))
+
+
+def plain() -> None:
+    """The calling thread back to normal scheduling on every CPU of the process: a thread starts
+    with its creator's policy, priority and CPUs, which are not its own (its resource
+    configuration applies what it declares)."""
+    normal_scheduling()
+    try:
+        os.sched_setaffinity(0, process_cpus())
+    except OSError:
+        pass  # CPUs taken away since: whatever the kernel left us
+
+
+class Saved:
+    """The calling thread's scheduling, to give back when a run ends on a thread it borrowed
+    (a system run in-process makes its caller's thread its main loop)."""
+
+    def __init__(self) -> None:
+        self.policy, self.param = os.sched_getscheduler(0), os.sched_getparam(0)
+        self.cpus = os.sched_getaffinity(0)
+
+    def restore(self) -> None:
+        try:
+            os.sched_setscheduler(0, self.policy, self.param)
+            os.sched_setaffinity(0, self.cpus)
+        except OSError:
+            pass  # nothing was changed that we may change back
 
 
 def normal_scheduling() -> None:
@@ -150,11 +185,10 @@ def apply(spec: Thread, log: Logger) -> None:
         except PermissionError:
             _note_once("fifo", log, "cannot use SCHED_FIFO (needs root or CAP_SYS_NICE): threads run with "
                        "normal scheduling and their deadlines are not protected")
-    if spec.cpus:
-        try:
-            os.sched_setaffinity(0, spec.cpus)
-        except OSError as error:
-            _note_once(f"cpus{spec.cpus}", log, "cannot set CPU affinity %s: %s", spec.cpus, error.strerror)
+    try:
+        os.sched_setaffinity(0, spec.cpus or process_cpus())  # no CPUs named: not its creator's either
+    except OSError as error:
+        _note_once(f"cpus{spec.cpus}", log, "cannot set CPU affinity %s: %s", spec.cpus, error.strerror)
 
 
 def hold_cpu_dma_latency(microseconds: int, log: Logger):

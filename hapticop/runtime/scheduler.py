@@ -146,12 +146,14 @@ class Scheduler:
     def run_realtime(self, main: CyclicThread) -> None:
         """The main thread's loop, on this (the process's main) thread, until it is done."""
         hold = None
+        borrowed = realtime.Saved()  # the caller's thread: given back as it was when the run ends
         wanted = self.composition.cpu_dma_latency
         if wanted is not None and any(spec.priority is not None for spec in self.composition.threads.values()):
             hold = realtime.hold_cpu_dma_latency(wanted, self.log)
         try:
             main.run_realtime(self.first_deadline(self.main_name), _never)
         finally:
+            borrowed.restore()
             if hold is not None:
                 hold.close()
 

@@ -64,9 +64,12 @@ class ControlService:
             return {"ok": True, "status": self.status()}
         if op != "patch":
             return {"ok": False, "error": f"unknown request {op!r}; expected 'status' or 'patch'"}
+        if wrong := _wrong_field(request):
+            return {"ok": False, "error": f"malformed request: {wrong}"}
+        file = request.get("file", "<patch>")
         try:
-            patch = load_patch(request.get("text", ""), request.get("file", "<patch>"))
-            pending = self.live.prepare(patch, request.get("file", "<patch>"))
+            patch = load_patch(request["text"], file)
+            pending = self.live.prepare(patch, file)
         except PatchError as error:
             return {"ok": False, "error": "patch refused", "diagnostics": [d.to_json() for d in error.diagnostics]}
         result = {"ok": True, "diff": pending.diff, "changes": pending.plan.describe()}
@@ -105,3 +108,23 @@ class ControlService:
                       if mode.when in layout.flag_index and region.flag(mode.when)],
             "timing": timing(region, composition),
         }
+
+
+PATCH_FIELDS = {"text": (str, "the patch's text"), "file": (str, "a file name"), "dry_run": (bool, "true or false")}
+
+
+def _wrong_field(request: dict) -> str | None:
+    """What is wrong with a patch request's fields, or None: a field of the wrong type is refused, not
+    guessed at (a `dry_run` of "no" or 0 must not decide whether a running system changes)."""
+    if "text" not in request:
+        return "a patch request needs 'text', the patch"
+    for name, (kind, what) in PATCH_FIELDS.items():
+        if name in request and not isinstance(request[name], kind):
+            return f"'{name}' must be {what}, not {_json_type(request[name])}"
+    return None
+
+
+def _json_type(value: object) -> str:
+    names = {bool: "a boolean", int: "a number", float: "a number", str: "a string", list: "an array",
+             dict: "an object", type(None): "null"}
+    return names.get(type(value), type(value).__name__)

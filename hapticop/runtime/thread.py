@@ -211,6 +211,8 @@ class CyclicThread:
         clock = self.clock
         spin = self.spec.busy_wait
         on_data = self.spec.wake == "data"
+        if self.apply_realtime:
+            realtime.plain()  # until its resource configuration, not its creator's real time
         while not region.system[Region.TERMINATE] and not should_stop():
             if on_data and self._wait_for_data(deadline):
                 self.cycle()  # data woke us before the deadline: an extra cycle, off the grid
