@@ -386,7 +386,7 @@ def test_a_run_in_process_gives_its_callers_thread_back_as_it_was(tmp_path):
     before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0)
     cpus = sorted(before[2])
     text = REALTIME.replace("FIRST", str(cpus[0])).replace("LAST", str(cpus[-1]))
-    result = run_until(tmp_path, text, lambda system: (tmp_path / "run-c" / "main_probe.runs").exists(),
-                       "the main loop ran its activities")
+    result = run_until(tmp_path, text, lambda system: (tmp_path / "run-c" / "main_probe.runs").exists()
+                       and system.state("sink") is State.RUNNING, "the main loop ran its activities, and the sink runs")
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0)) == before
