@@ -515,3 +515,72 @@ def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
     assert "all 7 slaves operational" in (run / "ethercat_watchdog.log").read_text()
     pose = np.load(run / "trajectory.npz")["pose"]  # the world's pose is the emulated robot's
     assert pose[-1, 0] - pose[0, 0] > 0.05  # the wheels, on SYNC0, drove it down the hallway
+
+
+KILL_MAIN = r'''
+"""Inside the sandbox: drive with the real master, SIGKILL the main process, watch the segment."""
+import json, os, signal, subprocess, sys, time
+
+def status():
+    out = subprocess.run([sys.executable, "-m", "hapticop.cli", "ethercat", "fault", "status"],
+                         capture_output=True, text=True).stdout
+    return json.loads(out)
+
+def until(condition, what, bound_s):
+    deadline = time.monotonic() + bound_s  # a bound against hanging, not a timing claim
+    while not condition():
+        if time.monotonic() > deadline:
+            print(json.dumps({"never": what, "status": status()}))
+            sys.exit(1)
+        time.sleep(0.05)
+
+def descendants(pid):
+    found, todo = [], [pid]
+    while todo:
+        here = todo.pop()
+        for task in os.listdir(f"/proc/{here}/task"):
+            try:
+                with open(f"/proc/{here}/task/{task}/children") as f:
+                    kids = [int(k) for k in f.read().split()]
+            except OSError:
+                kids = []
+            found += kids
+            todo += kids
+    return found
+
+def alive(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+system = subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", "systems/hallway_ethercat.yaml",
+                           "--duration", "120s", "--run-dir", sys.argv[1]],
+                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+until(lambda: all(w["live"] and w["enabled"] for w in status()["wheels"]), "every wheel drives", 90)
+children = descendants(system.pid)
+os.kill(system.pid, signal.SIGKILL)
+system.wait()
+until(lambda: not any(alive(c) for c in children), "every child process of the killed system ends", 10)
+final = status()
+print(json.dumps({"children": len(children), "states": [s["state"] for s in final["slaves"]],
+                  "outputs": final["outputs"], "wheels": final["wheels"]}))
+'''
+
+
+def test_when_the_main_process_is_killed_the_fieldbus_disables_the_drives_and_lets_the_segment_go(tmp_path):
+    """The fieldbus process outlives a SIGKILLed main process only to leave its device safe: it
+    writes drives-disabled outputs, takes every slave back to INIT and ends (not the slaves'
+    own watchdogs tripping on a wire gone quiet, which is what a process that simply died leaves)."""
+    import json
+    import sys
+
+    script = tmp_path / "kill_main.py"
+    script.write_text(KILL_MAIN)
+    done = _hapticop("ethercat", "sandbox", "--", sys.executable, str(script), str(tmp_path / "run"), timeout=180)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-2000:]
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    assert seen["children"] >= 2  # the fieldbus and watchdog processes (and the simulation's)
+    assert seen["states"] == [1] * 7, seen  # INIT, asked for: no SAFE-OP+ERROR from a tripped watchdog
+    assert all(set(outputs) == {"0"} for outputs in seen["outputs"]), seen["outputs"]  # drives disabled, no current
