@@ -181,6 +181,9 @@ class EthercatWatchdogParams(Params):
                                  "counter is healthy (an AL error in SAFE-OP keeps it full)")
     retry_lost_ms: float = Field(100.0, gt=0, description="how often to try to recover a lost slave (each try "
                                  "holds pysoem's GIL through its timeouts)")
+    fault_hold_ms: float = Field(200.0, ge=0, description="a raised slave_fault stays raised at least this long "
+                                 "after the segment is healthy again: every loop that must hold the robot sees it, "
+                                 "and a flapping wheel does not jerk the robot back into motion")
 
 
 class EthercatWatchdog(Block):
@@ -209,6 +212,7 @@ class EthercatWatchdog(Block):
         self.healthy = False
         self.check = None
         self.last_poll_ns = 0
+        self.fault_until_ns = 0
 
     def configure_resources(self) -> None:
         """What the cycle compares against, from the parameters (again after a live change)."""
@@ -257,4 +261,7 @@ class EthercatWatchdog(Block):
             self.healthy = healthy
         flags = self.flags
         flags["all_operational"] = healthy
-        flags["slave_fault"] = not healthy and seen
+        now, fault = self.clock.now_ns(), not healthy and seen
+        if fault:
+            self.fault_until_ns = now + int(self.params.fault_hold_ms * 1e6)
+        flags["slave_fault"] = fault or now < self.fault_until_ns
