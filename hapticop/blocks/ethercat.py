@@ -217,8 +217,13 @@ class EthercatWatchdog(Block):
     def configure_resources(self) -> None:
         """What the cycle compares against, from the parameters (again after a live change)."""
         p = self.params
-        self.all_in_op = bytes([AL_OP]) * p.slaves
+        self.in_op = np.zeros(p.slaves, dtype=bool)  # scratch: which slaves are in OP this cycle
         self.expected_wkc, self.lost_after = p.expected_working_counter, p.lost_after_cycles
+
+    def _all_in_op(self, states: np.ndarray) -> bool:
+        """Every slave in OP, compared in place (a bytes copy per cycle would allocate)."""
+        np.equal(states, AL_OP, out=self.in_op)
+        return bool(self.in_op.all())
 
     def _recover(self) -> bool:
         """SOEM's check on the master of this process: True while every slave is in OP."""
@@ -250,7 +255,7 @@ class EthercatWatchdog(Block):
         short = self.short_cycles = self.short_cycles + 1 if int(counter.value) != self.expected_wkc else 0
         seen = states.seq > 0
         healthy = (in_op and seen and stale < lost_after and short < lost_after
-                   and states.value.tobytes() == self.all_in_op)
+                   and self._all_in_op(states.value))
         if healthy != self.healthy:
             if healthy:
                 self.log.info("all %d slaves operational", self.params.slaves)
