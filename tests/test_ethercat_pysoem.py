@@ -396,8 +396,13 @@ def recovery_run(tmp_path_factory):
 
         def scenario(system):
             try:
-                _until(lambda: speed() > 0.1 and every_wheel_drives(), "the robot drives on every wheel")
+                def calm() -> bool:  # driving, commanded to, and no stop held from an earlier fault
+                    return (speed() > 0.1 and every_wheel_drives() and not system.flag("ropod.stop")
+                            and SetpointWatch.zero_changes[-1:] == [False])
+
+                _until(calm, "the robot drives on every wheel, no stop held")
                 for fault, args, undo, lasting in FAULTS:
+                    _until(calm, f"before {fault}: the robot drives on every wheel, no stop held")
                     zeros, stops = len(SetpointWatch.zero_changes), stops_raised()
                     box.fault(fault, **args)
                     _until(lambda: True in SetpointWatch.zero_changes[zeros:],
