@@ -10,6 +10,7 @@ own thread (`service.py`).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import sys
 from collections.abc import Callable
@@ -28,6 +29,7 @@ from hapticop.runtime.described import Description
 from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.modes import Modes
+from hapticop.runtime.recorder import InlineRecorder, RecorderProcess, plan_of
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.rundirs import new_run_directory
@@ -50,6 +52,7 @@ class RunOptions:
     shutdown_timeout_ns: int = 5 * SECOND
     echo: bool = True  # errors and warnings to the console
     control: str | None = None  # control socket name or path (default: the composition's name)
+    record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
 
 
 @dataclass
@@ -74,6 +77,9 @@ class System:
 
     def __init__(self, validated: Validated, options: RunOptions):
         source, loaded = validated.source, validated.graph.loaded
+        tree = source.tree
+        if options.record is not None and loaded.composition.record is None:
+            tree, loaded = _recording_all(tree, loaded)
         composition = loaded.composition
         if options.duration_ns is None and composition.duration is not None:
             options = dataclasses.replace(options, duration_ns=composition.duration)
@@ -84,7 +90,7 @@ class System:
         self.run_dir = options.run_dir or new_run_directory(self.name)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
-        self.description = Description.of(source.tree, loaded)
+        self.description = Description.of(tree, loaded)
         self.layout = layout_of(loaded, validated.flags)
         self.region = Region.create(self.layout)
         self.flag_index = self.layout.flag_index
@@ -104,8 +110,15 @@ class System:
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
         self.finished = False
+        self.recorder: RecorderProcess | InlineRecorder | None = None
+        self.recording: dict | None = None  # what the recorder recorded and lost, once it finished
+        if self.layout.recorded:
+            path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"
+            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual)
+            self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
+                             RecorderProcess(plan, self.region.name))
         if not self.virtual:
-            self.scheduler.spawn_processes(source.tree, self.run_dir, options.seed)
+            self.scheduler.spawn_processes(tree, self.run_dir, options.seed)
             realtime.prepare_process([composition.threads[t] for t in local], self.log)
             if self.live.scripted:
                 self.live.prepare_scripted()
@@ -145,6 +158,8 @@ class System:
         """The main thread's duty before each of its cycles: live changes, then supervision."""
         self.live.apply_due(self.clock.now_ns() - int(self.region.system[Region.STARTED_NS]))
         self.modes.apply_due()  # after the patches: a mode's values stay over a patched activity's
+        if self.virtual and self.recorder is not None:
+            self.recorder.between_cycles()
         self.supervisor.check(self.description)
 
     # -- what a live patch may touch (live.LiveTarget) -----------------------------------
@@ -185,9 +200,21 @@ class System:
             self.supervisor.restore_signals(previous)
             self.service.stop()
             self.scheduler.stop()
+            self._stop_recorder()
         return Outcome(self.supervisor.exit_status(), self.run_dir, self.supervisor.reasons)
 
+    def _stop_recorder(self) -> None:
+        """The loops are done: the recorder takes the last samples and finishes the file."""
+        if self.recorder is None:
+            return
+        self.recording, lost = self.recorder.stop()
+        self.recorder = None
+        if lost:
+            self.supervisor.reasons.append(lost)
+            self.log.error(lost)
+
     def close(self) -> None:
+        self._stop_recorder()  # a run that never ran still leaves a finished file
         self.writer.stop()
         self.built = None  # drop the views into the region before it is released
         self.main = None
@@ -204,6 +231,16 @@ class RunResult:
     flags: set[str]
     markings: dict[str, dict[str, int]]
     virtual: bool
+    recording: dict | None = None  # the recorder's summary: the file, and per stream written, recorded, dropped
+
+
+def _recording_all(tree, loaded: Loaded):
+    """`--record` on a file that records nothing: every stream, as if it said `record: {}`."""
+    from hapticop.composition.description import Record
+
+    tree = copy.copy(tree)
+    tree["record"] = {"streams": "all"}
+    return tree, dataclasses.replace(loaded, composition=loaded.composition.model_copy(update={"record": Record()}))
 
 
 def run_system(validated: Validated, options: RunOptions,
@@ -222,6 +259,7 @@ def run_system(validated: Validated, options: RunOptions,
         write_timing(data, system.run_dir)
         states = {owner: system.state(owner) for owner in system.layout.owner_index}
         flags = {name for name, i in system.flag_index.items() if system.region.flags[i]}
-        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual)
+        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual,
+                         system.recording)
     finally:
         system.close()
