@@ -29,12 +29,18 @@ from hapticop.cli.devices import devices as _devices  # noqa: E402
 from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
+from hapticop.cli.recordings import info as _info  # noqa: E402
+from hapticop.cli.recordings import plot as _plot  # noqa: E402
+from hapticop.cli.recordings import recover as _recover  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
 app.command("blocks")(_blocks)
+app.command("info")(_info)
+app.command("recover")(_recover)
+app.command("plot")(_plot)
 
 
 class OutputFormat(str, Enum):
@@ -122,18 +128,22 @@ def compose(
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
+    record: str | None = typer.Option(
+        None, "--record", is_flag=False, flag_value="", metavar="[FILE]",
+        help="record the streams to an MCAP file (default: NAME.mcap in the run directory); every stream "
+             "unless the file's 'record:' chooses"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_results, print_timing
+    from hapticop.runtime.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = _valid_or_exit(file, "not started")
     os.umask(0o077)  # what the run writes (logs, results, recordings) is its owner's alone, children included
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
-                         control=control)
+                         control=control, record=record)
     console = Console(stderr=True)
     if not console.is_terminal:
         console.width = 160  # a log or a pipe: no need to wrap the tables
@@ -149,6 +159,8 @@ def compose(
     result = run_system(validated, options, on_start=announce)
     print_timing(result.timing, console, result.virtual)
     print_results(result.outcome.run_dir, console)
+    if result.recording is not None:
+        print_recording(result.recording, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")

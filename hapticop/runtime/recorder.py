@@ -256,6 +256,19 @@ class RecorderProcess:
         self.plan = plan
         self.pid = self.process.pid
 
+    def wait_started(self, timeout_s: float = 60.0) -> str | None:
+        """Before the loops run: the recorder has the region mapped and the file open (None), or
+        what went wrong. Starting takes a second or two (a new interpreter, numpy, mcap)."""
+        try:
+            if self.messages.poll(timeout_s):
+                kind, _ = self.messages.recv()
+                if kind == "started":
+                    return None
+        except (OSError, EOFError):
+            pass
+        return (f"the recorder (process {self.pid}) did not start within {timeout_s:g} s "
+                f"(exit code {self.process.exitcode}); the run goes on unrecorded")
+
     def stop(self) -> tuple[dict | None, str | None]:
         """Ask for the last drain and the finished file: (summary, None), or (None, what went wrong)."""
         try:
@@ -289,6 +302,10 @@ class InlineRecorder:
         self.recorder = Recorder(plan, self.rings, clock)
         self.clock = clock
         self.next_ns = clock() + DRAIN_INTERVAL_NS
+
+    @staticmethod
+    def wait_started() -> None:
+        return None
 
     def between_cycles(self) -> None:
         now = self.clock()

@@ -187,6 +187,13 @@ class System:
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:
+        if self.recorder is not None:
+            failed = self.recorder.wait_started()
+            if failed:
+                self.supervisor.reasons.append(failed)
+                self.log.error(failed)
+                self.recorder.stop()
+                self.recorder = None
         previous = self.supervisor.install_signals()
         if not self.virtual:
             self.service.start(self.options.control)
