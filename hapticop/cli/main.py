@@ -129,7 +129,7 @@ def compose(
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
     record: str | None = typer.Option(
-        None, "--record", is_flag=False, flag_value="", metavar="[FILE]",
+        None, "--record", metavar="[FILE]",
         help="record the streams to an MCAP file (default: NAME.mcap in the run directory); every stream "
              "unless the file's 'record:' chooses"),
 ) -> None:
@@ -326,13 +326,26 @@ def schema(
         typer.echo(text, nl=False)
 
 
+def _bare_option(argv: list[str], option: str) -> list[str]:
+    """`--record` with no value (last, before another option, or before the composition file)
+    gets the empty value that means "the default file": the command-line parser has no optional values."""
+    out = []
+    for index, arg in enumerate(argv):
+        out.append(arg)
+        following = argv[index + 1] if index + 1 < len(argv) else None
+        if arg == option and (following is None or following.startswith("-")
+                              or following.endswith((".yaml", ".yml"))):
+            out.append("")
+    return out
+
+
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
     from hapticop.runtime.rundirs import RunDirectoryError
     from hapticop.runtime.supervisor import ForcedExit
 
     try:
-        app()
+        app(args=_bare_option(sys.argv[1:], "--record"))
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))

@@ -49,6 +49,7 @@ class Contents:
 
 
 def _open(path: Path):
+    path = Path(path)
     if path.name.endswith(PART):
         raise RecordingError(f"{path} is a recording its run never finished: `hapticop recover {path}` first")
     try:

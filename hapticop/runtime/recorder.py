@@ -92,6 +92,7 @@ class Recorder:
 
     def __init__(self, plan: RecorderPlan, rings: dict[str, SpscQueue], clock: Callable[[], int]):
         self.plan, self.rings, self.clock = plan, rings, clock
+        self.cpu_started = time.process_time()  # in its own process: the recorder's CPU, for the benchmark
         now = clock()
         self.file = RecordingFile(plan.path, library=_library())
         for name, media_type, data in plan.attachments:
@@ -138,7 +139,8 @@ class Recorder:
 
     def summary(self) -> dict:
         """Per stream: samples its writer published, recorded, and lost (the ring was lapped)."""
-        return {"path": str(self.plan.path), "clock": self.plan.clock, "streams": {
+        return {"path": str(self.plan.path), "clock": self.plan.clock, "messages": self.file.messages,
+                "cpu_s": time.process_time() - self.cpu_started, "streams": {
             name: {"written": int(ring.written), "recorded": self.recorded[name], "dropped": int(ring.dropped)}
             for name, ring in self.rings.items()}}
 
