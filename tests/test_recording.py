@@ -23,14 +23,14 @@ from hapticop.cli.main import _bare_option, app
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo, part_of
 from hapticop.recording.reading import RecordingError, contents, series
 from hapticop.recording.recover import recover
-from hapticop.runtime.recorder import Recorder, RecordedRing, RecorderPlan, values
+from hapticop.runtime.recorder import RecordedRing, Recorder, RecorderPlan, values
 from hapticop.runtime.streams import SpscQueue, queue_nbytes, sample_dtype
 
 from .conftest import ROOT
 from .runtime_helpers import compose
 
-# A counter on the 1 kHz main thread and one on a 100 Hz thread: each sample's value is known
-# from its number (count = number, slow = 2 x number), and each stops after a known count.
+# A counter on the 1 kHz main thread and one on a 100 Hz thread: each publishes once per cycle it
+# runs, so each sample's value is known from its number (count = number, slow = 2 x number).
 COUNTERS = """
 version: 1
 threads:
@@ -38,9 +38,9 @@ threads:
   slow: {period: 10ms, deploy: DEPLOY, schedules: {0: [slow_counter, slow_echo]}}
 activities:
   mediator: {block: mediator}
-  counter: {block: counter, params: {stop_after: STOP}}
+  counter: {block: counter}
   echo: {block: echo}
-  slow_counter: {block: counter, params: {step: 2, stop_after: SLOW_STOP}}
+  slow_counter: {block: counter, params: {step: 2}}
   slow_echo: {block: echo}
 streams:
   count: {from: counter.count, to: echo.input}
@@ -49,9 +49,8 @@ RECORD
 """
 
 
-def counters(record: str = "record: {}", stop: int = 700, slow_stop: int = 60, deploy: str = "thread") -> str:
-    return (COUNTERS.replace("RECORD", record).replace("SLOW_STOP", str(slow_stop)).replace("STOP", str(stop))
-            .replace("DEPLOY", deploy))
+def counters(record: str = "record: {}", deploy: str = "thread") -> str:
+    return COUNTERS.replace("RECORD", record).replace("DEPLOY", deploy)
 
 
 def _messages(path, topic):
@@ -65,7 +64,7 @@ def _check_stream(path, name, scale, exactly=None):
     found = series(path, name)
     n = len(found.sequence)
     if exactly is not None:
-        assert n == exactly
+        assert n == exactly and found.values[-1] == scale * exactly  # the last value: the cycles counted
     assert n > 0
     assert np.array_equal(found.sequence, np.arange(1, n + 1))
     assert (np.diff(found.publish_ns) > 0).all()
@@ -80,23 +79,26 @@ def test_every_sample_is_recorded_with_its_number_stamp_and_value(tmp_path):
     result = compose(tmp_path, counters(), duration="2s")
     path = tmp_path / "run-c" / "c.mcap"
     assert result.recording["path"] == str(path) and path.exists() and not part_of(path).exists()
-    assert result.recording["streams"]["count"] == {"written": 700, "recorded": 700, "dropped": 0}
-    assert result.recording["streams"]["slow"] == {"written": 60, "recorded": 60, "dropped": 0}
-    _check_stream(path, "count", 1, exactly=700)  # the counter ran 700 cycles, one sample each
-    _check_stream(path, "slow", 2, exactly=60)
+    n, slow = (result.recording["streams"][s]["written"] for s in ("count", "slow"))
+    cycles = result.timing["threads"]
+    assert 1900 < n <= cycles["main"]["cycles"] and 190 < slow <= cycles["slow"]["cycles"]
+    assert result.recording["streams"]["count"] == {"written": n, "recorded": n, "dropped": 0}
+    assert result.recording["streams"]["slow"] == {"written": slow, "recorded": slow, "dropped": 0}
+    _check_stream(path, "count", 1, exactly=n)  # the counter ran n cycles, one sample each
+    _check_stream(path, "slow", 2, exactly=slow)
     found = contents(path)
     assert found.drops() == {"count": 0, "slow": 0}
-    assert found.metadata["hapticop.written"] == {"count": "700", "slow": "60"}
+    assert found.metadata["hapticop.written"] == {"count": str(n), "slow": str(slow)}
     assert found.metadata["hapticop.run"]["clock"] == "virtual"
     channel = {c.topic: c for c in found.channels}["/streams/count"]
-    assert channel.count == 700 and channel.schema == "hapticop.Int64Array"
+    assert channel.count == n and channel.schema == "hapticop.Int64Array"
     assert (channel.stream.dtype, channel.stream.shape, channel.stream.unit, channel.stream.rate_hz) == (
         "int64", (), "1", 1000.0)
     assert channel.stream.writer == "counter.count" and channel.stream.readers == ("echo.input",)
     tree = YAML(typ="safe").load(found.attachments["composition.yaml"])
     assert tree["streams"]["count"]["from"] == "counter.count" and "record" in tree
     params = json.loads(found.attachments["parameters.json"])
-    assert params["counter"]["stop_after"] == 700 and params["slow_counter"]["step"] == 2
+    assert params["counter"]["step"] == 1 and params["slow_counter"]["step"] == 2
 
 
 def test_a_recording_is_the_same_every_run(tmp_path):
@@ -121,13 +123,14 @@ def test_the_payloads_decode_with_protobufs_own_parser_and_the_stored_schema(tmp
 
 
 def test_chosen_streams_only_and_decimated(tmp_path):
-    compose(tmp_path, counters("record: {streams: [count], decimate: {count: 10}}", stop=705), duration="1s")
+    result = compose(tmp_path, counters("record: {streams: [count], decimate: {count: 10}}"), duration="1s")
     path = tmp_path / "run-c" / "c.mcap"
     found = contents(path)
     assert [c.topic for c in found.channels] == ["/streams/count"]
     assert found.channels[0].stream.every == 10
     sequence = [m[0] for m in _messages(path, "/streams/count")]
-    assert sequence == list(range(10, 701, 10))
+    written = result.recording["streams"]["count"]["written"]
+    assert written > 900 and sequence == list(range(10, written + 1, 10))
 
 
 def test_nothing_is_recorded_unless_asked(tmp_path):
@@ -146,7 +149,7 @@ def test_compose_record_records_a_file_that_says_nothing_of_it(tmp_path):
     result = run_system(validate_path(path), RunOptions(clock="virtual", duration_ns=parse_duration_ns("1s"),
                                                         run_dir=tmp_path / "run", echo=False, record=str(target)))
     assert result.recording["path"] == str(target)
-    _check_stream(target, "count", 1, exactly=700)
+    _check_stream(target, "count", 1, exactly=result.recording["streams"]["count"]["written"])
 
 
 def test_the_record_option_may_stand_alone():
@@ -160,18 +163,19 @@ def test_the_record_option_may_stand_alone():
 # -- the command line: info, plot, recover ---------------------------------------------------
 
 def test_info_plot_and_csv(tmp_path):
-    compose(tmp_path, counters(), duration="1s")
+    result = compose(tmp_path, counters(), duration="1s")
+    n, slow = (result.recording["streams"][s]["written"] for s in ("count", "slow"))
     path = tmp_path / "run-c" / "c.mcap"
     runner = CliRunner()
     shown = runner.invoke(app, ["info", str(path)])
     assert shown.exit_code == 0, shown.output
-    assert "/streams/count" in shown.output and "700" in shown.output and "int64[] [1]" in shown.output
+    assert "/streams/count" in shown.output and str(n) in shown.output and "int64[] [1]" in shown.output
     assert "composition.yaml, parameters.json" in shown.output
     table = tmp_path / "out.csv"
     exported = runner.invoke(app, ["plot", str(path), "count", "slow", "--csv", str(table)])
     assert exported.exit_code == 0, exported.output
     rows = table.read_text().splitlines()
-    assert rows[0] == "stream,sequence,publish_time_s,log_time_s,value[0]" and len(rows) == 1 + 700 + 60
+    assert rows[0] == "stream,sequence,publish_time_s,log_time_s,value[0]" and len(rows) == 1 + n + slow
     assert rows[1].startswith("count,1,0.000000000,") and rows[1].endswith(",1.0")
     picture = tmp_path / "out.png"
     drawn = runner.invoke(app, ["plot", str(path), "count", "slow[0]", "-o", str(picture)])
@@ -217,7 +221,7 @@ def test_recover_keeps_every_whole_chunk_and_says_what_was_lost(tmp_path):
     whole = file.part.stat().st_size
     file.abandon()
     damaged = tmp_path / "run.mcap.part"
-    _cut(file.part, damaged, flushed_at + (whole - flushed_at) // 2)
+    _cut(file.part, damaged, flushed_at + (whole - flushed_at) // 10)  # inside the third chunk
     found = recover(damaged)
     assert found.target == tmp_path / "run.mcap" and not found.complete
     assert found.messages == {"/streams/x": 2000} and found.lost_bytes > 0
@@ -236,9 +240,10 @@ def test_recover_keeps_every_whole_chunk_and_says_what_was_lost(tmp_path):
 
 
 def test_recovering_a_finished_file_loses_nothing(tmp_path):
-    compose(tmp_path, counters(), duration="1s")
+    result = compose(tmp_path, counters(), duration="1s")
+    n, slow = (result.recording["streams"][s]["written"] for s in ("count", "slow"))
     found = recover(tmp_path / "run-c" / "c.mcap", tmp_path / "copy.mcap")
-    assert found.complete and found.messages == {"/streams/count": 700, "/streams/slow": 60}
+    assert found.complete and found.messages == {"/streams/count": n, "/streams/slow": slow}
     assert contents(tmp_path / "copy.mcap").drops() == {"count": 0, "slow": 0}
 
 
@@ -323,13 +328,22 @@ def _pids_children(pid):
 
 
 def test_in_real_time_every_sample_reaches_the_file(tmp_path):
-    result = compose(tmp_path, counters(stop=1500, slow_stop=100), clock="realtime", duration="2500ms")
+    result = compose(tmp_path, counters(), clock="realtime", duration="2s")
     assert result.outcome.status == 0, result.outcome.reasons
     path = tmp_path / "run-c" / "c.mcap"
-    assert result.recording["streams"]["count"]["dropped"] == 0
-    _check_stream(path, "count", 1, exactly=1500)
-    _check_stream(path, "slow", 2, exactly=100)
+    streams = result.recording["streams"]
+    assert streams["count"]["dropped"] == 0 and streams["slow"]["dropped"] == 0
+    _check_stream(path, "count", 1, exactly=streams["count"]["written"])
+    _check_stream(path, "slow", 2, exactly=streams["slow"]["written"])
     assert contents(path).metadata["hapticop.run"]["clock"] == "CLOCK_MONOTONIC"
+
+
+def _running_for(system, cycles):
+    """Wait until the main loop has run this many cycles."""
+    index = system.layout.thread_index["main"]
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and system.region.cycles[index] < cycles:
+        time.sleep(0.01)
 
 
 def test_a_stalled_recorder_drops_counted_samples_and_never_holds_the_loops(tmp_path):
@@ -339,7 +353,7 @@ def test_a_stalled_recorder_drops_counted_samples_and_never_holds_the_loops(tmp_
 
     def stall(system):
         def act():
-            time.sleep(0.8)
+            _running_for(system, 500)
             os.kill(system.recorder.pid, signal.SIGSTOP)
             stalled["stopped"] = True
             time.sleep(1.2)
@@ -348,16 +362,15 @@ def test_a_stalled_recorder_drops_counted_samples_and_never_holds_the_loops(tmp_
         threading.Thread(target=act, daemon=True).start()
 
     record = "record: {depth: 200ms}"
-    result = compose(tmp_path, counters(record, stop=3000, slow_stop=300), clock="realtime", duration="4s",
-                     on_start=stall)
+    result = compose(tmp_path, counters(record), clock="realtime", duration="4s", on_start=stall)
     assert stalled and result.outcome.status == 0, result.outcome.reasons
     count = result.recording["streams"]["count"]
-    assert count["written"] == 3000  # the counter published every one of its cycles, stall or not
     assert count["dropped"] > 0 and count["recorded"] + count["dropped"] == count["written"]
     found = series(tmp_path / "run-c" / "c.mcap", "count")
     assert len(found.sequence) == count["recorded"]
     assert int(np.sum(np.diff(found.sequence) - 1)) + (int(found.sequence[0]) - 1) == count["dropped"]
     assert np.array_equal(found.values, found.sequence)  # what was kept is whole
+    assert found.values[-1] == count["written"]  # the counter published every one of its cycles, stall or not
     assert contents(tmp_path / "run-c" / "c.mcap").drops()["count"] == count["dropped"]
 
 
@@ -366,14 +379,13 @@ def test_a_killed_recorder_leaves_a_part_that_recovers(tmp_path):
 
     def kill(system):
         def act():
-            time.sleep(2.0)
+            _running_for(system, 1500)  # cycles: more than a flush's worth of samples are in the file
             killed["pid"] = system.recorder.pid
             os.kill(system.recorder.pid, signal.SIGKILL)
 
         threading.Thread(target=act, daemon=True).start()
 
-    result = compose(tmp_path, counters(stop=3000, slow_stop=300), clock="realtime", duration="3500ms",
-                     on_start=kill)
+    result = compose(tmp_path, counters(), clock="realtime", duration="3500ms", on_start=kill)
     assert killed
     assert result.recording is None and any("recorder" in r and "recover" in r for r in result.outcome.reasons)
     path = tmp_path / "run-c" / "c.mcap"
@@ -382,14 +394,14 @@ def test_a_killed_recorder_leaves_a_part_that_recovers(tmp_path):
     assert not found.complete and found.messages["/streams/count"] > 0  # flushed every second
     recovered = _check_stream(path, "count", 1)
     _check_stream(path, "slow", 2)
-    assert "hapticop.drops" not in contents(path).metadata and len(recovered.sequence) < 3000
+    assert "hapticop.drops" not in contents(path).metadata and len(recovered.sequence) < 3500
 
 
 def test_when_the_main_process_is_killed_the_recorder_finishes_the_file(tmp_path):
     """SIGKILL of the main process alone: the recorder is told by the kernel, takes what the
     rings still hold and finishes a valid file, then leaves."""
     composition = tmp_path / "c.yaml"
-    composition.write_text(counters(stop=100000, slow_stop=10000))
+    composition.write_text(counters())
     target = tmp_path / "k.mcap"
     process = subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", str(composition), "--run-dir",
                                 str(tmp_path / "run"), "--record", str(target)], cwd=ROOT,

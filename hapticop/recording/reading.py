@@ -5,6 +5,7 @@ Only finished files are read here; a `.part` left by a crash is first rewritten 
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -65,7 +66,7 @@ def contents(path: Path) -> Contents:
             summary = reader.get_summary()
             metadata = {record.name: dict(record.metadata) for record in reader.iter_metadata()}
             attachments = {record.name: bytes(record.data) for record in reader.iter_attachments()}
-        except (McapError, ValueError, EOFError) as error:
+        except (McapError, ValueError, EOFError, struct.error) as error:
             raise RecordingError(f"{path} is not a finished MCAP recording ({type(error).__name__}: {error}); "
                                  "if its run was killed, try `hapticop recover`") from None
     if summary is None or summary.statistics is None:
