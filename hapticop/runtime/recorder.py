@@ -93,7 +93,7 @@ class Recorder:
     def __init__(self, plan: RecorderPlan, rings: dict[str, SpscQueue], clock: Callable[[], int]):
         self.plan, self.rings, self.clock = plan, rings, clock
         self.cpu_started = time.process_time()  # in its own process: the recorder's CPU, for the benchmark
-        now = clock()
+        now = self.started_ns = clock()
         self.file = RecordingFile(plan.path, library=_library())
         for name, media_type, data in plan.attachments:
             self.file.attach(name, media_type, data, now)
@@ -153,6 +153,8 @@ class Recorder:
         streams = summary["streams"]
         self.file.metadata("hapticop.drops", {name: str(s["dropped"]) for name, s in streams.items()})
         self.file.metadata("hapticop.written", {name: str(s["written"]) for name, s in streams.items()})
+        self.file.metadata("hapticop.recorder", {"cpu_s": f"{summary['cpu_s']:.3f}", "messages": str(self.file.messages),
+                                                 "elapsed_s": f"{(self.clock() - self.started_ns) / 1e9:.3f}"})
         summary["path"] = str(self.file.finish())
         return summary
 
