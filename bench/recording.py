@@ -107,8 +107,8 @@ def kill(after_s: float) -> dict:
         part = target.with_name(target.name + ".part")
         process = _compose(Path(scratch) / "run", "120s", target, start_new_session=True, stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not (part.exists() and part.stat().st_size > 20000):
-            time.sleep(0.05)  # the loops run (the first samples were flushed)
+        while time.monotonic() < deadline and not (part.exists() and part.stat().st_size > 200_000):
+            time.sleep(0.05)  # the loops run: the first samples were flushed
         time.sleep(after_s)
         victims = [p for p in _session(process.pid) if "resource_tracker" not in _cmdline(p)]
         killed_ns = time.monotonic_ns()

@@ -40,6 +40,9 @@ DRAIN_INTERVAL_NS = 20_000_000  # the recorder wakes 50 times a second: a ring h
 FLUSH_INTERVAL_NS = 1_000_000_000  # a kill loses at most this much, plus one drain
 BATCH = 4096  # samples taken from one ring at a time
 PR_SET_PDEATHSIG = 1
+RECORDER_NICE = -5
+"""Normal scheduling (SCHED_OTHER), weighted above ordinary processes so that a busy machine
+does not starve it for longer than its rings hold; the real-time loops preempt it all the same."""
 
 
 class View(Protocol):
@@ -222,6 +225,10 @@ def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> 
     if os.getppid() != parent:
         orphaned.set()
     os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # never real time, whatever it inherited
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, RECORDER_NICE)
+    except OSError:
+        pass  # without the right (CAP_SYS_NICE), at the ordinary weight
     memory = shared_memory.SharedMemory(name=region_name, create=False)
     rings = _rings(plan, memory.buf)
     recorder = None
