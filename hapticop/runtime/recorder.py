@@ -156,8 +156,9 @@ class Recorder:
         streams = summary["streams"]
         self.file.metadata("hapticop.drops", {name: str(s["dropped"]) for name, s in streams.items()})
         self.file.metadata("hapticop.written", {name: str(s["written"]) for name, s in streams.items()})
-        self.file.metadata("hapticop.recorder", {"cpu_s": f"{summary['cpu_s']:.3f}", "messages": str(self.file.messages),
-                                                 "elapsed_s": f"{(self.clock() - self.started_ns) / 1e9:.3f}"})
+        self.file.metadata("hapticop.recorder", {
+            "cpu_s": f"{summary['cpu_s']:.3f}", "messages": str(self.file.messages),
+            "elapsed_s": f"{(self.clock() - self.started_ns) / 1e9:.3f}"})
         summary["path"] = str(self.file.finish())
         return summary
 

@@ -5,7 +5,8 @@ the main thread, whose mediator activity owns the coordination: through its cont
 `coordination` handle it starts the other threads (`scheduler.py`) and steps the nets
 every cycle. Between two main-thread cycles, live patches are applied (`live.py`) and the
 supervisor keeps the run bounded (`supervisor.py`); the control socket answers from its
-own thread (`service.py`).
+own thread (`service.py`). A run that records has a recorder (`recorder.py`), started before the
+loops and stopped after them.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hapticop.composition import flags as flagdefs
-from hapticop.composition.description import Composition
+from hapticop.composition.description import Composition, Record
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
@@ -243,8 +244,6 @@ class RunResult:
 
 def _recording_all(tree, loaded: Loaded):
     """`--record` on a file that records nothing: every stream, as if it said `record: {}`."""
-    from hapticop.composition.description import Record
-
     tree = copy.copy(tree)
     tree["record"] = {"streams": "all"}
     return tree, dataclasses.replace(loaded, composition=loaded.composition.model_copy(update={"record": Record()}))
