@@ -20,7 +20,7 @@ from hapticop.runtime.context import ActivityContext, FlagView, InputPort, Outpu
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region, Transport
-from hapticop.runtime.streams import QUEUE_HEADER, LatestSlot, SpscQueue, latest_nbytes, queue_nbytes
+from hapticop.runtime.streams import QUEUE_HEADER, LatestSlot, RecorderRing, SpscQueue, latest_nbytes, queue_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 
 
@@ -107,11 +107,11 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
     return objects
 
 
-def recorder_ring(region: Region, transport: Transport, port) -> SpscQueue:
+def recorder_ring(region: Region, transport: Transport, port) -> RecorderRing:
     """The recorder's ring of a stream: the loop never waits for it, and overwrites the oldest
     samples when the recorder falls a whole ring behind (the recorder counts them)."""
     capacity = (transport.nbytes - QUEUE_HEADER.itemsize) // latest_nbytes(port)
-    return SpscQueue(region.buffer_at(transport.offset, transport.nbytes), port, capacity, "drop_oldest")
+    return RecorderRing(region.buffer_at(transport.offset, transport.nbytes), port, capacity)
 
 
 def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,

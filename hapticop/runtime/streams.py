@@ -394,3 +394,15 @@ class SpscQueue:
             f"SpscQueue({self.port.describe()}, capacity={self.capacity}, {self.overflow}, "
             f"write_index={head[_W]}, read_index={head[_R]}, dropped={self.dropped})"
         )
+
+
+class RecorderRing(SpscQueue):
+    """The recorder's own ring of a stream: never refuses a sample (the oldest are overwritten and
+    counted by the recorder), and leaves the origin stamps out, which are the loops' business
+    (measured latencies), not the record's: a push costs the writing loop less."""
+
+    def __init__(self, buffer: Buffer, port: Port, capacity: int) -> None:
+        super().__init__(buffer, port, capacity, "drop_oldest")
+
+    def push(self, value: np.ndarray, stamp_ns: int, origins: np.ndarray | None = None) -> bool:
+        return SpscQueue.push(self, value, stamp_ns)
