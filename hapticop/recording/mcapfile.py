@@ -114,7 +114,8 @@ class RecordingFile:
         self._batches: dict[int, tuple[np.dtype, np.ndarray]] = {}  # a stream channel's record layout, prefix
         self._chunk = bytearray()
         self._chunk_times: list[int] = []  # first and last log time in the open chunk
-        self._index: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}  # per channel: log times, offsets
+        self._index: dict[int, list[tuple[int, np.ndarray]]] = {}  # per channel: (log time, offsets) per batch
+        self._templates: dict[int, np.ndarray] = {}
         self._chunk_indexes: list[ChunkIndex] = []
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
@@ -156,19 +157,20 @@ class RecordingFile:
         channel = self.channel(topic_of(info.name), arrays.MESSAGE_ENCODING, schema, info.metadata())
         prefix = arrays.prefix(info.nbytes)
         self._batches[channel] = (_message_records(len(prefix), info.nbytes), np.frombuffer(prefix, np.uint8))
+        self._templates[channel] = np.zeros(0, self._batches[channel][0])
         return channel
 
     # -- messages ----------------------------------------------------------------------------
-    def _added(self, channel: int, log_times: np.ndarray, offsets: np.ndarray) -> None:
+    def _added(self, channel: int, log_time_ns: int, offsets: np.ndarray) -> None:
+        """Messages appended to the open chunk at `offsets`, all logged at `log_time_ns`."""
         n = len(offsets)
-        self._index.setdefault(channel, []).append((log_times, offsets))
+        self._index.setdefault(channel, []).append((log_time_ns, offsets))
         self.counts[channel] += n
         self.messages += n
-        first, last = int(log_times.min()), int(log_times.max())
-        self.first_ns = first if self.first_ns is None else min(self.first_ns, first)
-        self.last_ns = max(self.last_ns, last)
-        self._chunk_times = [min(self._chunk_times[0], first), max(self._chunk_times[1], last)] if (
-            self._chunk_times) else [first, last]
+        self.first_ns = log_time_ns if self.first_ns is None else min(self.first_ns, log_time_ns)
+        self.last_ns = max(self.last_ns, log_time_ns)
+        times = self._chunk_times
+        self._chunk_times = [min(times[0], log_time_ns), max(times[1], log_time_ns)] if times else [log_time_ns] * 2
         if len(self._chunk) >= CHUNK_BYTES:
             self._close_chunk()
 
@@ -179,7 +181,7 @@ class RecordingFile:
                 sequence=sequence & 0xFFFFFFFF).write(builder)
         offset = len(self._chunk)
         self._chunk += builder.end()
-        self._added(channel, np.array([log_time_ns], np.uint64), np.array([offset], np.uint64))
+        self._added(channel, log_time_ns, np.array([offset], np.uint64))
 
     def write_samples(self, channel: int, samples: np.ndarray, log_time_ns: int) -> None:
         """Samples drained from a ring (`streams.sample_dtype`): each with its number as the
@@ -187,19 +189,23 @@ class RecordingFile:
         n = len(samples)
         if not n:
             return
-        layout, prefix = self._batches[channel]
-        records = np.empty(n, layout)
-        records["opcode"] = 0x05  # Message
-        records["length"] = layout.itemsize - 9
-        records["channel"] = channel
+        template = self._templates[channel]
+        if len(template) < n:  # the constant fields (opcode, length, channel, the payload's prefix), laid out once
+            layout, prefix = self._batches[channel]
+            template = np.zeros(max(n, 2 * len(template), 64), layout)
+            template["opcode"] = 0x05  # Message
+            template["length"] = layout.itemsize - 9
+            template["channel"] = channel
+            template["data"][:, :len(prefix)] = prefix
+            self._templates[channel] = template
+        records = template[:n].copy()
         records["sequence"] = samples["count"] & np.uint64(0xFFFFFFFF)
         records["log_time"] = log_time_ns
         records["publish_time"] = samples["stamp_ns"]
-        records["data"][:, :len(prefix)] = prefix
-        records["data"][:, len(prefix):] = samples["payload"]
-        offsets = len(self._chunk) + np.arange(n, dtype=np.uint64) * np.uint64(layout.itemsize)
+        records["data"][:, -samples["payload"].shape[1]:] = samples["payload"]
+        offsets = len(self._chunk) + np.arange(n, dtype=np.uint64) * np.uint64(template.itemsize)
         self._chunk += records.tobytes()
-        self._added(channel, np.full(n, log_time_ns, np.uint64), offsets)
+        self._added(channel, log_time_ns, offsets)
 
     def _close_chunk(self) -> None:
         if not self._chunk:
@@ -212,7 +218,7 @@ class RecordingFile:
         index_offsets, indexes = {}, bytearray()
         for channel, parts in self._index.items():
             pairs = np.empty((sum(len(o) for _, o in parts), 2), "<u8")
-            pairs[:, 0] = np.concatenate([t for t, _ in parts])
+            pairs[:, 0] = np.concatenate([np.full(len(o), t, np.uint64) for t, o in parts])
             pairs[:, 1] = np.concatenate([o for _, o in parts])
             index_offsets[channel] = chunk_offset + chunk_length + len(indexes)
             body = pairs.tobytes()

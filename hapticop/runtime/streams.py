@@ -369,12 +369,14 @@ class SpscQueue:
         if n <= 0:
             head[_R] = r
             return 0
-        numbers = np.arange(r, r + n, dtype=np.uint64)
-        where = (numbers % np.uint64(capacity)).astype(np.intp)
-        before = self._samples["seq"][where]
-        taken = self._samples[where]
+        first = r % capacity
+        where = (slice(first, first + n) if first + n <= capacity  # one run of slots: copied as a block
+                 else np.arange(first, first + n) % capacity)
+        before = self._samples["seq"][where].copy()
+        taken = self._samples[where].copy()
         after = self._samples["seq"][where]
-        good = (before == after) & (before % 2 == 0) & (taken["count"] == numbers + np.uint64(1))
+        numbers = np.arange(r + 1, r + n + 1, dtype=np.uint64)
+        good = (before == after) & (before % 2 == 0) & (taken["count"] == numbers)
         kept = int(np.count_nonzero(good))
         out[:kept] = taken[good]
         head[_DROP_OLD] = head[_DROP_OLD] + (n - kept)
