@@ -300,9 +300,9 @@ class Record(Strict):
     decimate: dict[Name, Annotated[int, Field(ge=1, le=1_000_000)]] = Field(
         default_factory=dict, description="record only every Nth sample of these streams, e.g. {scan_ranges: 2}")
     depth: Duration = Field(
-        1_000_000_000, description="how long the recorder may be descheduled before samples are lost: each "
+        3_000_000_000, description="how long the recorder may be descheduled before samples are lost: each "
         "recorded stream gets a ring of this many seconds of its samples, written by the loop, read by the recorder",
-        json_schema_extra={"default": "1s"})
+        json_schema_extra={"default": "3s"})
     doc: str = ""
 
 
