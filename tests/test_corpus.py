@@ -38,6 +38,7 @@ CASES = [
     ("invalid-priority-99-only-thread.yaml", "priority-99", 6, "priority 99 is refused", None),
     ("invalid-latency-unreachable.yaml", "latency-unreachable", 16, "no stream path carries data", None),
     ("invalid-latency-unknown-port.yaml", "unknown-port", 17, "has no output port 'cont'", "did you mean 'count'?"),
+    ("invalid-record-unknown-stream.yaml", "unknown-stream", 16, "names stream 'cont'", "did you mean 'count'?"),
     ("invalid-phase-too-long.yaml", "bad-value", 6, "phase must be shorter than the period", None),
     # YAML level
     ("invalid-yaml-syntax.yaml", "yaml-syntax", 7, "malformed YAML", None),

@@ -4,6 +4,7 @@ import time
 import tracemalloc
 
 import numpy as np
+import pytest
 
 from hapticop.runtime.system import RunOptions, System
 from hapticop.validation import validate_text
@@ -25,11 +26,16 @@ def _assert_nothing_stays(system, run_cycles) -> None:
     assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
 
 
-def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
-    text = counting()
+@pytest.mark.parametrize("record", ["", "record: {}"])
+def test_steady_cycles_allocate_nothing_that_stays(tmp_path, record):
+    """Recorded or not: a recorded stream's writer pushes into the recorder's ring too (the
+    recorder itself, here drained by the main process between cycles, is set aside)."""
+    text = counting() + record
     validated = validate_text(text, "alloc.yaml")
     assert validated.report.ok, validated.report.diagnostics
     system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    recorder, system.recorder = system.recorder, None
+    assert (recorder is not None) == bool(record)
     try:
         threads = system.built.threads
         main, slow = threads["main"], threads["slow"]
@@ -45,6 +51,9 @@ def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
         cycles(0, 2_000)  # everything is running and warm
         assert system.state("recorder").flag_name == "running"
         _assert_nothing_stays(system, lambda: cycles(2_000, 10_000))
+        if recorder is not None:
+            summary, _ = recorder.stop()
+            assert summary["streams"]["samples"]["written"] > 10_000
     finally:
         system.writer.stop()
         system.built = system.main = None

@@ -349,3 +349,10 @@ def test_changing_max_age_is_a_live_stream_change(hallway):
     plan = plan_changes(old, validate_patched(new_tree).composition)
     assert plan.changed_streams == ["scan_ranges"] and not plan.unsupported
     assert "stream 'scan_ranges': max_age 200ms -> 300ms" in plan.describe()
+
+
+def test_what_a_run_records_cannot_change_live(hallway):
+    tree, old = hallway
+    new_tree = apply_patch(tree, {"record": {"streams": ["handle_force"]}})
+    plan = plan_changes(old, validate_patched(new_tree).composition)
+    assert [path for path, _ in plan.unsupported] == [("record",)]

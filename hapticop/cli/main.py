@@ -30,6 +30,9 @@ from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
 from hapticop.cli.new import new as _new  # noqa: E402
+from hapticop.cli.recordings import info as _info  # noqa: E402
+from hapticop.cli.recordings import plot as _plot  # noqa: E402
+from hapticop.cli.recordings import recover as _recover  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
@@ -37,6 +40,9 @@ app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
 app.command("blocks")(_blocks)
 app.command("new")(_new)
+app.command("info")(_info)
+app.command("recover")(_recover)
+app.command("plot")(_plot)
 
 
 class OutputFormat(str, Enum):
@@ -127,11 +133,15 @@ def compose(
     group_readable: bool = typer.Option(
         False, "--group-readable", envvar="HAPTICOP_GROUP_READABLE",
         help="let your group read the run's logs and results (directories 0750, files 0640; default: yours alone)"),
+    record: str | None = typer.Option(
+        None, "--record", metavar="[FILE]",
+        help="record the streams to an MCAP file (default: NAME.mcap in the run directory); every stream "
+             "unless the file's 'record:' chooses"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_results, print_timing
+    from hapticop.runtime.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = _valid_or_exit(file, "not started")
@@ -140,7 +150,7 @@ def compose(
     os.umask(0o027 if group_readable else 0o077)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
-                         control=control, group_readable=group_readable)
+                         control=control, group_readable=group_readable, record=record)
     console = Console(stderr=True)
     if not console.is_terminal:
         console.width = 160  # a log or a pipe: no need to wrap the tables
@@ -156,6 +166,8 @@ def compose(
     result = run_system(validated, options, on_start=announce)
     print_timing(result.timing, console, result.virtual)
     print_results(result.outcome.run_dir, console)
+    if result.recording is not None:
+        print_recording(result.recording, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
@@ -337,6 +349,19 @@ def schema(
         typer.echo(text, nl=False)
 
 
+def _bare_option(argv: list[str], option: str) -> list[str]:
+    """`--record` with no value (last, before another option, or before the composition file)
+    gets the empty value that means "the default file": the command-line parser has no optional values."""
+    out = []
+    for index, arg in enumerate(argv):
+        out.append(arg)
+        following = argv[index + 1] if index + 1 < len(argv) else None
+        if arg == option and (following is None or following.startswith("-")
+                              or following.endswith((".yaml", ".yml"))):
+            out.append("")
+    return out
+
+
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
     from hapticop.runtime.control import ControlError
@@ -345,7 +370,7 @@ def main() -> None:
     from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
-        app()
+        app(args=_bare_option(sys.argv[1:], "--record"))
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))

@@ -335,6 +335,20 @@ class Latency(Strict):
     doc: str = ""
 
 
+class Record(Strict):
+    """Every sample of the chosen streams kept in one MCAP file per run, by a recorder process
+    outside the real-time loops (`hapticop compose --record` turns it on for any file)."""
+
+    streams: Literal["all"] | list[Name] = Field("all", description="the streams to record, or 'all'")
+    decimate: dict[Name, Annotated[int, Field(ge=1, le=1_000_000)]] = Field(
+        default_factory=dict, description="record only every Nth sample of these streams, e.g. {scan_ranges: 2}")
+    depth: Duration = Field(
+        3_000_000_000, description="how long the recorder may be descheduled before samples are lost: each "
+        "recorded stream gets a ring of this many seconds of its samples, written by the loop, read by the recorder",
+        json_schema_extra={"default": "3s"})
+    doc: str = ""
+
+
 class Composition(Strict):
     """A whole hapticop system: what runs, where, how it is wired and coordinated."""
 
@@ -356,6 +370,7 @@ class Composition(Strict):
         description="end-to-end latencies to measure and report, e.g. handle displacement to wheel command",
     )
     duration: Duration | None = Field(None, description="the system stops by itself after this long, e.g. '60s'")
+    record: Record | None = Field(None, description="record streams to an MCAP file while running")
     cpu_dma_latency: int | None = Field(
         0, ge=0, le=1_000_000, description="while real-time threads run, hold /dev/cpu_dma_latency at this many "
         "microseconds so deep CPU idle states do not delay wake-ups; null leaves power management alone",

@@ -11,6 +11,7 @@ own thread (`service.py`).
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import signal
 import sys
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hapticop.composition import flags as flagdefs
-from hapticop.composition.description import Composition
+from hapticop.composition.description import Composition, Record
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
@@ -32,6 +33,7 @@ from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.modes import Modes
 from hapticop.runtime.preflight import DevicesMissing, missing_devices
+from hapticop.runtime.recorder import InlineRecorder, RecorderProcess, plan_of
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.rundirs import directory_mode, new_run_directory
@@ -55,6 +57,7 @@ class RunOptions:
     echo: bool = True  # errors and warnings to the console
     control: str | None = None  # control socket name or path (default: the composition's name)
     group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
+    record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
 
 
 @dataclass
@@ -79,6 +82,9 @@ class System:
 
     def __init__(self, validated: Validated, options: RunOptions):
         source, loaded = validated.source, validated.graph.loaded
+        tree = source.tree
+        if options.record is not None and loaded.composition.record is None:
+            tree, loaded = _recording_all(tree, loaded)
         composition = loaded.composition
         if options.duration_ns is None and composition.duration is not None:
             options = dataclasses.replace(options, duration_ns=composition.duration)
@@ -99,15 +105,17 @@ class System:
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
         self.region = self.scheduler = self.built = None
         self.finished = False
+        self.recorder: RecorderProcess | InlineRecorder | None = None
+        self.recording: dict | None = None  # what the recorder recorded and lost, once it finished
         try:
-            self._build(validated, loaded, composition, options)
+            self._build(validated, tree, loaded, composition, options)
         except BaseException:  # Ctrl+C while processes start, a block that cannot be built: nothing stays
             self.close()
             raise
 
-    def _build(self, validated: Validated, loaded: Loaded, composition: Composition, options: RunOptions) -> None:
-        source = validated.source
-        self.description = Description.of(source.tree, loaded)
+    def _build(self, validated: Validated, tree, loaded: Loaded, composition: Composition,
+               options: RunOptions) -> None:
+        self.description = Description.of(tree, loaded)
         self.layout = layout_of(loaded, validated.flags)
         self.region = Region.create(self.layout)
         self.log.info("shared memory %s, %d bytes", self.region.name, self.layout.size)
@@ -127,9 +135,14 @@ class System:
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
+        if self.layout.recorded:
+            path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"
+            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual)
+            self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
+                             RecorderProcess(plan, self.region.name))
         if not self.virtual:
             realtime.warn_missing(list(composition.threads.values()), composition.cpu_dma_latency, self.log)
-            self.scheduler.spawn_processes(source.tree, self.run_dir, options.seed)
+            self.scheduler.spawn_processes(tree, self.run_dir, options.seed)
             realtime.prepare_process([composition.threads[t] for t in local], self.log)
             if self.live.scripted:
                 self.live.prepare_scripted()
@@ -196,6 +209,13 @@ class System:
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:
+        if self.recorder is not None:
+            failed = self.recorder.wait_started()
+            if failed:
+                self.supervisor.reasons.append(failed)
+                self.log.error(failed)
+                self.recorder.stop()
+                self.recorder = None
         previous = self.supervisor.install_signals()
         if not self.virtual:
             self.service.start(self.control_path)
@@ -209,8 +229,19 @@ class System:
             self.supervisor.restore_signals(previous)
             self.service.stop()
             self.scheduler.stop()
+            self._stop_recorder()
         return Outcome(self.supervisor.exit_status(self.description, self.run_dir), self.run_dir,
                        self.supervisor.reasons)
+
+    def _stop_recorder(self) -> None:
+        """The loops are done: the recorder takes the last samples and finishes the file."""
+        if self.recorder is None:
+            return
+        self.recording, lost = self.recorder.stop()
+        self.recorder = None
+        if lost:
+            self.supervisor.reasons.append(lost)
+            self.log.error(lost)
 
     def close(self) -> None:
         """Release everything, whether the system ran, was interrupted, or was half built. Another
@@ -219,6 +250,7 @@ class System:
             if self.scheduler is not None and not self.finished:
                 self.finished = True
                 self.scheduler.stop()  # processes started but never run leave before the region goes
+            self._stop_recorder()  # a run that never ran still leaves a finished file
             self.writer.stop()
             self.built = None  # drop the views into the region before it is released
             self.main = None
@@ -250,6 +282,14 @@ class RunResult:
     flags: set[str]
     markings: dict[str, dict[str, int]]
     virtual: bool
+    recording: dict | None = None  # the recorder's summary: the file, and per stream written, recorded, dropped
+
+
+def _recording_all(tree, loaded: Loaded):
+    """`--record` on a file that records nothing: every stream, as if it said `record: {}`."""
+    tree = copy.copy(tree)
+    tree["record"] = {"streams": "all"}
+    return tree, dataclasses.replace(loaded, composition=loaded.composition.model_copy(update={"record": Record()}))
 
 
 def run_system(validated: Validated, options: RunOptions,
@@ -268,6 +308,7 @@ def run_system(validated: Validated, options: RunOptions,
         write_timing(data, system.run_dir)
         states = {owner: system.state(owner) for owner in system.layout.owner_index}
         flags = {name for name, i in system.flag_index.items() if system.region.flags[i]}
-        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual)
+        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual,
+                         system.recording)
     finally:
         system.close()
