@@ -320,3 +320,18 @@ class WhatItRunsWith(Block):
             told = self.run_dir / f"{self.name}.runs"
             told.with_suffix(".part").write_text(f"{os.getpid()} {threading.get_native_id()} {gc.get_freeze_count()}")
             told.with_suffix(".part").rename(told)  # whole, or not there
+
+
+class SameName(Block):
+    """Declares 'force' both in and out: a stream could not tell them apart."""
+
+    inputs = {"force": Port("float64", (3,), "N")}
+    outputs = {"force": Port("float64", (3,), "N")}
+
+
+class BadDeclaration(Block):
+    """Its ports cannot be worked out: an author's bug."""
+
+    @classmethod
+    def interface(cls, params):
+        raise ZeroDivisionError("division by zero")

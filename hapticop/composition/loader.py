@@ -143,4 +143,22 @@ def _resolve_activities(loaded: Loaded) -> None:
             loaded.diagnostics.extend(diagnostics_from(error, block.Params, prefix=path + ("params",)))
             loaded.broken.add(("activities", name))
             continue
-        loaded.activities[name] = ResolvedActivity(name, spec, block, params, block.declare(params))
+        try:
+            interface = block.declare(params)
+        except Exception as error:  # noqa: BLE001 - an author's block: its failure is a finding, not a crash
+            loaded.diagnostics.append(Diagnostic(
+                rule="block-declaration", path=path + ("block",),
+                message=f"block '{spec.block}' could not declare its ports for these parameters: "
+                        f"{type(error).__name__}: {error}"))
+            loaded.broken.add(("activities", name))
+            continue
+        both = sorted(set(interface.inputs) & set(interface.outputs))
+        if both:  # a stream names a port by activity and name alone: it would not know which one
+            loaded.diagnostics.append(Diagnostic(
+                rule="block-declaration", path=path + ("block",),
+                message=f"block '{spec.block}' declares {', '.join(repr(p) for p in both)} as both an input and "
+                        "an output port", hint="a block's port names must differ: rename one (e.g. 'demand' in, "
+                        "'force' out)"))
+            loaded.broken.add(("activities", name))
+            continue
+        loaded.activities[name] = ResolvedActivity(name, spec, block, params, interface)
