@@ -24,6 +24,20 @@ app = typer.Typer(
 
 SYSTEMS_DIR = Path("systems")
 
+
+def _version(asked: bool) -> None:
+    if asked:
+        from hapticop import __version__
+
+        typer.echo(f"hapticop {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                          help="print hapticop's version and exit")) -> None:
+    """Declarative real-time dataflow for haptic teleoperation."""
+
 from hapticop.cli.catalogue import blocks as _blocks  # noqa: E402
 from hapticop.cli.devices import devices as _devices  # noqa: E402
 from hapticop.cli.devices import falcon as _falcon  # noqa: E402
@@ -86,9 +100,14 @@ def validate(
             for diagnostic in report.sorted():
                 typer.echo(diagnostic.to_text())
             status = "ok" if report.ok else "FAILED"
-            typer.echo(f"{report.file}: {status} ({len(report.errors)} errors, {len(report.warnings)} warnings)")
+            typer.echo(f"{report.file}: {status} ({_count(len(report.errors), 'error')}, "
+                       f"{_count(len(report.warnings), 'warning')})")
     failed = any(not r.ok or (strict and r.warnings) for r in reports)
     raise typer.Exit(1 if failed else 0)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 class ClockKind(str, Enum):
