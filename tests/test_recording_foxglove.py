@@ -123,7 +123,7 @@ def _panels(content):
 
 
 def test_the_shipped_layout_is_the_built_one_and_names_channels_the_recording_has(hallway_run):
-    shipped = (ROOT / "foxglove" / "hallway-layout.json").read_text()
+    shipped = (ROOT / "foxglove-layouts" / "hallway.json").read_text()
     assert shipped == hallway_layout()  # regenerate: python -m hapticop.recording.layout
     with open(hallway_run, "rb") as stream:
         topics = {channel.topic for channel in make_reader(stream).get_summary().channels.values()}

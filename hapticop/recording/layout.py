@@ -1,9 +1,9 @@
-"""The Foxglove layout shipped for the hallway (foxglove/hallway-layout.json), built with the SDK.
+"""The Foxglove layout shipped for the hallway (foxglove-layouts/hallway.json), built with the SDK.
 
 The 3D panel follows the robot (base_link) with the scan and the force arrow (`scene`); beside it,
 plots of the handle's position, the environment force and the commanded twist, from the raw
 stream channels against the loops' own stamps (publish time). Regenerate the file with
-`python -m hapticop.recording.layout > foxglove/hallway-layout.json`.
+`python -m hapticop.recording.layout > foxglove-layouts/hallway.json`.
 """
 
 from __future__ import annotations
