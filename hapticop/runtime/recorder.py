@@ -33,6 +33,7 @@ from hapticop.blocks.interface import Port
 from hapticop.composition.loader import Loaded
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.plan import recorded_streams
+from hapticop.recording.scene import views_for
 from hapticop.runtime.region import Layout
 from hapticop.runtime.streams import SpscQueue, sample_dtype
 
@@ -192,7 +193,7 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual
     return RecorderPlan(path, rings, clock,
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
-                        {"hapticop.run": run})
+                        {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]))
 
 
 def _library() -> str:
