@@ -182,6 +182,8 @@ class System:
         """The main thread's duty before each of its cycles: live changes, then supervision."""
         self.live.apply_due(self.clock.now_ns() - int(self.region.system[Region.STARTED_NS]))
         self.modes.apply_due()  # after the patches: a mode's values stay over a patched activity's
+        if self.virtual and self.recorder is not None:
+            self.recorder.between_cycles()
         self.supervisor.check(self.description)
 
     # -- what a live patch may touch (live.LiveTarget) -----------------------------------
