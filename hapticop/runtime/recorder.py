@@ -165,7 +165,7 @@ class Recorder:
         return summary
 
 
-def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual: bool) -> RecorderPlan:
+def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual: bool, seed: int = 0) -> RecorderPlan:
     """What a run records (the layout placed the rings), with the composition as it runs (`extends`
     resolved, `--record` applied) and every activity's resolved parameters attached."""
     import json
@@ -185,7 +185,7 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual
         rings.append(RecordedRing(info, transport.offset, transport.nbytes, plan[name].capacity))
     params = {name: resolved.params.model_dump(mode="json") for name, resolved in loaded.activities.items()}
     clock = "virtual" if virtual else "CLOCK_MONOTONIC"
-    run = {"composition": composition.name or Path(file).stem, "file": str(file), "clock": clock,
+    run = {"composition": composition.name or Path(file).stem, "file": str(file), "clock": clock, "seed": str(seed),
            "realtime_minus_clock_ns": str(time.time_ns() - time.monotonic_ns()) if not virtual else "",
            "host": platform.node(), "kernel": platform.release(), "python": platform.python_version(),
            "times": "publish_time: the writing loop's stamp at publication; log_time: when the recorder took the "

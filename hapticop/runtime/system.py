@@ -137,7 +137,7 @@ class System:
         self.main.supervisor = self._between_cycles
         if self.layout.recorded:
             path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"
-            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual)
+            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual, options.seed)
             self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
                              RecorderProcess(plan, self.region.name))
         if not self.virtual:
