@@ -104,20 +104,34 @@ class Series:
 
 def series(path: Path, stream: str) -> Series:
     """Every recorded sample of a raw stream."""
+    return series_of(path, [stream])[stream]
+
+
+def series_of(path: Path, streams: list[str]) -> dict[str, Series]:
+    """Every recorded sample of each of these raw streams, read in one pass over the file."""
     found = contents(path)
-    channel = resolve_topic(found, stream)
-    if channel.stream is None:
-        raise RecordingError(f"'{channel.topic}' is a derived channel, not a stream's samples")
-    info = channel.stream
-    sequence, publish, log, data = [], [], [], []
-    with _open(path) as handle:
-        for _, _, message in make_reader(handle).iter_messages(topics=[channel.topic], log_time_order=False):
-            sequence.append(message.sequence)
-            publish.append(message.publish_time)
-            log.append(message.log_time)
-            data.append(message.data)
-    order = np.argsort(np.asarray(publish, dtype=np.int64), kind="stable")
-    values = (np.stack([arrays.decode(d, info.dtype, info.shape) for d in data]) if data
-              else np.zeros((0, *info.shape), info.dtype))
-    return Series(info, np.asarray(sequence, dtype=np.int64)[order], np.asarray(publish, dtype=np.int64)[order],
-                  np.asarray(log, dtype=np.int64)[order], values[order])
+    channels = {}
+    for stream in streams:
+        channel = resolve_topic(found, stream)
+        if channel.stream is None:
+            raise RecordingError(f"'{channel.topic}' is a derived channel, not a stream's samples")
+        channels[channel.topic] = (stream, channel.stream)
+    taken: dict[str, tuple[list, list, list, list]] = {topic: ([], [], [], []) for topic in channels}
+    if channels:
+        with _open(path) as handle:
+            for _, channel, message in make_reader(handle).iter_messages(topics=list(channels), log_time_order=False):
+                sequence, publish, log, data = taken[channel.topic]
+                sequence.append(message.sequence)
+                publish.append(message.publish_time)
+                log.append(message.log_time)
+                data.append(message.data)
+    result = {}
+    for topic, (stream, info) in channels.items():
+        sequence, publish, log, data = taken[topic]
+        order = np.argsort(np.asarray(publish, dtype=np.int64), kind="stable")
+        values = (np.stack([arrays.decode(d, info.dtype, info.shape) for d in data]) if data
+                  else np.zeros((0, *info.shape), info.dtype))
+        result[stream] = Series(info, np.asarray(sequence, dtype=np.int64)[order],
+                                np.asarray(publish, dtype=np.int64)[order], np.asarray(log, dtype=np.int64)[order],
+                                values[order])
+    return result

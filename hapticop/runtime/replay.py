@@ -1,0 +1,592 @@
+"""Replaying a recording: an activity's recorded inputs fed back to its block, its outputs compared.
+
+The composition the run used and every activity's resolved parameters are attached to its
+recording (`recorder.plan_of`); a replay builds the chosen activity's block from them with real
+ports on a virtual clock, as the runtime would, and steps it through the cycles its thread ran,
+in order. Nothing tells the block it is replayed: its input ports read the same transports
+(a latest slot, or a queue of the stream's capacity) the runtime gives it, written with the
+recorded samples, each with its own number and publication stamp, so `valid`, `age_ns()` and
+`seq` say what they said in the run.
+
+How the recorded samples line up with the cycles (docs/recording.md, "Replay"):
+
+- the activity's cycles are the publish times of its recorded outputs (every output a cycle
+  publishes carries the cycle's time), with the thread's period filling any gap longer than
+  one and a half periods (cycles that published nothing); its creation and resource
+  configuration take the two cycles before the first, in which the blocks publish nothing;
+- before a cycle at time t, every input sample published before t is written to the port's
+  transport, in order; one published at t too when its writer ran earlier at that instant (an
+  activity before it in its thread's schedule, or a thread before its own in the file: the
+  virtual clock steps equal deadlines in file order); before a flush, the rest published at t;
+- the first cycles run the capability configuration until it completes (as the life cycle
+  does, the activity runs from the next cycle), then compute (and flush); a run that finished
+  in order cleaned its activities, so the last cycle of a block with a `clean` of its own is
+  its cleaning;
+- flags are not recorded: those the block awaits are held raised, the others lowered.
+
+Under the virtual clock this is the run itself, cycle for cycle, and the outputs are equal to
+the bit. A wall-clock recording lines up as well as its stamps allow: a sample another thread
+published while the activity computed counts as seen in that cycle.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+from pydantic import ValidationError
+
+from hapticop.blocks.base import Block
+from hapticop.composition.diagnostics import Severity
+from hapticop.composition.loader import Loaded, load_tree
+from hapticop.composition.yamlsource import SourceError, parse_text
+from hapticop.recording.mcapfile import StreamInfo
+from hapticop.recording.reading import Contents, RecordingError, Series, contents, series_of
+from hapticop.runtime.assembly import activity_rng, thread_of
+from hapticop.runtime.clock import VirtualClock
+from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
+from hapticop.runtime.logs import Level, Logger
+from hapticop.runtime.streams import LatestSlot, SpscQueue, latest_nbytes, queue_nbytes
+
+DEFAULT_BLOCK = "haptic_controller"  # what `hapticop replay` replays when not told
+
+
+class ReplayError(Exception):
+    """A recording, or an activity of it, that cannot be replayed: the file, and what is wrong."""
+
+
+@dataclass
+class Run:
+    """What a replay reads of a recording: the composition as it ran, its parameters, its streams."""
+
+    path: Path
+    found: Contents
+    loaded: Loaded
+    parameters: dict
+    virtual: bool
+    seed: int
+    finished: bool  # the run ended in order: its activities were cleaned
+    _series: dict[str, Series] = field(default_factory=dict)
+
+    @property
+    def streams(self) -> dict[str, StreamInfo]:
+        """The recorded raw streams, by name."""
+        return {c.stream.name: c.stream for c in self.found.channels if c.stream is not None}
+
+    def load(self, streams: list[str]) -> None:
+        """Read these streams' samples, those not read yet, in one pass over the file."""
+        missing = [s for s in dict.fromkeys(streams) if s not in self._series]
+        if missing:
+            try:
+                self._series.update(series_of(self.path, missing))
+            except RecordingError as error:
+                raise ReplayError(str(error)) from None
+
+    def series(self, stream: str) -> Series:
+        self.load([stream])
+        return self._series[stream]
+
+
+def open_run(path: Path) -> Run:
+    """A recording read for replay; a `ReplayError` says what it lacks."""
+    path = Path(path)
+    try:
+        found = contents(path)
+    except RecordingError as error:
+        raise ReplayError(str(error)) from None
+    attached = found.attachments
+    for name in ("composition.yaml", "parameters.json"):
+        if name not in attached:
+            raise ReplayError(f"{path}: no {name} attached: the recording does not say what ran, so there is "
+                              "nothing to replay against")
+    try:
+        source = parse_text(attached["composition.yaml"].decode(), f"{path}:composition.yaml")
+    except (SourceError, UnicodeDecodeError) as error:
+        raise ReplayError(f"{path}: its attached composition does not read: {error}") from None
+    loaded = load_tree(source.tree)
+    errors = [d for d in loaded.diagnostics if d.severity is Severity.ERROR]
+    if loaded.composition is None or errors:
+        what = errors[0].message if errors else "no composition"
+        raise ReplayError(f"{path}: its attached composition does not load here: {what}")
+    try:
+        parameters = json.loads(attached["parameters.json"])
+    except ValueError as error:
+        raise ReplayError(f"{path}: its attached parameters.json is not JSON ({error})") from None
+    if not isinstance(parameters, dict):
+        raise ReplayError(f"{path}: its attached parameters.json is not a mapping of activities to parameters")
+    run = found.metadata.get("hapticop.run", {})
+    try:
+        seed = int(run.get("seed") or 0)
+    except ValueError:
+        raise ReplayError(f"{path}: its run metadata has a seed that is not a number: {run.get('seed')!r}") from None
+    return Run(path, found, loaded, parameters, run.get("clock") == "virtual", seed,
+               "hapticop.recorder" in found.metadata)
+
+
+# -- which activities ---------------------------------------------------------------------
+
+def _inputs_of(run: Run, activity: str) -> list[tuple[str, str]]:
+    """(stream, port) of every stream the activity reads."""
+    return [(name, reader.split(".")[1]) for name, spec in run.loaded.composition.streams.items()
+            for reader in spec.readers if reader.split(".")[0] == activity]
+
+
+def _outputs_of(run: Run, activity: str) -> list[tuple[str, str]]:
+    """(stream, port) of every recorded stream the activity writes."""
+    recorded = run.streams
+    return [(name, spec.writer.split(".")[1]) for name, spec in run.loaded.composition.streams.items()
+            if spec.writer.split(".")[0] == activity and name in recorded]
+
+
+def why_not(run: Run, activity: str) -> str | None:
+    """Why the activity cannot be replayed from this recording, or None if it can."""
+    if activity not in thread_of(run.loaded.composition):
+        return "it is on no thread's schedule"
+    recorded, drops = run.streams, run.found.drops()
+    for stream, _ in _inputs_of(run, activity):
+        info = recorded.get(stream)
+        if info is None:
+            return f"its input stream '{stream}' was not recorded (record it: 'record.streams')"
+        if info.every != 1:
+            return f"its input stream '{stream}' was recorded only every {info.every}th sample"
+        if drops.get(stream):
+            return f"its input stream '{stream}' lost {drops[stream]} samples in the recording"
+    if not _outputs_of(run, activity):
+        return "none of its output streams was recorded: there is nothing to compare"
+    return None
+
+
+def choose(run: Run, wanted: list[str]) -> list[str]:
+    """The activities named (each checked), or by default the haptic controllers, or else every
+    activity with inputs, all recorded, that needs no other activity and is no simulator."""
+    activities = run.loaded.activities
+    for name in wanted:
+        if name not in activities:
+            raise ReplayError(f"{run.path}: the recorded composition has no activity '{name}' "
+                              f"(it has: {', '.join(activities)})")
+        reason = why_not(run, name)
+        if reason:
+            raise ReplayError(f"{run.path}: activity '{name}' cannot be replayed: {reason}")
+    if wanted:
+        return list(wanted)
+    able = [name for name in activities if why_not(run, name) is None]
+    haptic = [name for name in able if activities[name].spec.block == DEFAULT_BLOCK]
+    chosen = haptic or [name for name in able if _inputs_of(run, name) and not activities[name].block.simulator
+                        and not activities[name].block.needs_of(activities[name].params)]
+    if not chosen:
+        raise ReplayError(f"{run.path}: no activity can be replayed from it (every input of an activity must be "
+                          "recorded, undecimated and without drops, and one of its outputs too); name one with "
+                          "--activity to hear why")
+    return chosen
+
+
+# -- one activity, replayed ----------------------------------------------------------------
+
+class _Discard:
+    """A log sink: what a replayed block says is not the replay's business."""
+
+    @staticmethod
+    def put(_item) -> None:
+        return None
+
+
+@dataclass
+class _Feed:
+    """One input stream's recorded samples, written to the port's transport as their time comes."""
+
+    stream: str
+    write: Callable[[np.ndarray, int], object]
+    samples: Series
+    first: bool  # a sample stamped at a cycle's time was written before the activity ran in it
+    next: int = 0
+
+    def until(self, t_ns: int, inclusive: bool) -> None:
+        publish, values = self.samples.publish_ns, self.samples.values
+        i, n = self.next, len(publish)
+        while i < n and (publish[i] < t_ns or (inclusive and publish[i] == t_ns)):
+            self.write(values[i], int(publish[i]))
+            i += 1
+        self.next = i
+
+
+class _Captured:
+    """An output's transport that keeps every published sample and its stamp."""
+
+    def __init__(self) -> None:
+        self.values: list[np.ndarray] = []
+        self.stamps: list[int] = []
+
+    def write(self, value: np.ndarray, stamp_ns: int, origins=None) -> None:
+        self.values.append(np.array(value, copy=True))
+        self.stamps.append(int(stamp_ns))
+
+
+@dataclass
+class Compared:
+    """One output stream: the replayed samples against the recorded ones."""
+
+    stream: str
+    port: str
+    samples: int  # compared
+    max_diff: float
+    mismatches: int  # samples beyond the tolerance (or published at another time)
+    missing: int  # recorded samples the replay did not publish
+    extra: int  # samples the replay published beyond the recorded ones
+    first: str = ""  # where the first mismatch is, in words
+
+    @property
+    def ok(self) -> bool:
+        return not (self.mismatches or self.missing or self.extra)
+
+
+@dataclass
+class Replayed:
+    """One activity's replay."""
+
+    activity: str
+    block: str
+    thread: str
+    cycles: int
+    start_s: float
+    end_s: float
+    inputs: list[str]
+    compared: list[Compared]
+
+    @property
+    def ok(self) -> bool:
+        return all(c.ok for c in self.compared)
+
+
+class ActivityReplay:
+    """The activity's block with real ports on a virtual clock, fed from the recording."""
+
+    def __init__(self, run: Run, activity: str, run_dir: Path):
+        self.run, self.name = run, activity
+        composition = run.loaded.composition
+        resolved = run.loaded.activities[activity]
+        self.block_type = resolved.block
+        params = _parameters(run, activity, resolved.block)
+        interface = resolved.block.declare(params)
+        self.thread = thread_of(composition)[activity]
+        self.period = composition.threads[self.thread].period
+        self.on_request = resolved.spec.start == "on_request"
+        self.clock = VirtualClock()
+        now = self.clock.now_ns
+        inputs = {p: InputPort(p, spec, now) for p, spec in interface.inputs.items()}
+        outputs = {p: OutputPort(p, spec, now) for p, spec in interface.outputs.items()}
+        self.feeds: list[_Feed] = []
+        run.load([stream for stream, _ in _inputs_of(run, activity) + _outputs_of(run, activity)])
+        for stream, port in _inputs_of(run, activity):
+            spec = composition.streams[stream]
+            port_spec = interface.inputs[port]
+            samples = run.series(stream)
+            _same_kind(run, stream, f"input '{port}'", port_spec, samples.info)
+            if spec.policy.kind == "queue":
+                capacity = spec.policy.capacity
+                transport = SpscQueue(bytearray(queue_nbytes(port_spec, capacity)), port_spec, capacity,
+                                      spec.policy.overflow)
+                write = transport.push
+            else:
+                transport = LatestSlot(bytearray(latest_nbytes(port_spec)), port_spec, synchronised=False)
+                write = transport.write
+            inputs[port].connect(transport, spec.policy.kind == "queue", spec.max_age or 0)
+            self.feeds.append(_Feed(stream, write, samples, self._runs_first(spec.writer.split(".")[0])))
+        self.outputs: list[tuple[str, str, _Captured, Series]] = []
+        for stream, port in _outputs_of(run, activity):
+            recorded = run.series(stream)
+            _same_kind(run, stream, f"output '{port}'", interface.outputs[port], recorded.info)
+            captured = _Captured()
+            outputs[port].transports.append(captured)
+            self.outputs.append((stream, port, captured, recorded))
+        names = list(interface.flags_written) + list(interface.flags_read)
+        flags = np.zeros(max(len(names), 1), np.uint8)
+        for i, flag in enumerate(names):
+            flags[i] = flag in resolved.block.awaits
+        view = FlagView(flags, {f"{activity}.{flag}": i for i, flag in enumerate(names)}, activity, names)
+        log = Logger(activity, Level.ERROR, _Discard(), now)  # type: ignore[arg-type]
+        run_dir.mkdir(parents=True, exist_ok=True)
+        self.context = ActivityContext(activity, params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), view,
+                                       self.clock, log, activity_rng(run.seed, activity), run_dir,
+                                       period_ns=self.period)
+        self.ports = list(inputs.values())
+        self.run_dir = run_dir
+        self.needs = [need.activity for need in resolved.block.needs_of(params)
+                      if need.activity in run.loaded.activities]
+        self.block = self._hook("building", lambda: resolved.block(self.context))
+
+    def _runs_first(self, writer: str) -> bool:
+        """Whether the writer runs before this activity at an instant both run at."""
+        composition = self.run.loaded.composition
+        owner = thread_of(composition)
+        theirs = owner.get(writer)
+        if theirs != self.thread:
+            order = list(composition.threads)
+            return theirs is not None and order.index(theirs) < order.index(self.thread)
+        for members in composition.threads[self.thread].schedules.values():
+            if writer in members and self.name in members:
+                return members.index(writer) < members.index(self.name)
+        return False
+
+    def cycles(self) -> tuple[np.ndarray, np.ndarray]:
+        """The times of the activity's cycles, and which of them published a recorded output."""
+        stamps = np.unique(np.concatenate([recorded.publish_ns for _, _, _, recorded in self.outputs]))
+        if not len(stamps):
+            raise ReplayError(f"{self.run.path}: activity '{self.name}' published no recorded sample: "
+                              "there is nothing to compare")
+        period = self.period
+        if not self.run.virtual:  # one cycle's outputs carry stamps microseconds apart: the first stands for all
+            keep = [0]
+            for i in range(1, len(stamps)):
+                if stamps[i] - stamps[keep[-1]] > period // 2:
+                    keep.append(i)
+            stamps = stamps[keep]
+        times, published = [], []
+        for i, t in enumerate(stamps):
+            if i:
+                gap = int(t - stamps[i - 1])
+                filled = int(round(gap / period)) - 1 if gap > 1.5 * period else 0
+                for k in range(1, filled + 1):
+                    times.append(int(stamps[i - 1]) + k * period)
+                    published.append(False)
+            times.append(int(t))
+            published.append(True)
+        return np.asarray(times, np.int64), np.asarray(published, bool)
+
+    def _at(self, t_ns: int, inclusive_all: bool = False) -> None:
+        """The clock at `t_ns`, the samples due by then written, the inputs refreshed."""
+        self.clock.advance_to(max(t_ns, self.clock.now_ns()))
+        for feed in self.feeds:
+            feed.until(t_ns, inclusive_all or feed.first)
+        for port in self.ports:
+            port.refresh()
+
+    def _hook(self, what: str, call: Callable[[], object]) -> object:
+        try:
+            return call()
+        except Exception as error:  # noqa: BLE001 - a block's failure is the replay's finding, not a traceback
+            raise ReplayError(f"{self.run.path}: activity '{self.name}': its {what} raised at "
+                              f"{self.clock.now_ns() / 1e9:.6f} s: {type(error).__name__}: {error}") from None
+
+    def _configure(self, capabilities_at: int) -> bool:
+        """Create and configure the block in the cycles before `capabilities_at`, capabilities there;
+        whether they completed."""
+        block, period = self.block, self.period
+        self._at(capabilities_at - 2 * period)
+        self._hook("create", block.create)
+        self._at(capabilities_at - period)
+        if self._hook("configure_resources", block.configure_resources) is False:
+            raise ReplayError(f"{self.run.path}: activity '{self.name}': its resource configuration does not "
+                              "complete with the flags it awaits raised: replay cannot tell when it did")
+        self._at(capabilities_at)
+        return self._hook("configure_capabilities", block.configure_capabilities) is not False
+
+    def _probe(self, at: int) -> tuple[bool, bool]:
+        """Whether the capability configuration publishes (the haptic controller holds the handle while
+        it waits) and whether cleaning does (it zeroes the force), found on a block of its own in a
+        scratch directory: the first recorded output is the configuration's or the first compute's,
+        the last the cleaning's or the last compute's."""
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="hapticop-replay-") as scratch:
+            probe = ActivityReplay(self.run, self.name, Path(scratch))
+            beside = [_beside(self.run, name, probe.clock, Path(scratch)) for name in probe.needs]
+
+            def published() -> int:
+                return sum(len(captured.values) for _, _, captured, _ in probe.outputs)
+
+            probe._configure(at)
+            configuring = published()
+            try:
+                probe.block.clean()
+            except Exception:  # noqa: BLE001 - a block that cannot clean this early: it is not the cleaning that published
+                pass
+            cleaning = published() - configuring
+            for other in beside:
+                other.clean()
+        return configuring > 0, cleaning > 0
+
+    def replay(self, tolerance: float = 0.0) -> Replayed:
+        times, published = self.cycles()
+        period, block = self.period, self.block
+        start = int(times[0])
+        beside = [_beside(self.run, name, self.clock, self.run_dir) for name in self.needs]
+        configuring_publishes, cleaning_publishes = self._probe(start)
+        if configuring_publishes:
+            configured, first = self._configure(start), 1
+        else:
+            configured, first = self._configure(start - period), 0
+            if not configured:
+                raise ReplayError(f"{self.run.path}: activity '{self.name}': its capability configuration publishes "
+                                  "nothing and does not complete at once: replay cannot tell when it did")
+        running = configured and not self.on_request
+        failed = False
+        flushes = self.block_type.implements_flush()
+        cleans = self.run.finished and cleaning_publishes
+        last = len(times) - 1
+        for i, t in enumerate(times):
+            if i < first:
+                continue
+            if configured and not running and not published[i]:
+                continue  # started on request: ready, waiting for the mediator's word
+            self._at(int(t))
+            if not configured:
+                configured = self._hook("configure_capabilities", block.configure_capabilities) is not False
+                running = configured and not self.on_request
+                continue
+            running = True
+            if i == last and cleans:
+                self._hook("clean", block.clean)
+                break
+            if failed:  # a running hook raised in the run as here: the life cycle paused it
+                self._hook("pausing", block.pausing)
+                continue
+            try:
+                block.compute()
+                if flushes:
+                    self._at(int(t), inclusive_all=True)
+                    block.flush()
+            except Exception:  # noqa: BLE001 - as the life cycle: the activity pauses, its outputs safe
+                failed = True
+        if self.run.finished and not cleans:  # cleaned after its last output, publishing nothing
+            self._at(int(times[-1]) + period)
+            self._hook("clean", block.clean)
+        for other in beside:
+            other.clean()
+        origin = min((int(s.samples.publish_ns[0]) for s in self.feeds if len(s.samples.publish_ns)), default=start)
+        origin = min(origin, start)
+        compared = [_compare(stream, port, captured, recorded, tolerance, self.run.virtual, origin)
+                    for stream, port, captured, recorded in self.outputs]
+        return Replayed(self.name, self.run.loaded.activities[self.name].spec.block, self.thread, len(times),
+                        (start - origin) / 1e9, (int(times[-1]) - origin) / 1e9,
+                        [feed.stream for feed in self.feeds], compared)
+
+
+def _beside(run: Run, activity: str, clock: VirtualClock, run_dir: Path) -> Block:
+    """An activity the replayed one needs (an operator a world judges, say), created and
+    resource-configured with no ports connected, so that what it tells its run (`hapticop.published`)
+    is there as it was; it is never stepped."""
+    resolved = run.loaded.activities[activity]
+    params = _parameters(run, activity, resolved.block)
+    interface = resolved.block.declare(params)
+    names = list(interface.flags_written) + list(interface.flags_read)
+    context = ActivityContext(
+        activity, params,
+        SimpleNamespace(**{p: InputPort(p, spec, clock.now_ns) for p, spec in interface.inputs.items()}),
+        SimpleNamespace(**{p: OutputPort(p, spec, clock.now_ns) for p, spec in interface.outputs.items()}),
+        FlagView(np.zeros(max(len(names), 1), np.uint8), {f"{activity}.{f}": i for i, f in enumerate(names)},
+                 activity, names),
+        clock, Logger(activity, Level.ERROR, _Discard(), clock.now_ns), activity_rng(run.seed, activity),  # type: ignore[arg-type]
+        run_dir, period_ns=0)
+    try:
+        block = resolved.block(context)
+        block.create()
+        block.configure_resources()
+    except Exception as error:  # noqa: BLE001
+        raise ReplayError(f"{run.path}: activity '{activity}', needed beside the replayed one, does not configure "
+                          f"outside its run: {type(error).__name__}: {error}") from None
+    return block
+
+
+def _parameters(run: Run, activity: str, block: type[Block]):
+    raw = run.parameters.get(activity)
+    if not isinstance(raw, dict):
+        raise ReplayError(f"{run.path}: its attached parameters.json has no parameters for activity '{activity}'")
+    try:
+        return block.Params.model_validate(raw)
+    except ValidationError as error:
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise ReplayError(f"{run.path}: parameters.json, activity '{activity}', {where or 'parameters'}: "
+                          f"{first['msg']}") from None
+
+
+def _same_kind(run: Run, stream: str, what: str, port, info: StreamInfo) -> None:
+    if np.dtype(port.dtype) != np.dtype(info.dtype) or tuple(port.shape) != tuple(info.shape):
+        raise ReplayError(f"{run.path}: stream '{stream}' was recorded as {info.dtype}{list(info.shape)}, but the "
+                          f"{what} takes {np.dtype(port.dtype).name}{list(port.shape)} with the recorded parameters")
+
+
+def _element(stream: str, shape: tuple[int, ...], flat_index: int) -> str:
+    if not shape:
+        return stream
+    return f"{stream}[{', '.join(str(int(i)) for i in np.unravel_index(flat_index, shape))}]"
+
+
+def _compare(stream: str, port: str, captured: _Captured, recorded: Series, tolerance: float, stamps: bool,
+             origin_ns: int) -> Compared:
+    info = recorded.info
+    n = len(captured.values)
+    replayed = (np.stack(captured.values) if n else np.zeros((0, *info.shape), info.dtype)).reshape(n, -1)
+    replayed_stamps = np.asarray(captured.stamps, np.int64)
+    index = recorded.sequence - 1  # the replayed sample with the recorded one's number
+    have = (index >= 0) & (index < n)
+    mine = replayed[index[have]].astype(np.float64)
+    theirs = recorded.values.reshape(len(recorded.values), -1)[have].astype(np.float64)
+    both_nan = np.isnan(mine) & np.isnan(theirs)
+    diff = np.where(both_nan, 0.0, np.abs(mine - theirs))
+    diff[np.isnan(diff)] = math.inf  # one NaN, the other not
+    worst = diff.max(axis=1) if diff.shape[1] else np.zeros(len(diff))
+    bad = worst > tolerance
+    late = replayed_stamps[index[have]] != recorded.publish_ns[have] if stamps else np.zeros(len(worst), bool)
+    first = ""
+    wrong = np.flatnonzero(bad | late)
+    if len(wrong):
+        k = int(wrong[0])
+        number = int(recorded.sequence[have][k])
+        at = (int(recorded.publish_ns[have][k]) - origin_ns) / 1e9
+        if bad[k]:
+            j = int(np.argmax(diff[k]))
+            first = (f"at {at:.6f} s (sample {number}): {_element(stream, info.shape, j)} replayed "
+                     f"{mine[k, j]!r}, recorded {theirs[k, j]!r}")
+        else:
+            first = (f"at {at:.6f} s (sample {number}): replayed at "
+                     f"{(int(replayed_stamps[index[have]][k]) - origin_ns) / 1e9:.6f} s")
+    last_recorded = int(recorded.sequence.max()) if len(recorded.sequence) else 0
+    extra = max(0, n - last_recorded - (info.every - 1))
+    missing = int((~have).sum())
+    if not first and missing:
+        number = int(recorded.sequence[~have][0])
+        first = f"sample {number} and {missing - 1} more were recorded but not replayed"
+    elif not first and extra:
+        first = f"the replay published {extra} samples after the last recorded one"
+    return Compared(stream, port, int(have.sum()), float(worst.max()) if len(worst) else 0.0,
+                    int((bad | late).sum()), missing, extra, first)
+
+
+def replay(path: Path, activities: list[str] | None = None, tolerance: float = 0.0,
+           run_dir: Path | None = None) -> list[Replayed]:
+    """Replay the chosen activities of a recording, each from its own recorded inputs."""
+    import tempfile
+
+    run = open_run(path)
+    chosen = choose(run, list(activities or []))
+    with tempfile.TemporaryDirectory(prefix="hapticop-replay-") as scratch:
+        base = Path(run_dir) if run_dir is not None else Path(scratch)
+        return [ActivityReplay(run, name, base).replay(tolerance) for name in chosen]
+
+
+def results(path: Path, run_dir: Path, tolerance: float = 0.0) -> tuple[list[Replayed], list[Path]]:
+    """What the run's activities leave when they clean (the hallway world's trajectory, metrics and
+    picture), made again from the recording: every activity whose block promises files is
+    replayed into `run_dir`. Returns the replays and the files they left."""
+    run = open_run(path)
+    activities = run.loaded.activities
+    promising = [name for name, resolved in activities.items() if resolved.block.promises(resolved.params)]
+    if not promising:
+        raise ReplayError(f"{run.path}: no activity of its composition leaves results (a block whose "
+                          "`promises` names files, such as hallway_world)")
+    reasons = {name: why_not(run, name) for name in promising}
+    able = [name for name, reason in reasons.items() if reason is None]
+    if not able:
+        name, reason = next(iter(reasons.items()))
+        raise ReplayError(f"{run.path}: activity '{name}' cannot be replayed: {reason}")
+    run_dir = Path(run_dir)
+    replayed = [ActivityReplay(run, name, run_dir).replay(tolerance) for name in able]
+    files = [run_dir / f for name in able for f in activities[name].block.promises(activities[name].params)
+             if (run_dir / f).exists()]
+    return replayed, files
