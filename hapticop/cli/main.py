@@ -47,6 +47,8 @@ from hapticop.cli.new import new as _new  # noqa: E402
 from hapticop.cli.recordings import info as _info  # noqa: E402
 from hapticop.cli.recordings import plot as _plot  # noqa: E402
 from hapticop.cli.recordings import recover as _recover  # noqa: E402
+from hapticop.cli.recordings import replay as _replay  # noqa: E402
+from hapticop.cli.recordings import report as _report  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
@@ -57,6 +59,8 @@ app.command("new")(_new)
 app.command("info")(_info)
 app.command("recover")(_recover)
 app.command("plot")(_plot)
+app.command("replay")(_replay)
+app.command("report")(_report)
 
 
 class OutputFormat(str, Enum):

@@ -95,3 +95,65 @@ def plot(
     written = plotting.draw(chosen, target, f"{file.name}: {', '.join(streams)}")
     if written is not None:
         typer.echo(f"wrote {written}")
+
+
+def replay(
+    file: Path = typer.Argument(..., help="a recording (RUN.mcap)"),
+    activities: list[str] = typer.Option([], "--activity", "-a",
+                                         help="an activity to replay (again for more; default: the haptic "
+                                              "controller, or every activity whose inputs were all recorded)"),
+    tolerance: float = typer.Option(0.0, "--tolerance", min=0.0,
+                                    help="the largest difference still a match, in the output's unit (default: "
+                                         "equal to the bit, as a virtual-clock run replays)"),
+) -> None:
+    """Feed the recorded inputs of activities back to their blocks, cycle by cycle under the virtual
+    clock, and compare their outputs with the recorded ones; exit 1 on a mismatch, 2 if it cannot."""
+    from hapticop.runtime.replay import ReplayError
+    from hapticop.runtime.replay import replay as run_replay
+
+    try:
+        replayed = run_replay(file, activities, tolerance)
+    except ReplayError as error:
+        raise _fail(str(error), 2) from None
+    for one in replayed:
+        _print_replayed(one)
+    if not all(one.ok for one in replayed):
+        typer.echo(f"mismatch beyond the tolerance ({tolerance:g})", err=True)
+        raise typer.Exit(1)
+
+
+def _print_replayed(one) -> None:
+    typer.echo(f"{one.activity} ({one.block}, thread {one.thread}): {one.cycles} cycles from {one.start_s:.3f} s "
+               f"to {one.end_s:.3f} s; inputs {', '.join(one.inputs) or 'none'}")
+    for c in one.compared:
+        verdict = "equal" if c.ok and c.max_diff == 0 else ("within tolerance" if c.ok else f"MISMATCH {c.first}")
+        typer.echo(f"  {c.stream:<24} {c.samples:>8} samples  max |diff| {c.max_diff:<10.3g} {verdict}")
+        if c.mismatches > 1 or c.missing or c.extra:
+            typer.echo(f"  {'':<24} {c.mismatches} samples differ, {c.missing} not replayed, {c.extra} extra")
+
+
+def report(
+    file: Path = typer.Argument(..., help="a recording (RUN.mcap)"),
+    output: Path | None = typer.Option(None, "-o", "--output",
+                                       help="directory to write to (default: RUN.report beside the file)"),
+) -> None:
+    """The results a run leaves (the hallway world's trajectory, metrics and picture), made again
+    from its recording by replaying the activities that leave them."""
+    from rich.console import Console
+
+    from hapticop.runtime.replay import ReplayError, results
+    from hapticop.runtime.report import print_results
+
+    target = output if output is not None else file.with_suffix(".report")
+    try:
+        replayed, files = results(file, target)
+    except ReplayError as error:
+        raise _fail(str(error), 2) from None
+    for one in replayed:
+        _print_replayed(one)
+    for path in files:
+        typer.echo(f"wrote {path}")
+    print_results(target, Console())
+    if not all(one.ok for one in replayed):
+        typer.echo("the replayed activities' outputs differ from the recorded ones: the results may too", err=True)
+        raise typer.Exit(1)

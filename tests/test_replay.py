@@ -1,0 +1,179 @@
+"""Replaying a recorded hallway run: the haptic controller's outputs come back equal to the bit under
+the virtual clock, a tampered recording is a reported mismatch, a bad one a located error, and the
+hallway world's trajectory, metrics and picture made from the recording are the run's own."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from typer.testing import CliRunner
+
+from hapticop.cli.main import app
+from hapticop.recording import arrays
+from hapticop.recording.reading import series
+from hapticop.runtime.replay import ReplayError, replay, results
+
+from .conftest import ROOT
+from .runtime_helpers import compose
+
+cli = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A 4 s hallway run under the virtual clock, every stream recorded: the haptic loop runs from
+    about 1 s, the operator drives from about 1.3 s, and the world leaves its results."""
+    tmp = tmp_path_factory.mktemp("hallway")
+    text = (ROOT / "systems" / "hallway.yaml").read_text() + "\nrecord: {}\n"
+    result = compose(tmp, text, duration="4s", name="hallway")
+    assert not any(s["dropped"] for s in result.recording["streams"].values())
+    return tmp / "run-hallway"
+
+
+def _rewrite(source, target, *, sample=None, parameters=None, without_topic=None, attachments=True):
+    """A copy of a recording with one stream sample changed (`sample`: (topic, number, fn of the
+    array)), the parameters changed (`parameters`: fn of the dict), a channel left out, or nothing attached."""
+    with open(source, "rb") as stream, open(target, "wb") as out:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        writer = Writer(out, compression=CompressionType.ZSTD)
+        writer.start(profile="", library="test")
+        schemas = {sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channels = {cid: writer.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0),
+                                                 dict(c.metadata))
+                    for cid, c in summary.channels.items() if c.topic != without_topic}
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                continue
+            data = message.data
+            if sample is not None and channel.topic == sample[0] and message.sequence == sample[1]:
+                meta = channel.metadata
+                value = arrays.decode(data, meta["dtype"], tuple(json.loads(meta["shape"]))).copy()
+                sample[2](value)
+                raw = value.astype(np.dtype(meta["dtype"]).newbyteorder("<")).tobytes()
+                data = arrays.prefix(len(raw)) + raw
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time, message.sequence)
+        for record in reader.iter_attachments():
+            if not attachments:
+                continue
+            data = record.data
+            if parameters is not None and record.name == "parameters.json":
+                changed = json.loads(data)
+                parameters(changed)
+                data = json.dumps(changed).encode()
+            writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type, data)
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, dict(record.metadata))
+        writer.finish()
+    return target
+
+
+def test_the_haptic_controllers_outputs_replay_equal_to_the_bit(recorded):
+    path = recorded / "hallway.mcap"
+    [haptic] = replay(path)  # by default: the haptic controller
+    assert (haptic.activity, haptic.block, haptic.thread) == ("haptic", "haptic_controller", "main")
+    assert set(haptic.inputs) == {"handle_position", "handle_velocity", "scan_ranges", "scan_angles",
+                                  "platform_velocity"}
+    compared = {c.stream: c for c in haptic.compared}
+    assert set(compared) == {"handle_force", "velocity_setpoint", "environment_force"}
+    for stream, c in compared.items():
+        # the same code on the same samples in the same order: equal, not merely close
+        assert c.ok and c.max_diff == 0.0 and c.samples == len(series(path, stream).values) > 2500
+    assert np.abs(series(path, "velocity_setpoint").values).max() > 0.1  # the robot was driven: a real test
+    assert haptic.cycles == compared["handle_force"].samples
+
+
+def test_replay_on_the_command_line_says_equal_and_exits_0(recorded):
+    result = cli.invoke(app, ["replay", str(recorded / "hallway.mcap"), "--activity", "haptic"])
+    assert result.exit_code == 0, result.output
+    assert "haptic (haptic_controller, thread main)" in result.output
+    assert result.output.count("max |diff| 0 ") == 3 and "equal" in result.output
+
+
+def test_a_changed_output_sample_is_a_mismatch_at_its_time_and_element(recorded, tmp_path):
+    path = recorded / "hallway.mcap"
+    number = 2000
+    tampered = _rewrite(path, tmp_path / "t.mcap",
+                        sample=("/streams/handle_force", number, lambda v: v.__setitem__(2, v[2] + 0.25)))
+    [haptic] = replay(tampered)
+    compared = {c.stream: c for c in haptic.compared}
+    force = compared["handle_force"]
+    assert not haptic.ok and not force.ok and force.mismatches == 1
+    assert force.max_diff == pytest.approx(0.25)
+    assert f"(sample {number}): handle_force[2] replayed" in force.first
+    assert compared["velocity_setpoint"].ok and compared["environment_force"].ok
+    result = cli.invoke(app, ["replay", str(tampered)])
+    assert result.exit_code == 1 and "MISMATCH" in result.output
+    assert cli.invoke(app, ["replay", str(tampered), "--tolerance", "0.3"]).exit_code == 0
+
+
+def test_a_changed_parameter_is_a_mismatch(recorded, tmp_path):
+    def stiffer(parameters):
+        parameters["haptic"]["centring"]["kp_n_per_m"] *= 1.5
+
+    tampered = _rewrite(recorded / "hallway.mcap", tmp_path / "p.mcap", parameters=stiffer)
+    [haptic] = replay(tampered)
+    force = {c.stream: c for c in haptic.compared}["handle_force"]
+    assert not force.ok and force.max_diff > 0.01 and "handle_force[" in force.first
+    assert cli.invoke(app, ["replay", str(tampered)]).exit_code == 1
+
+
+@pytest.mark.parametrize(("change", "expected"), [
+    ({"without_topic": "/streams/scan_ranges"},
+     "activity 'haptic' cannot be replayed: its input stream 'scan_ranges' was not recorded"),
+    ({"attachments": False}, "no composition.yaml attached"),
+    ({"parameters": lambda p: p["haptic"].__setitem__("scan_points", "many")},
+     "parameters.json, activity 'haptic', scan_points: "),
+])
+def test_a_recording_that_cannot_be_replayed_is_a_located_error(recorded, tmp_path, change, expected):
+    broken = _rewrite(recorded / "hallway.mcap", tmp_path / "b.mcap", **change)
+    with pytest.raises(ReplayError, match="^" + str(broken)) as raised:
+        replay(broken, ["haptic"])
+    assert expected in str(raised.value)
+    result = cli.invoke(app, ["replay", str(broken), "-a", "haptic"])
+    assert result.exit_code == 2 and expected in result.output and "Traceback" not in result.output
+
+
+def test_bad_files_and_activities_are_located_errors(recorded, tmp_path):
+    path = recorded / "hallway.mcap"
+    text = tmp_path / "not.mcap"
+    text.write_text("version: 1\n")
+    for args, expected in (
+        ([str(text)], f"error: {text} is not a finished MCAP recording"),
+        ([str(tmp_path / "absent.mcap")], f"error: cannot read {tmp_path / 'absent.mcap'}"),
+        ([str(path), "-a", "nobody"], f"error: {path}: the recorded composition has no activity 'nobody' (it has: "),
+        ([str(path), "-a", "mediator"], f"error: {path}: activity 'mediator' cannot be replayed: none of its output"),
+    ):
+        result = cli.invoke(app, ["replay", *args])
+        assert result.exit_code == 2, result.output
+        assert expected in result.output and "Traceback" not in result.output
+
+
+def test_the_worlds_results_from_the_recording_are_the_runs_own(recorded, tmp_path):
+    """The hallway world replayed from the recording leaves the trajectory, metrics, results and
+    picture the run left, to the byte (the operator it judges configured beside it says its variant)."""
+    out = tmp_path / "report"
+    [world], files = results(recorded / "hallway.mcap", out)
+    assert world.activity == "world" and world.ok
+    assert sorted(f.name for f in files) == ["metrics.json", "results.json", "run.png", "trajectory.npz"]
+    for name in ("metrics.json", "results.json", "run.png"):
+        assert (out / name).read_bytes() == (recorded / name).read_bytes(), name
+    with np.load(out / "trajectory.npz") as mine, np.load(recorded / "trajectory.npz") as theirs:
+        assert sorted(mine.files) == sorted(theirs.files)
+        for key in theirs.files:
+            assert np.array_equal(mine[key], theirs[key]), key
+    assert json.loads((out / "metrics.json").read_text())["t_end_s"] > 2.0  # the operator drove for seconds
+
+
+def test_report_on_the_command_line(recorded, tmp_path):
+    result = cli.invoke(app, ["report", str(recorded / "hallway.mcap"), "-o", str(tmp_path / "r")])
+    assert result.exit_code == 0, result.output
+    assert f"wrote {tmp_path / 'r' / 'run.png'}" in result.output and "stop error" in result.output
+    counters = tmp_path / "c.mcap"
+    counters.write_bytes(b"")
+    result = cli.invoke(app, ["report", str(counters)])
+    assert result.exit_code == 2 and "is not a finished MCAP recording" in result.output
