@@ -16,6 +16,7 @@ from hapticop.cli.main import app
 from hapticop.recording import arrays
 from hapticop.recording.reading import series
 from hapticop.runtime.replay import ReplayError, replay, results
+from hapticop.sim.recorded_run import integrate
 
 from .conftest import ROOT
 from .runtime_helpers import compose
@@ -177,3 +178,37 @@ def test_report_on_the_command_line(recorded, tmp_path):
     counters.write_bytes(b"")
     result = cli.invoke(app, ["report", str(counters)])
     assert result.exit_code == 2 and "is not a finished MCAP recording" in result.output
+
+
+def test_a_run_with_no_world_gets_the_hallways_metrics_and_picture_from_its_streams(recorded, tmp_path):
+    """--from-streams ignores the world: the path is the ropod controller's odometry, so the metrics
+    come close to the world's own (true pose) without equalling them."""
+    out = tmp_path / "streams"
+    result = cli.invoke(app, ["report", str(recorded / "hallway.mcap"), "--from-streams", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "from the streams velocity_setpoint, platform_velocity, environment_force" in result.output
+    assert (out / "run.png").stat().st_size > 10_000
+    mine, theirs = (json.loads((d / "metrics.json").read_text()) for d in (out, recorded))
+    assert mine["ended_by"] == theirs["ended_by"]
+    assert mine["e_stop_m"] == pytest.approx(theirs["e_stop_m"], abs=0.05)
+    assert mine["side_clearance_min_m"] == pytest.approx(theirs["side_clearance_min_m"], abs=0.01)
+    assert mine["t_end_s"] == pytest.approx(theirs["t_end_s"], abs=0.2)
+
+
+def test_without_odometry_the_streams_report_says_what_is_missing(recorded, tmp_path):
+    broken = _rewrite(recorded / "hallway.mcap", tmp_path / "o.mcap", without_topic="/streams/platform_velocity")
+    result = cli.invoke(app, ["report", str(broken), "--from-streams"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"{broken}: no recorded stream from a ropod_controller block's 'platform_velocity' port" in result.output
+    unknown = cli.invoke(app, ["report", str(recorded / "hallway.mcap"), "--from-streams", "--hallway", "H9"])
+    assert unknown.exit_code == 2 and "--hallway H9: not a hallway" in unknown.output
+
+
+def test_odometry_integrates_a_twist_held_between_samples():
+    times = np.arange(0, 1_000_000_001, 1_000_000, dtype=np.int64)  # 1 s at 1 kHz
+    straight = integrate(times, np.tile([1.0, 0.0, 0.0], (len(times), 1)), (0.5, 0.0, 0.0))
+    assert straight[-1] == pytest.approx([1.5, 0.0, 0.0])
+    half_turn = integrate(times, np.tile([1.0, 0.0, np.pi], (len(times), 1)), (0.0, 0.0, 0.0))
+    assert half_turn[-1] == pytest.approx([0.0, 2 / np.pi, np.pi], abs=1e-6)  # a half circle of radius 1/pi
+    sideways = integrate(times, np.tile([0.0, 1.0, 0.0], (len(times), 1)), (0.0, 0.0, np.pi / 2))
+    assert sideways[-1] == pytest.approx([-1.0, 0.0, np.pi / 2])  # the robot's left is -x when it faces +y

@@ -136,17 +136,27 @@ def report(
     file: Path = typer.Argument(..., help="a recording (RUN.mcap)"),
     output: Path | None = typer.Option(None, "-o", "--output",
                                        help="directory to write to (default: RUN.report beside the file)"),
+    from_streams: bool = typer.Option(False, "--from-streams",
+                                      help="build the hallway's metrics and picture from the haptic, Falcon and "
+                                           "odometry streams even when an activity (a simulated world) leaves them"),
+    hallway: str | None = typer.Option(None, "--hallway",
+                                       help="the hallway the run drove (H1..H6; default: the world's, else H1)"),
 ) -> None:
-    """The results a run leaves (the hallway world's trajectory, metrics and picture), made again
-    from its recording by replaying the activities that leave them."""
+    """The results a run leaves (the hallway world's trajectory, metrics and picture), made again from
+    its recording by replaying the activities that leave them; a run with none (the real robot) gets
+    the hallway's metrics and picture from its recorded streams."""
     from rich.console import Console
 
-    from hapticop.runtime.replay import ReplayError, results
+    from hapticop.runtime.replay import ReplayError, leaving_results, open_run, results
     from hapticop.runtime.report import print_results
 
     target = output if output is not None else file.with_suffix(".report")
     try:
-        replayed, files = results(file, target)
+        run = open_run(file)
+        if from_streams or not leaving_results(run):
+            _from_streams(run, target, hallway)
+            return
+        replayed, files = results(run, target)
     except ReplayError as error:
         raise _fail(str(error), 2) from None
     for one in replayed:
@@ -157,3 +167,42 @@ def report(
     if not all(one.ok for one in replayed):
         typer.echo("the replayed activities' outputs differ from the recorded ones: the results may too", err=True)
         raise typer.Exit(1)
+
+
+def _from_streams(run, target: Path, hallway: str | None) -> None:
+    """The hallway's metrics.json and run.png from the recorded streams (`sim.recorded_run`)."""
+    from hapticop.sim.hallway import HallwayGeometry
+    from hapticop.sim.metrics import compute_metrics, metrics_json
+    from hapticop.sim.recorded_run import READ, MissingStream, hallway_log, writers
+
+    composition = run.loaded.composition
+    if hallway is None:
+        worlds = [a for a in run.loaded.activities.values() if a.spec.block == "hallway_world"]
+        hallway = str(getattr(worlds[0].params, "hallway", "H1")) if worlds else "H1"
+    try:
+        geometry = HallwayGeometry.named(hallway)
+    except (KeyError, ValueError):
+        raise _fail(f"--hallway {hallway}: not a hallway of docs/hallway-experiment.md §2 (H1 to H6)", 2) from None
+    found = writers({name: spec.writer for name, spec in composition.streams.items() if name in run.streams},
+                    {name: spec.block for name, spec in composition.activities.items()})
+    try:
+        log = hallway_log(found, run.series, geometry.start)
+        metrics = compute_metrics(log, geometry)
+    except (MissingStream, ValueError) as error:
+        raise _fail(f"{run.path}: {error}", 2) from None
+    target.mkdir(parents=True, exist_ok=True)
+    (target / "metrics.json").write_text(metrics_json(metrics))
+    used = [found[writer] for writer in READ if writer in found]
+    typer.echo(f"{run.path}: hallway {hallway} from the streams {', '.join(used)} (the path is odometry)")
+    typer.echo(f"wrote {target / 'metrics.json'}")
+    try:
+        from hapticop.sim.plot import plot_run
+
+        typer.echo(f"wrote {plot_run(log, geometry, target / 'run.png', title=f'{hallway}, from {run.path.name}')}")
+    except RuntimeError as error:  # matplotlib missing: the numbers are there
+        typer.echo(f"no picture: {error}", err=True)
+    for label, value, unit in (("ended by", metrics.ended_by, ""), ("stop error against dist2", metrics.e_stop_m, "m"),
+                               ("least side clearance", metrics.side_clearance_min_m, "m"),
+                               ("peak force", metrics.force_peak_n, "N"), ("rms force", metrics.force_rms_n, "N")):
+        shown = value if isinstance(value, str) else f"{value:.3f} {unit}".strip()
+        typer.echo(f"  {label:<26} {shown}")

@@ -570,13 +570,18 @@ def replay(path: Path, activities: list[str] | None = None, tolerance: float = 0
         return [ActivityReplay(run, name, base).replay(tolerance) for name in chosen]
 
 
-def results(path: Path, run_dir: Path, tolerance: float = 0.0) -> tuple[list[Replayed], list[Path]]:
+def leaving_results(run: Run) -> list[str]:
+    """The activities whose blocks leave files in the run directory when they clean (`promises`)."""
+    return [name for name, resolved in run.loaded.activities.items() if resolved.block.promises(resolved.params)]
+
+
+def results(path: Path | Run, run_dir: Path, tolerance: float = 0.0) -> tuple[list[Replayed], list[Path]]:
     """What the run's activities leave when they clean (the hallway world's trajectory, metrics and
     picture), made again from the recording: every activity whose block promises files is
     replayed into `run_dir`. Returns the replays and the files they left."""
-    run = open_run(path)
+    run = path if isinstance(path, Run) else open_run(path)
     activities = run.loaded.activities
-    promising = [name for name, resolved in activities.items() if resolved.block.promises(resolved.params)]
+    promising = leaving_results(run)
     if not promising:
         raise ReplayError(f"{run.path}: no activity of its composition leaves results (a block whose "
                           "`promises` names files, such as hallway_world)")

@@ -9,9 +9,10 @@ Time-weighted quantities weight each sample by the interval to the next one (sam
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Literal
 
 import numpy as np
@@ -335,3 +336,20 @@ def _effort_and_oscillation(
         at_limit |= (np.abs(d["force_device"]) >= limit * (1.0 - 1e-6)).any(axis=1)
     return dict(effort_ns=effort, handle_speed_rms_mps=speed_rms, oscillation_index_mps=osc,
                 sustained_oscillation=bool(osc > 0.02), divergence=_longest_run_s(at_limit, w) > 0.5)
+
+
+def metrics_json(metrics: RunMetrics) -> str:
+    """The metrics as the run directory's metrics.json: plain JSON, null for what is not a number."""
+    return json.dumps(_plain(asdict(metrics)), indent=2)
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return None if not np.isfinite(value) else float(value)
+    if isinstance(value, (np.integer, int, bool, np.bool_)) and not isinstance(value, str):
+        return value.item() if hasattr(value, "item") else value
+    return value if isinstance(value, (str, type(None))) else str(value)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict
 from typing import Literal
 
 import numpy as np
@@ -115,7 +114,7 @@ class HallwayWorld(Block):
             self.flags["finished"] = True
 
     def clean(self) -> None:
-        from hapticop.sim.metrics import compute_metrics
+        from hapticop.sim.metrics import compute_metrics, metrics_json
         from hapticop.sim.world_share import find_operator, withdraw_world
 
         withdraw_world(self.run_dir, self.name)
@@ -126,7 +125,7 @@ class HallwayWorld(Block):
         self.recorder.meta.update(operator=self.variant, variation=operator.get("variation"))
         self.recorder.save(self.run_dir / "trajectory.npz")
         metrics = compute_metrics(self.recorder, self.geometry)
-        (self.run_dir / "metrics.json").write_text(json.dumps(_plain(asdict(metrics)), indent=2))
+        (self.run_dir / "metrics.json").write_text(metrics_json(metrics))
         if self.params.plot:
             try:
                 from hapticop.sim.plot import plot_run
@@ -174,15 +173,3 @@ def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray)
     out[1] = sy + s * rx + c * ry
     out[2] = st + rt
     return out
-
-
-def _plain(value):
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, (np.floating, float)):
-        return None if not np.isfinite(value) else float(value)
-    if isinstance(value, (np.integer, int, bool, np.bool_)) and not isinstance(value, str):
-        return value.item() if hasattr(value, "item") else value
-    return value if isinstance(value, (str, type(None))) else str(value)
