@@ -303,16 +303,8 @@ class ActivityReplay:
             captured = _Captured()
             outputs[port].transports.append(captured)
             self.outputs.append((stream, port, captured, recorded))
-        names = list(interface.flags_written) + list(interface.flags_read)
-        flags = np.zeros(max(len(names), 1), np.uint8)
-        for i, flag in enumerate(names):
-            flags[i] = flag in resolved.block.awaits
-        view = FlagView(flags, {f"{activity}.{flag}": i for i, flag in enumerate(names)}, activity, names)
-        log = Logger(activity, Level.ERROR, _Discard(), now)  # type: ignore[arg-type]
         run_dir.mkdir(parents=True, exist_ok=True)
-        self.context = ActivityContext(activity, params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), view,
-                                       self.clock, log, activity_rng(run.seed, activity), run_dir,
-                                       period_ns=self.period)
+        self.context = _context(run, activity, params, interface, self.clock, run_dir, inputs, outputs, self.period)
         self.ports = list(inputs.values())
         self.run_dir = run_dir
         self.needs = [need.activity for need in resolved.block.needs_of(params)
@@ -473,15 +465,9 @@ def _beside(run: Run, activity: str, clock: VirtualClock, run_dir: Path) -> Bloc
     resolved = run.loaded.activities[activity]
     params = _parameters(run, activity, resolved.block)
     interface = resolved.block.declare(params)
-    names = list(interface.flags_written) + list(interface.flags_read)
-    context = ActivityContext(
-        activity, params,
-        SimpleNamespace(**{p: InputPort(p, spec, clock.now_ns) for p, spec in interface.inputs.items()}),
-        SimpleNamespace(**{p: OutputPort(p, spec, clock.now_ns) for p, spec in interface.outputs.items()}),
-        FlagView(np.zeros(max(len(names), 1), np.uint8), {f"{activity}.{f}": i for i, f in enumerate(names)},
-                 activity, names),
-        clock, Logger(activity, Level.ERROR, _Discard(), clock.now_ns), activity_rng(run.seed, activity),  # type: ignore[arg-type]
-        run_dir, period_ns=0)
+    context = _context(run, activity, params, interface, clock, run_dir,
+                       {p: InputPort(p, spec, clock.now_ns) for p, spec in interface.inputs.items()},
+                       {p: OutputPort(p, spec, clock.now_ns) for p, spec in interface.outputs.items()}, 0)
     try:
         block = resolved.block(context)
         block.create()
@@ -490,6 +476,19 @@ def _beside(run: Run, activity: str, clock: VirtualClock, run_dir: Path) -> Bloc
         raise ReplayError(f"{run.path}: activity '{activity}', needed beside the replayed one, does not configure "
                           f"outside its run: {type(error).__name__}: {error}") from None
     return block
+
+
+def _context(run: Run, activity: str, params, interface, clock: VirtualClock, run_dir: Path, inputs: dict,
+             outputs: dict, period_ns: int) -> ActivityContext:
+    """What the block sees, as the runtime gives it: its flags (those it awaits raised), a log
+    nobody reads, the run's randomness for this activity."""
+    names = list(interface.flags_written) + list(interface.flags_read)
+    awaited = run.loaded.activities[activity].block.awaits
+    flags = np.array([flag in awaited for flag in names] or [False], np.uint8)
+    view = FlagView(flags, {f"{activity}.{flag}": i for i, flag in enumerate(names)}, activity, names)
+    log = Logger(activity, Level.ERROR, _Discard(), clock.now_ns)  # type: ignore[arg-type]
+    return ActivityContext(activity, params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), view, clock, log,
+                           activity_rng(run.seed, activity), run_dir, period_ns=period_ns)
 
 
 def _parameters(run: Run, activity: str, block: type[Block]):
