@@ -203,7 +203,13 @@ class _Feed:
     write: Callable[[np.ndarray, int], object]
     samples: Series
     first: bool  # a sample stamped at a cycle's time was written before the activity ran in it
+    local: bool  # written on the activity's own thread
     next: int = 0
+
+    def latest(self, t_ns: int) -> int | None:
+        """The stamp of the last sample published at or before `t_ns`."""
+        i = int(np.searchsorted(self.samples.publish_ns, t_ns, side="right")) - 1
+        return int(self.samples.publish_ns[i]) if i >= 0 else None
 
     def until(self, t_ns: int, inclusive: bool) -> None:
         publish, values = self.samples.publish_ns, self.samples.values
@@ -295,7 +301,9 @@ class ActivityReplay:
                 transport = LatestSlot(bytearray(latest_nbytes(port_spec)), port_spec, synchronised=False)
                 write = transport.write
             inputs[port].connect(transport, spec.policy.kind == "queue", spec.max_age or 0)
-            self.feeds.append(_Feed(stream, write, samples, self._runs_first(spec.writer.split(".")[0])))
+            writer = spec.writer.split(".")[0]
+            self.feeds.append(_Feed(stream, write, samples, self._runs_first(writer),
+                                    thread_of(composition).get(writer) == self.thread))
         self.outputs: list[tuple[str, str, _Captured, Series]] = []
         for stream, port in _outputs_of(run, activity):
             recorded = run.series(stream)
@@ -326,34 +334,47 @@ class ActivityReplay:
 
     def cycles(self) -> tuple[np.ndarray, np.ndarray]:
         """The times of the activity's cycles, and which of them published a recorded output."""
-        stamps = np.unique(np.concatenate([recorded.publish_ns for _, _, _, recorded in self.outputs]))
-        if not len(stamps):
+        published = [recorded.publish_ns for _, _, _, recorded in self.outputs]
+        if not any(len(p) for p in published):
             raise ReplayError(f"{self.run.path}: activity '{self.name}' published no recorded sample: "
                               "there is nothing to compare")
+        if not self.run.virtual:
+            # One cycle's outputs are stamped microseconds apart, and a gap is an overrun's skipped
+            # periods: the cycles are those of the output published most often, as they were stamped.
+            stamps = max(published, key=len)
+            return stamps.astype(np.int64), np.ones(len(stamps), bool)
+        stamps = np.unique(np.concatenate(published))
         period = self.period
-        if not self.run.virtual:  # one cycle's outputs carry stamps microseconds apart: the first stands for all
-            keep = [0]
-            for i in range(1, len(stamps)):
-                if stamps[i] - stamps[keep[-1]] > period // 2:
-                    keep.append(i)
-            stamps = stamps[keep]
-        times, published = [], []
+        times, marks = [], []
         for i, t in enumerate(stamps):
-            if i:
+            if i:  # cycles that published nothing (or decimated outputs): on the thread's period
                 gap = int(t - stamps[i - 1])
                 filled = int(round(gap / period)) - 1 if gap > 1.5 * period else 0
                 for k in range(1, filled + 1):
                     times.append(int(stamps[i - 1]) + k * period)
-                    published.append(False)
+                    marks.append(False)
             times.append(int(t))
-            published.append(True)
-        return np.asarray(times, np.int64), np.asarray(published, bool)
+            marks.append(True)
+        return np.asarray(times, np.int64), np.asarray(marks, bool)
 
     def _at(self, t_ns: int, inclusive_all: bool = False) -> None:
-        """The clock at `t_ns`, the samples due by then written, the inputs refreshed."""
+        """The clock at `t_ns`, the samples due by then written, the inputs refreshed.
+
+        On the wall clock a cycle is known by its outputs' stamps, taken after it computed: another
+        thread's sample stamped between its start and then was not seen. Its start is bounded by the
+        last sample an activity before it on its thread published in the cycle (the Falcon's handle,
+        for the haptic controller): another thread's samples count up to that stamp."""
         self.clock.advance_to(max(t_ns, self.clock.now_ns()))
+        seen_by = t_ns
+        if not self.run.virtual and not inclusive_all:
+            stamps = [feed.latest(t_ns) for feed in self.feeds if feed.local and feed.first]
+            started = [stamp for stamp in stamps if stamp is not None and stamp > t_ns - self.period]
+            seen_by = max(started, default=t_ns)
         for feed in self.feeds:
-            feed.until(t_ns, inclusive_all or feed.first)
+            if feed.local or inclusive_all:
+                feed.until(t_ns, inclusive_all or feed.first)
+            else:
+                feed.until(seen_by, seen_by != t_ns or feed.first)
         for port in self.ports:
             port.refresh()
 
@@ -541,7 +562,7 @@ def _compare(stream: str, port: str, captured: _Captured, recorded: Series, tole
         if bad[k]:
             j = int(np.argmax(diff[k]))
             first = (f"at {at:.6f} s (sample {number}): {_element(stream, info.shape, j)} replayed "
-                     f"{mine[k, j]!r}, recorded {theirs[k, j]!r}")
+                     f"{float(mine[k, j])!r}, recorded {float(theirs[k, j])!r}")
         else:
             first = (f"at {at:.6f} s (sample {number}): replayed at "
                      f"{(int(replayed_stamps[index[have]][k]) - origin_ns) / 1e9:.6f} s")
