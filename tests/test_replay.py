@@ -226,3 +226,15 @@ def test_a_wall_clock_recording_replays_cycle_for_cycle(tmp_path):
         print(f"{c.stream}: {c.samples} samples, {c.mismatches} differ, max |diff| {c.max_diff:g}")
         assert c.samples > 1000 and c.missing == 0 and c.extra == 0
         assert c.mismatches <= c.samples // 200
+
+
+def test_without_a_haptic_controller_every_activity_with_recorded_inputs_replays(tmp_path):
+    """The desk's virtual wall: the wall, the button and the force limit each replay from their own
+    recorded inputs, equal to the bit; the simulators and the Falcon (which needs its simulator) do not."""
+    text = (ROOT / "systems" / "wall.yaml").read_text() + "\nrecord: {}\n"
+    compose(tmp_path, text, duration="2s", name="wall")
+    replayed = replay(tmp_path / "run-wall" / "wall.mcap")
+    assert [(r.activity, r.block) for r in replayed] == [("wall", "virtual_wall"), ("grip", "button"),
+                                                         ("limit", "force_limit")]
+    assert all(r.ok and r.cycles > 1900 for r in replayed)
+    assert all(c.max_diff == 0.0 for r in replayed for c in r.compared)
