@@ -32,7 +32,6 @@ published while the activity computed counts as seen in that cycle.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +44,7 @@ from hapticop.blocks.base import Block
 from hapticop.composition.diagnostics import Severity
 from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.yamlsource import SourceError, parse_text
+from hapticop.recording.compare import Compared, compare
 from hapticop.recording.mcapfile import StreamInfo
 from hapticop.recording.reading import Contents, RecordingError, Series, contents, series_of
 from hapticop.runtime.assembly import activity_rng, thread_of
@@ -230,24 +230,6 @@ class _Captured:
     def write(self, value: np.ndarray, stamp_ns: int, origins=None) -> None:
         self.values.append(np.array(value, copy=True))
         self.stamps.append(int(stamp_ns))
-
-
-@dataclass
-class Compared:
-    """One output stream: the replayed samples against the recorded ones."""
-
-    stream: str
-    port: str
-    samples: int  # compared
-    max_diff: float
-    mismatches: int  # samples beyond the tolerance (or published at another time)
-    missing: int  # recorded samples the replay did not publish
-    extra: int  # samples the replay published beyond the recorded ones
-    first: str = ""  # where the first mismatch is, in words
-
-    @property
-    def ok(self) -> bool:
-        return not (self.mismatches or self.missing or self.extra)
 
 
 @dataclass
@@ -472,7 +454,8 @@ class ActivityReplay:
             other.clean()
         origin = min((int(s.samples.publish_ns[0]) for s in self.feeds if len(s.samples.publish_ns)), default=start)
         origin = min(origin, start)
-        compared = [_compare(stream, port, captured, recorded, tolerance, self.run.virtual, origin)
+        compared = [compare(stream, port, captured.values, captured.stamps, recorded, tolerance, self.run.virtual,
+                            origin)
                     for stream, port, captured, recorded in self.outputs]
         return Replayed(self.name, self.run.loaded.activities[self.name].spec.block, self.thread, len(times),
                         (start - origin) / 1e9, (int(times[-1]) - origin) / 1e9,
@@ -529,53 +512,6 @@ def _same_kind(run: Run, stream: str, what: str, port, info: StreamInfo) -> None
     if np.dtype(port.dtype) != np.dtype(info.dtype) or tuple(port.shape) != tuple(info.shape):
         raise ReplayError(f"{run.path}: stream '{stream}' was recorded as {info.dtype}{list(info.shape)}, but the "
                           f"{what} takes {np.dtype(port.dtype).name}{list(port.shape)} with the recorded parameters")
-
-
-def _element(stream: str, shape: tuple[int, ...], flat_index: int) -> str:
-    if not shape:
-        return stream
-    return f"{stream}[{', '.join(str(int(i)) for i in np.unravel_index(flat_index, shape))}]"
-
-
-def _compare(stream: str, port: str, captured: _Captured, recorded: Series, tolerance: float, stamps: bool,
-             origin_ns: int) -> Compared:
-    info = recorded.info
-    n = len(captured.values)
-    replayed = (np.stack(captured.values) if n else np.zeros((0, *info.shape), info.dtype)).reshape(n, -1)
-    replayed_stamps = np.asarray(captured.stamps, np.int64)
-    index = recorded.sequence - 1  # the replayed sample with the recorded one's number
-    have = (index >= 0) & (index < n)
-    mine = replayed[index[have]].astype(np.float64)
-    theirs = recorded.values.reshape(len(recorded.values), -1)[have].astype(np.float64)
-    both_nan = np.isnan(mine) & np.isnan(theirs)
-    diff = np.where(both_nan, 0.0, np.abs(mine - theirs))
-    diff[np.isnan(diff)] = math.inf  # one NaN, the other not
-    worst = diff.max(axis=1) if diff.shape[1] else np.zeros(len(diff))
-    bad = worst > tolerance
-    late = replayed_stamps[index[have]] != recorded.publish_ns[have] if stamps else np.zeros(len(worst), bool)
-    first = ""
-    wrong = np.flatnonzero(bad | late)
-    if len(wrong):
-        k = int(wrong[0])
-        number = int(recorded.sequence[have][k])
-        at = (int(recorded.publish_ns[have][k]) - origin_ns) / 1e9
-        if bad[k]:
-            j = int(np.argmax(diff[k]))
-            first = (f"at {at:.6f} s (sample {number}): {_element(stream, info.shape, j)} replayed "
-                     f"{float(mine[k, j])!r}, recorded {float(theirs[k, j])!r}")
-        else:
-            first = (f"at {at:.6f} s (sample {number}): replayed at "
-                     f"{(int(replayed_stamps[index[have]][k]) - origin_ns) / 1e9:.6f} s")
-    last_recorded = int(recorded.sequence.max()) if len(recorded.sequence) else 0
-    extra = max(0, n - last_recorded - (info.every - 1))
-    missing = int((~have).sum())
-    if not first and missing:
-        number = int(recorded.sequence[~have][0])
-        first = f"sample {number} and {missing - 1} more were recorded but not replayed"
-    elif not first and extra:
-        first = f"the replay published {extra} samples after the last recorded one"
-    return Compared(stream, port, int(have.sum()), float(worst.max()) if len(worst) else 0.0,
-                    int((bad | late).sum()), missing, extra, first)
 
 
 def replay(path: Path, activities: list[str] | None = None, tolerance: float = 0.0,
