@@ -86,7 +86,7 @@ def round_goals(bench: BenchRun) -> list[list[Goal]]:
                                   FRAMEWORK_US))
         if len(bench.virtual_speed) >= round_:
             speed = bench.virtual_speed[round_ - 1]
-            found.append(Goal("virtual clock, simulated s per wall s (at least)", speed, VIRTUAL_SPEED,
+            found.append(Goal("virtual clock, simulated s per s of CPU time (at least)", speed, VIRTUAL_SPEED,
                               at_least=True))
         rounds.append(found)
     return rounds
@@ -168,7 +168,7 @@ def markdown(bench: BenchRun) -> str:
                   "|---|---|---|---|---|---|"]
         lines += [f"| {loop} | {f['activities']} | {f['cycle_p50']:.1f} | {f['cycle_p99']:.1f} | "
                   f"{f['framework_p50']:.1f} | {f['framework_p99']:.1f} |" for loop, f in loops.items()]
-        lines += ["", f"Virtual clock: {speed:.1f} simulated s per wall s.", ""]
+        lines += ["", f"Virtual clock: {speed:.1f} simulated s per s of CPU time.", ""]
     for c in bench.conditions:
         lines += [f"## {c.name}" + (f", round {c.round}" if bench.repeat > 1 else ""), "",
                   "| thread | priority | deploy | cycles | p50 | p99 | p99.9 | max | missed | CPU % |",
