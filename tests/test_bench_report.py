@@ -143,3 +143,21 @@ def test_a_machine_too_noisy_for_a_verdict_is_named_so(tmp_path):
     assert missing and "the empty probe loop itself misses" in missing[0]
     text = report.markdown(_rounds(tmp_path, [60], probe_missed=100))
     assert "Verdict: none. The machine itself is too noisy" in text
+
+
+def test_the_loops_goals_leave_out_probes_and_threads_of_simulators():
+    timing = recorded_timing()
+    timing["threads"]["simulators"] = dict(timing["threads"]["main"], simulation=True, deploy="process")
+    assert "simulators" not in report.realtime_threads(timing)
+    assert "main" in report.realtime_threads(timing) and "probe_above" not in report.realtime_threads(timing)
+
+
+def test_the_framework_s_work_is_measured_per_loop_of_the_system():
+    """Which loops are measured, and that a cycle's framework share is part of it (no speed judged)."""
+    from hapticop.benchmark.overhead import measure
+
+    found = measure(Path(__file__).parents[1] / "systems" / "hallway.yaml", cycles=20, warm=200)
+    assert set(found) == {"main", "fieldbus", "watchdog"}  # not the simulators' thread, nor the 15 Hz ones
+    assert found["main"]["activities"] == 3
+    for figures in found.values():
+        assert 0 <= figures["framework_p50"] <= figures["cycle_p50"]

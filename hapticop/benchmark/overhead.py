@@ -36,7 +36,7 @@ class _HookTimer:
         return result
 
 
-def measure(path: Path, cycles: int = 3_000) -> dict[str, dict[str, float]]:
+def measure(path: Path, cycles: int = 3_000, warm: int = WARM_CYCLES) -> dict[str, dict[str, float]]:
     """Per 1 kHz thread of the system (threads of simulators only, and empty ones, set aside):
     cycle and framework time (p50, p99, us) over `cycles` steady cycles."""
     from hapticop.runtime.system import RunOptions, System
@@ -60,7 +60,7 @@ def measure(path: Path, cycles: int = 3_000) -> dict[str, dict[str, float]]:
         try:
             system.start_threads()
             due = dict.fromkeys(names, 0)
-            for i in range(WARM_CYCLES + cycles):
+            for i in range(warm + cycles):
                 now = i * 1_000_000
                 system.clock.advance_to(now)
                 for row, name in enumerate(names):
@@ -71,8 +71,8 @@ def measure(path: Path, cycles: int = 3_000) -> dict[str, dict[str, float]]:
                     started = time.thread_time_ns()
                     threads[name].cycle()
                     took = time.thread_time_ns() - started
-                    if i >= WARM_CYCLES:
-                        total[i - WARM_CYCLES, row], inside[i - WARM_CYCLES, row] = took, hooks[row]
+                    if i >= warm:
+                        total[i - warm, row], inside[i - warm, row] = took, hooks[row]
         finally:
             for thread in threads.values():
                 for runner in thread.runners.values():
