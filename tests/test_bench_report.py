@@ -143,6 +143,11 @@ def test_a_machine_too_noisy_for_a_verdict_is_named_so(tmp_path):
     assert missing and "the empty probe loop itself misses" in missing[0]
     text = report.markdown(_rounds(tmp_path, [60], probe_missed=100))
     assert "Verdict: none. The machine itself is too noisy" in text
+    starved = _rounds(tmp_path, [60])
+    simulators = dict(starved.conditions[0].timing["threads"]["main"], simulation=True, cycles=100,
+                      missed_deadlines=900)
+    starved.conditions[0].timing["threads"]["simulators"] = simulators
+    assert any("the simulators' thread 'simulators' missed 90 %" in reason for reason in report.noise(starved))
 
 
 def test_the_loops_goals_leave_out_probes_and_threads_of_simulators():

@@ -22,6 +22,7 @@ FRAMEWORK_US = 30.0
 VIRTUAL_SPEED = 20.0
 NOISY_CYCLICTEST_P999_US = 500.0  # docs/realtime.md §3: beyond this the machine itself misses the wake-up goals
 NOISY_SPREAD = 2.0  # cyclictest's p99 differing more than this between rounds of one condition
+STARVED_SIMULATORS_PERCENT = 10.0  # simulators missing more of their periods leave the loops without their load
 
 
 def _f(value, digits: int = 0) -> str:
@@ -103,6 +104,11 @@ def noise(bench: BenchRun) -> list[str]:
             if s["p99.9"] > NOISY_CYCLICTEST_P999_US:
                 reasons.append(f"round {c.round} {c.name}: cyclictest's own p99.9 is {s['p99.9']:.0f} us "
                                f"(over {NOISY_CYCLICTEST_P999_US:.0f})")
+        for name, t in c.timing["threads"].items():
+            missed = missed_percent(t["cycles"], t["missed_deadlines"])
+            if t.get("simulation") and t["period"] == "1ms" and missed > STARVED_SIMULATORS_PERCENT:
+                reasons.append(f"round {c.round} {c.name}: the simulators' thread '{name}' missed {missed:.0f} % of "
+                               "its periods, so the loops ran without the devices' load")
         probe = c.timing["threads"].get(EMPTY_PROBE)
         if probe:
             missed = missed_percent(probe["cycles"], probe["missed_deadlines"])
