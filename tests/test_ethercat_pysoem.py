@@ -509,7 +509,8 @@ def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
 
     run = tmp_path / "run"
     done = _hapticop("ethercat", "sandbox", "--", sys.executable, "-m", "hapticop.cli", "compose",
-                     "systems/hallway_ethercat.yaml", "--duration", "4s", "--run-dir", str(run))
+                     "systems/hallway_ethercat.yaml", "--duration", "4s", "--run-dir", str(run),
+                     "--shutdown-timeout", "30s")  # the world judges and draws the run as it cleans, in its own process
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert "in OP: EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC" in (run / "ethercat.log").read_text()
     assert ("PDO assignment read over CoE as expected: wheel_1, wheel_2, wheel_3, wheel_4"
