@@ -70,7 +70,6 @@ class HallwayWorld(Block):
         self.pose = self.outputs.pose_in_hallway.value
         self.pose[:] = self.geometry.start
         self.started_ns: int | None = None  # when the operator started driving, on the system's clock
-        self._load_the_judge()
         self.ended = ""
         self.still_since: float | None = None
         self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
@@ -114,18 +113,6 @@ class HallwayWorld(Block):
         if self.ended:
             self.log.always("run ended at %.2f s: %s", t, self.ended)
             self.flags["finished"] = True
-
-    def _load_the_judge(self) -> None:
-        """Import now what judging and drawing the run need (close to a second of CPU): the world
-        cleans within the shutdown's time limit, in a process that may have to share the CPU."""
-        import hapticop.sim.metrics  # noqa: F401
-
-        if self.params.plot:
-            try:
-                import matplotlib.backends.backend_agg  # noqa: F401
-                import matplotlib.figure  # noqa: F401
-            except ImportError:  # no picture then: clean says so
-                pass
 
     def clean(self) -> None:
         from hapticop.sim.metrics import compute_metrics
