@@ -18,7 +18,7 @@ from hapticop.composition.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import ROOT
-from .runtime_helpers import IGNORES_SHUTDOWN, compose, counting, pipeline, run_until, steps
+from .runtime_helpers import IGNORES_SHUTDOWN, PATIENCE_S, compose, counting, pipeline, run_until, steps
 
 
 def test_threads_in_the_main_process(tmp_path):
@@ -198,7 +198,8 @@ def test_the_hallway_in_real_time_scans_from_a_simulation_process_and_leaves_not
     result = run_until(tmp_path, text, lambda system: (
         "LIDAR streaming" in _read(run / "lidar.log") and system.state("haptic") is State.RUNNING
         and steps(system, "lidar") > 5 and steps(system, "lidar_sim") > 5),
-        "the LIDAR streams scans from the simulated scanner and the haptic controller runs", name="hallway")
+        "the LIDAR streams scans from the simulated scanner and the haptic controller runs", name="hallway",
+        shutdown_timeout=f"{PATIENCE_S:g}s")  # the world judges and draws the run as it cleans, in its own process
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert result.timing["activities"]["lidar"]["steps"] > 5
     assert result.timing["activities"]["lidar_sim"]["steps"] > 5

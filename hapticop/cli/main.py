@@ -325,6 +325,7 @@ def bench(
     duration: str = typer.Option("30s", help="how long each condition runs"),
     out: Path | None = typer.Option(None, help="report directory (default: ./hapticop-bench-DATE)"),
     load: bool = typer.Option(True, help="also run under load on every core"),
+    repeat: int = typer.Option(1, min=1, help="rounds of every condition: the report gives each figure's spread"),
 ) -> None:
     """Measure a composition idle and under load beside cyclictest; write report.md and latency.png."""
     import time
@@ -337,7 +338,8 @@ def bench(
     out.mkdir(parents=True, exist_ok=True)
     conditions = ("idle", "loaded") if load else ("idle",)
     try:
-        result = runner.run(str(file), seconds, out, conditions, say=lambda text: typer.echo(text, err=True))
+        result = runner.run(str(file), seconds, out, conditions, say=lambda text: typer.echo(text, err=True),
+                            repeat=repeat)
     except RuntimeError as error:
         typer.echo(f"bench failed: {error}", err=True)
         raise typer.Exit(1) from None

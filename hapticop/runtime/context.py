@@ -48,8 +48,9 @@ class InputPort:
     def disconnect(self) -> None:
         self.transport = None
 
-    def refresh(self) -> None:
+    def refresh(self) -> bool:
         """Copy the newest sample in (runtime, before the step); queue inputs are left to pop().
+        True when a new sample arrived (`fresh`).
 
         An unchanged slot is not copied again: most inputs of a 1 kHz loop change at a lower
         rate (a scan of 811 ranges at 15 Hz), and the copy is most of what a read costs.
@@ -57,15 +58,16 @@ class InputPort:
         transport = self.transport
         if transport is None or self.queue:
             self.fresh = False
-            return
+            return False
         written = transport.count
         if written == self._seen:
             self.fresh = False
-            return
+            return False
         before = self.meta[0]
-        self.fresh = transport.read_into(self.value, self.meta, self.origins) and self.meta[0] != before
-        if self.fresh:
+        fresh = self.fresh = transport.read_into(self.value, self.meta, self.origins) and self.meta[0] != before
+        if fresh:
             self._seen = written
+        return fresh
 
     def pop(self) -> bool:
         """Take the next queued sample into `value`; False when the queue is empty."""

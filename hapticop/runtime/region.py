@@ -127,6 +127,8 @@ class Layout:
         section("go", (threads,), "int64")  # the mediator started this thread
         section("latency_max", (threads,), "int64")
         section("latency", (threads, BINS), "int64")
+        section("busy_max", (threads,), "int64")  # a timed cycle's wake-up to its end: what the loop computes
+        section("busy", (threads, BINS), "int64")
         section("compute_max", (acts,), "int64")
         section("compute", (acts, BINS), "int64")
         section("sim_ns", (acts,), "int64")  # time each activity spent in simulated devices

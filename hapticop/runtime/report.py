@@ -19,6 +19,7 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
     turns each thread's CPU time into a share of one core; histograms are kept, sparse, so a
     report can be drawn from the file alone."""
     layout = region.layout
+    simulating = _simulation_threads(region, composition)
     threads = {}
     for name, index in layout.thread_index.items():
         # A copy: the running loops go on counting, and a histogram read while it changes
@@ -32,11 +33,13 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
             "period": format_duration(composition.threads[name].period),
             "priority": composition.threads[name].priority,
             "deploy": composition.threads[name].deploy,
+            "simulation": name in simulating,
             "cycles": cycles,
             "missed_deadlines": missed,
             "missed_percent": round(100.0 * missed / (cycles + missed), 3) if cycles + missed else None,
             "cpu_percent": round(100.0 * cpu_ns / elapsed_ns, 1) if elapsed_ns and cpu_ns else None,
             "wakeup_latency_us": _numbers(summary),
+            "cycle_us": _numbers(Summary.of(region.busy[index].copy(), int(region.busy_max[index]))),
             "histogram_us": sparse(histogram),
         }
     activities = {}
@@ -46,8 +49,10 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
         if region.sim_ns[index]:
             activities[name]["simulation_us_per_step"] = round(
                 int(region.sim_ns[index]) / 1000 / max(1, summary.count), 1)
-    if elapsed_ns:  # the system's own CPU: the loops' CPU less what their blocks spent simulating devices
-        simulated = 100.0 * int(region.sim_ns.sum()) / elapsed_ns
+    if elapsed_ns:  # the system's own CPU: the loops' CPU less the simulators' (whole threads, or their blocks' share)
+        inside = {a for t in simulating for members in composition.threads[t].schedules.values() for a in members}
+        simulated = 100.0 * sum(int(region.sim_ns[i]) for a, i in layout.activity_index.items() if a not in inside)
+        simulated = simulated / elapsed_ns + sum(threads[t]["cpu_percent"] or 0.0 for t in simulating)
         loops = sum(t["cpu_percent"] or 0.0 for t in threads.values())
         cpu = {"loops_percent": round(loops, 1), "simulators_percent": round(simulated, 1),
                "without_simulators_percent": round(loops - simulated, 1)}
@@ -61,6 +66,17 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
     return {"started_ns": int(region.system[Region.STARTED_NS]),
             "elapsed_s": round(elapsed_ns / 1e9, 3) if elapsed_ns else None, "cpu": cpu, "threads": threads,
             "activities": activities, "latencies": latencies}
+
+
+def _simulation_threads(region: Region, composition) -> set[str]:
+    """Threads that run simulators only (each counted its simulation time): no real system has them."""
+    index = region.layout.activity_index
+    found = set()
+    for name, spec in composition.threads.items():
+        members = {a for schedule in spec.schedules.values() for a in schedule if a in index}
+        if members and all(region.sim_ns[index[a]] for a in members):
+            found.add(name)
+    return found
 
 
 def sparse(histogram) -> dict[str, int]:

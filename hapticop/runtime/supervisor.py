@@ -131,7 +131,8 @@ class Supervisor:
         if not (region.cycles > 0).all() and now - started < STARTUP_BOUND_NS:
             return
         self.operating_ns = now
-        for name in ("latency", "latency_max", "compute", "compute_max", "missed", "e2e", "e2e_max", "sim_ns"):
+        for name in ("latency", "latency_max", "busy", "busy_max", "compute", "compute_max", "missed", "e2e",
+                     "e2e_max", "sim_ns"):
             getattr(region, name)[...] = 0
         region.cycles_base[:] = region.cycles
         region.cpu_base[:] = region.cpu_ns

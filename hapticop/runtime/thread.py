@@ -75,10 +75,12 @@ class ActivityRunner:
     def step(self) -> None:
         if self.retuned is not None:
             self._take_parameters()
+        changed = False
         for port in self.inputs:
-            port.refresh()
+            if port.refresh() or port.queue:  # a queue's origins change as the block pops it
+                changed = True
         relay = self.relay
-        if relay is not None:
+        if relay is not None and changed:  # the origins merged last step still stand otherwise
             relay.before_step()
         cpu = time.thread_time_ns() if self.simulator else 0  # a simulator's CPU counts as simulation
         started = time.perf_counter_ns()
@@ -228,11 +230,12 @@ class CyclicThread:
             woke = clock.now_ns()
             record(region.latency, region.latency_max, index, woke - deadline)
             self.cycle()
+            finished = clock.now_ns()
+            record(region.busy, region.busy_max, index, finished - woke)
             region.cpu_ns[index] = time.thread_time_ns()
             if self.done:
                 break
             deadline += period
-            finished = clock.now_ns()
             if finished > deadline:  # overran: skip and count the periods already gone
                 missed = (finished - deadline) // period + 1
                 region.missed[index] += missed
