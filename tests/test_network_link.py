@@ -106,6 +106,7 @@ def test_reruns_are_bit_identical_and_seeds_differ():
 
 def test_the_same_seed_gives_the_same_chances_whatever_the_settings():
     """Common random numbers: the packets lost at 5 % are among those lost at 20 %."""
+
     def lost(loss: float) -> set[int]:
         delivered = {d[0] for d in run(LinkParams(delay_s=0.02, jitter_s=0.002, loss=loss, seed=5), 2000)}
         return set(range(2000)) - delivered
