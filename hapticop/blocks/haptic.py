@@ -69,6 +69,10 @@ class HapticController(Block):
                 "ranges": Port("float32", n, "m"),
                 "angles": Port("float32", n, "rad"),
                 "platform_velocity": Port("float64", (3,), "m/s, m/s, rad/s", required=False),
+                "predicted_travel": Port("float64", (3,), "m, m, rad", "the robot's motion since the scan, "
+                                         "predicted (a pose_predictor's travel): the scan is rendered from "
+                                         "there (model-mediated); unconnected: measured twist × scan age",
+                                         required=False),
             },
             outputs={
                 "force": Port("float64", (3,), "N", "force for the Falcon"),
@@ -142,8 +146,9 @@ class HapticController(Block):
             self._take_scan()
         scan_ok = ranges.valid
         if scan_ok:
+            travel = p_in.predicted_travel
             self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
-                              scan_age_s=ranges.age_ns() / 1e9)
+                              scan_age_s=ranges.age_ns() / 1e9, travel=travel.value if travel.valid else None)
         else:
             out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
         setpoint = out.velocity_setpoint.value
