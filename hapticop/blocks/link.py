@@ -33,8 +33,9 @@ class LinkedStream(Params):
 
 class LinkBlockParams(Params):
     streams: dict[str, LinkedStream] = Field(
-        ..., min_length=1, description="the streams through the link, by name: each gets an input <name>, and "
-        "outputs <name>_received and <name>_delay")
+        default_factory=lambda: {"samples": LinkedStream()}, min_length=1,
+        description="the streams through the link, by name: each gets an input <name>, and outputs "
+        "<name>_received and <name>_delay (by default one scalar stream, 'samples')")
     link: LinkParams = Field(default_factory=LinkParams)
 
 
