@@ -95,7 +95,10 @@ class _Lane:
 
     def step(self, now_s: float) -> None:
         source, link = self.source, self.link
-        if source.fresh:  # type: ignore[attr-defined]
+        if source.queue:  # type: ignore[attr-defined]
+            while source.pop():  # type: ignore[attr-defined]
+                link.send(now_s, self.sent)
+        elif source.fresh:  # type: ignore[attr-defined]
             link.send(now_s, self.sent)
         arrived = False
         while (slot := link.receive(now_s)) >= 0:
