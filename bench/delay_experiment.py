@@ -61,9 +61,10 @@ def cell_patch(rtt_ms: int, loss: float, tank: bool, governor: bool, seed: int) 
             "controller_force": None, "tank_level": None,
             "environment_force": {"to": ["operator.environment_force", "world.environment_force"]},
             "handle_velocity": {"to": ["haptic.handle_velocity"]}})
-    if not governor:
+    if not governor:  # neither the robot's governor nor the operator's side's model of it
         schedule.remove("governor")
         activities["governor"] = None
+        activities["haptic"] = {"params": {"governor": None}}
         streams.update({
             "governed_setpoint": None,
             "setpoint_received": {"to": ["ropod.velocity_setpoint"]},

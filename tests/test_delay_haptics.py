@@ -253,3 +253,31 @@ def test_the_hallway_behind_the_emulated_link_runs_the_same_twice(tmp_path):
     assert np.ptp(a["pose"][:, 0]) > 0.1  # the robot drove, behind a link that lost samples
     uplink = (tmp_path / "run-a" / "uplink.log").read_text()
     assert " 0 lost" not in uplink and "lost" in uplink
+
+
+def test_the_operators_side_governs_its_commands_on_the_scan_seen_from_the_predicted_pose():
+    """Behind a link, the haptic controller's governor models the robot's: the robot a predicted 0.4 m nearer
+    to the wall than the scan shows may be commanded less speed, so the commands sent (and the pose predicted
+    from them) stay what the governed robot does."""
+    harness = BlockHarness("haptic_controller", {"governor": {}, "scan_points": 811})
+    angles = np.linspace(-0.75 * np.pi, 0.75 * np.pi, 811, dtype=np.float32)
+    ranges = np.full(811, 30.0, dtype=np.float32)
+    ahead = np.abs(angles) < 0.4
+    ranges[ahead] = (1.6 / np.cos(angles[ahead])).astype(np.float32)  # a wall 1.6 m ahead of the scanner
+    harness.flags["resources_ready"] = True
+    for port, value in (("angles", angles), ("ranges", ranges), ("handle_position", [0.0, 0.0, 0.0]),
+                        ("handle_velocity", [0.0, 0.0, 0.0])):
+        harness.feed(port, value)
+    harness.configure()
+
+    def commanded(travel_m: float | None) -> float:
+        harness.feed("handle_position", [0.0, 0.0, -0.04])  # pushed well forward: full speed asked
+        if travel_m is not None:
+            harness.feed("predicted_travel", [travel_m, 0.0, 0.0])
+        harness.step()
+        return float(harness.outputs.velocity_setpoint.value[0])
+
+    as_scanned = commanded(None)
+    predicted = commanded(0.4)
+    assert 0.0 < predicted < as_scanned
+    assert commanded(5.0) == 0.0  # predicted past the stop line: no forward command

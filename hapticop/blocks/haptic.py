@@ -145,10 +145,10 @@ class HapticController(Block):
         if ranges.meta[0] != self.scan_seq:  # a scan not taken yet (it may have come while configuring)
             self._take_scan()
         scan_ok = ranges.valid
+        travel = p_in.predicted_travel.value if p_in.predicted_travel.valid else None
         if scan_ok:
-            travel = p_in.predicted_travel
             self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
-                              scan_age_s=ranges.age_ns() / 1e9, travel=travel.value if travel.valid else None)
+                              scan_age_s=ranges.age_ns() / 1e9, travel=travel)
         else:
             out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
         setpoint = out.velocity_setpoint.value
@@ -158,7 +158,10 @@ class HapticController(Block):
         if self.flags["robot_held"]:
             setpoint[:] = 0.0
         if self.governor is not None and scan_ok:
-            govern_cycle(setpoint, self.beams, self.stop_gap_m, setpoint, self.governor)
+            # behind a link the robot's own governor decides; this one, on the scan seen from the predicted
+            # pose, is the model of it that keeps the commands sent (and so the prediction) what the robot does
+            gap = self.stop_gap_m if travel is None else self.stop_gap_m - float(travel[0])
+            govern_cycle(setpoint, self.beams, gap, setpoint, self.governor)
         self._blind_policy(not scan_ok, setpoint)
         out.force.publish()
         out.environment_force.publish()
