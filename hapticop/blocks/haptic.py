@@ -69,6 +69,10 @@ class HapticController(Block):
                 "ranges": Port("float32", n, "m"),
                 "angles": Port("float32", n, "rad"),
                 "platform_velocity": Port("float64", (3,), "m/s, m/s, rad/s", required=False),
+                "predicted_travel": Port("float64", (3,), "m, m, rad", "the robot's motion since the scan, "
+                                         "predicted (a pose_predictor's travel): the scan is rendered from "
+                                         "there (model-mediated); unconnected: measured twist × scan age",
+                                         required=False),
             },
             outputs={
                 "force": Port("float64", (3,), "N", "force for the Falcon"),
@@ -141,9 +145,10 @@ class HapticController(Block):
         if ranges.meta[0] != self.scan_seq:  # a scan not taken yet (it may have come while configuring)
             self._take_scan()
         scan_ok = ranges.valid
+        travel = p_in.predicted_travel.value if p_in.predicted_travel.valid else None
         if scan_ok:
             self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
-                              scan_age_s=ranges.age_ns() / 1e9)
+                              scan_age_s=ranges.age_ns() / 1e9, travel=travel)
         else:
             out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
         setpoint = out.velocity_setpoint.value
@@ -153,7 +158,10 @@ class HapticController(Block):
         if self.flags["robot_held"]:
             setpoint[:] = 0.0
         if self.governor is not None and scan_ok:
-            govern_cycle(setpoint, self.beams, self.stop_gap_m, setpoint, self.governor)
+            # behind a link the robot's own governor decides; this one, on the scan seen from the predicted
+            # pose, is the model of it that keeps the commands sent (and so the prediction) what the robot does
+            gap = self.stop_gap_m if travel is None else self.stop_gap_m - float(travel[0])
+            govern_cycle(setpoint, self.beams, gap, setpoint, self.governor)
         self._blind_policy(not scan_ok, setpoint)
         out.force.publish()
         out.environment_force.publish()

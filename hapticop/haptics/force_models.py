@@ -67,11 +67,15 @@ class ForceModel(ABC):
         """Take a new scan: (n,) ranges in m from the scanner, NaN where invalid."""
 
     @abstractmethod
-    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0) -> Vec:
+    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0,
+               travel: Vec | None = None) -> Vec:
         """Write the environmental force (N, handle frame) into ``out_force`` and return it.
 
         ``handle_pos``: (3,) m, handle frame. ``robot_twist``: (3,) measured ``[vx, vy, wz]``.
         ``scan_age_s``: how old the scan is now, for models that predict to the present.
+        ``travel``: the robot's motion ``[dx, dy, dθ]`` since the scan, in the scan's frame, when a
+        predictor knows it (model-mediated rendering, ``hapticop.haptics.prediction``); it then
+        replaces the model's own ``robot_twist·scan_age_s``.
         """
 
     def compute(
@@ -102,7 +106,8 @@ class NoForce(ForceModel):
     def __init__(self, params: NoForceParams = NoForceParams()) -> None:
         self.params = params
 
-    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0) -> Vec:
+    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0,
+               travel: Vec | None = None) -> Vec:
         out_force.fill(0.0)
         return out_force
 
@@ -206,7 +211,8 @@ class ThesisForce(ForceModel):
         out_force[HANDLE_Y] = 0.0
         out_force[HANDLE_Z] = fz
 
-    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0) -> Vec:
+    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0,
+               travel: Vec | None = None) -> Vec:
         self._render(float(handle_pos[HANDLE_X]), float(handle_pos[HANDLE_Z]), out_force)
         return out_force
 
@@ -369,15 +375,20 @@ class BrakingField(ForceModel):
         self._corridor_gap = beams.corridor_gap(p.corridor_margin_m, p.robust_k)
         beams.select_sides(p.window_rear_m, p.window_ahead_m)
 
-    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0) -> Vec:
+    def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0,
+               travel: Vec | None = None) -> Vec:
         p = self.params
         vx = float(robot_twist[TWIST_VX])
         vy = float(robot_twist[TWIST_VY])
-        gap = self._corridor_gap - p.stop_distance_m - vx * scan_age_s
+        if travel is None:
+            moved_x, moved_y = vx * scan_age_s, vy * scan_age_s
+        else:
+            moved_x, moved_y = float(travel[0]), float(travel[1])
+        gap = self._corridor_gap - p.stop_distance_m - moved_x
         self.gap_m = gap
         rho_z = self.longitudinal_risk(gap, vx)
-        lead = scan_age_s + p.lead_time_s
-        c_left, c_right = self.beams.side_clearances(vx * lead, vy * lead, p.robust_k)
+        lead = p.lead_time_s
+        c_left, c_right = self.beams.side_clearances(moved_x + vx * lead, moved_y + vy * lead, p.robust_k)
         self.c_left_m, self.c_right_m = c_left, c_right
         start = p.side_distance_m + p.side_margin_m
         band = start - p.bumper_m

@@ -338,9 +338,10 @@ def _effort_and_oscillation(
                 sustained_oscillation=bool(osc > 0.02), divergence=_longest_run_s(at_limit, w) > 0.5)
 
 
-def metrics_json(metrics: RunMetrics) -> str:
-    """The metrics as the run directory's metrics.json: plain JSON, null for what is not a number."""
-    return json.dumps(_plain(asdict(metrics)), indent=2)
+def metrics_json(metrics: RunMetrics, extra: dict | None = None) -> str:
+    """The metrics as the run directory's metrics.json: plain JSON, null for what is not a number;
+    `extra` adds what only some compositions measure (an energy tank's lowest level)."""
+    return json.dumps(_plain({**asdict(metrics), **(extra or {})}), indent=2)
 
 
 def _plain(value):

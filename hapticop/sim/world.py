@@ -43,6 +43,8 @@ class HallwayWorld(Block):
         "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
         "device_force": Port("float64", (3,), "N", "the whole force the Falcon renders", required=False),
         "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip", required=False),
+        "tank_level": Port("float64", (), "J", "an energy tank's level on the Falcon's port: its lowest goes "
+                           "into the metrics", required=False),
         "handle_position": Port("float64", (3,), "m", "true handle position, device frame", required=False),
         "handle_velocity": Port("float64", (3,), "m/s", "true handle velocity, device frame", required=False),
         "operator_time": Port("float64", (), "s", "seconds the operator has driven: the recording's clock"),
@@ -75,6 +77,7 @@ class HallwayWorld(Block):
         self.command = np.zeros(2)
         self.nothing = np.zeros(3)
         self.variant = "unknown"  # the operator's, once it has said (clean)
+        self.tank_lowest_j = math.inf  # the energy tank's lowest level while driving (inf: no tank)
 
     def compute(self) -> None:
         inputs = self.inputs
@@ -95,6 +98,9 @@ class HallwayWorld(Block):
         setpoint = inputs.velocity_setpoint.value
         self.command[0], self.command[1] = setpoint[0], setpoint[2]
         force = inputs.environment_force
+        tank = inputs.tank_level
+        if tank.seq and float(tank.value) < self.tank_lowest_j:
+            self.tank_lowest_j = float(tank.value)
         self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
                              force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
@@ -125,7 +131,8 @@ class HallwayWorld(Block):
         self.recorder.meta.update(operator=self.variant, variation=operator.get("variation"))
         self.recorder.save(self.run_dir / "trajectory.npz")
         metrics = compute_metrics(self.recorder, self.geometry)
-        (self.run_dir / "metrics.json").write_text(metrics_json(metrics))
+        extra = {"tank_level_min_j": self.tank_lowest_j} if self.tank_lowest_j < math.inf else None
+        (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra))
         if self.params.plot:
             try:
                 from hapticop.sim.plot import plot_run
