@@ -40,7 +40,7 @@ def cli_reference() -> str:
                         if not sub.hidden]
         if records:
             lines += ["| | |", "|---|---|"]
-            lines += [f"| `{_cell(name)}` | {_cell(text)} |" for name, text in records]
+            lines += [f"| {_code(name)} | {_cell(text)} |" for name, text in records]
             lines.append("")
     return "\n".join(lines).rstrip() + "\n"
 
@@ -57,6 +57,13 @@ def _commands(command: Any, context: Any,
 
 def _first_paragraph(text: str) -> str:
     return " ".join(text.strip().split("\n\n")[0].split())
+
+
+def _code(text: str) -> str:
+    """Code in a table cell; a `|` cannot sit in a code span there (GitHub and MkDocs disagree): plain, escaped."""
+    if "|" not in text:
+        return f"`{_cell(text)}`"
+    return _cell(text).replace("<", "&lt;").replace(">", "&gt;")
 
 
 def _cell(text: str) -> str:
