@@ -8,6 +8,7 @@ YAML examples (```yaml fences in README.md and docs/) say what they are on their
   (`# faster.yaml: a JSON Patch for systems/hallway.yaml`) and leave it valid;
 - `# excerpt...`: part of a file, checked against the JSON Schema without its required keys;
 - anything else: a whole composition, which must validate without errors.
+Python examples (```python fences) run, their asserts included.
 """
 
 from __future__ import annotations
@@ -99,6 +100,20 @@ def test_yaml_example_is_valid(page, line, body, workspaces):
         file.write_text(body)
         report = validate_path(file).report
         assert report.ok, f"{where}:\n" + "\n".join(d.to_text() for d in report.sorted())
+
+
+def _python_examples() -> list:
+    return [pytest.param(page, id=str(page.relative_to(ROOT))) for page in PAGES_WITH_EXAMPLES
+            if any(language == "python" for language, _, _ in _fences(page))]
+
+
+@pytest.mark.parametrize("page", _python_examples())
+def test_python_examples_run(page):
+    """A page's Python examples run in order in one namespace, as a reader would paste them; their asserts hold."""
+    namespace: dict = {"__name__": f"docs_{page.stem.replace('-', '_')}"}
+    for language, line, body in _fences(page):
+        if language == "python":
+            exec(compile(body, f"{page.relative_to(ROOT)}:{line}", "exec"), namespace)  # the project's own pages
 
 
 def _command_lines() -> list:
