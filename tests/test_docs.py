@@ -181,3 +181,20 @@ def test_every_page_is_in_the_site_navigation():
 
 def test_the_readme_stays_an_introduction():
     assert len((ROOT / "README.md").read_text().splitlines()) < 250, "move details into docs/"
+
+
+def test_hapticop_docs_writes_the_pages_and_checks_them(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from hapticop.cli import docpages
+
+    monkeypatch.setattr(docpages, "DOCS", tmp_path)
+    runner = CliRunner()
+    written = runner.invoke(app, ["docs"])
+    assert written.exit_code == 0 and sorted(written.output.split()) == sorted(
+        ["wrote"] * len(PAGES) + [f"docs/{name}" for name in PAGES])
+    assert runner.invoke(app, ["docs", "--check"]).exit_code == 0
+    (tmp_path / "reference" / "cli.md").write_text("stale\n")
+    checked = runner.invoke(app, ["docs", "--check"])
+    assert checked.exit_code == 1 and "reference/cli.md" in checked.output
+    assert (tmp_path / "reference" / "cli.md").read_text() == "stale\n"
