@@ -116,8 +116,9 @@ def _type(field: dict, defs: dict) -> str:
     if "$ref" in field:
         name = field["$ref"].rsplit("/", 1)[-1]
         return f"[{name}](#{name.lower()})" if name in FORMAT_MODELS else name
-    if "anyOf" in field:
-        kinds = [_type(option, defs) for option in field["anyOf"] if option.get("type") != "null"]
+    options = field.get("anyOf") or field.get("oneOf")
+    if options:
+        kinds = [_type(option, defs) for option in options if option.get("type") != "null"]
         return " or ".join(dict.fromkeys(kinds)) or "null"
     if "const" in field:
         return f"`{field['const']}`"
