@@ -198,3 +198,24 @@ def test_hapticop_docs_writes_the_pages_and_checks_them(tmp_path, monkeypatch):
     checked = runner.invoke(app, ["docs", "--check"])
     assert checked.exit_code == 1 and "reference/cli.md" in checked.output
     assert (tmp_path / "reference" / "cli.md").read_text() == "stale\n"
+
+
+def test_the_tutorials_mistakes_print_what_it_shows(tmp_path, monkeypatch):
+    """The tutorial's sample of `validate` output is what validate prints for the two mistakes it names."""
+    from typer.testing import CliRunner
+
+    page = ROOT / "docs" / "tutorial.md"
+    fences = _fences(page)
+    files = {re.match(r"#\s*([\w.-]+\.yaml)", body).group(1): body
+             for language, _, body in fences if language == "yaml"}
+    shown = next(body for language, _, body in fences if language == "text")
+    new("my_app", directory=tmp_path, block=False, force=False)
+    (tmp_path / "my_wall.yaml").write_text(files["my_wall.yaml"])
+    mistaken = files["my_grip.yaml"].replace("max_norm_n: 8.0", "max_norm: 8.0")
+    mistaken = mistaken.replace("from: wall.force, to", "from: wal.force, to")
+    assert mistaken.count("max_norm:") == 1 and mistaken.count("wal.force") == 1
+    (tmp_path / "my_grip.yaml").write_text(mistaken)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, ["validate", "my_grip.yaml"])
+    assert result.exit_code == 1
+    assert result.output == shown
