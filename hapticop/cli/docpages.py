@@ -156,6 +156,9 @@ PAGES: dict[str, Callable[[], str]] = {
 
 def docs(check: bool = typer.Option(False, "--check", help="write nothing; fail if a page is not current")) -> None:
     """Write the documentation pages generated from the code (CLI, composition format, blocks)."""
+    if not DOCS.is_dir():
+        typer.echo(f"error: no {DOCS}: the pages are written into a checkout of hapticop (pip install -e)", err=True)
+        raise typer.Exit(2)
     stale = []
     for name, make in PAGES.items():
         path = DOCS / name
