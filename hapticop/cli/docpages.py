@@ -22,11 +22,8 @@ FORMAT_MODELS = [
 ]
 
 
-def cli_reference() -> str:
-    """Every command and option, as `--help` shows them, one section per command."""
-    from hapticop.cli.main import app
-
-    root = typer.main.get_command(app)
+def cli_reference(root: Any) -> str:
+    """Every command and option under `root` (the `hapticop` command), as `--help` shows them."""
     lines = ["# Command-line reference", "",
              "Generated from the commands themselves by `hapticop docs`; `hapticop COMMAND --help` says the same.",
              ""]
@@ -70,7 +67,7 @@ def _cell(text: str) -> str:
     return " ".join(text.split()).replace("|", "\\|")
 
 
-def composition_reference() -> str:
+def composition_reference(root: Any = None) -> str:
     """Every entry of a composition file: its type, default and meaning, from the JSON Schema."""
     from hapticop.composition.schema import composition_schema
 
@@ -140,21 +137,24 @@ def _type(field: dict, defs: dict) -> str:
             "null": "null"}.get(kind, kind or "any")
 
 
-def blocks_reference() -> str:
+def blocks_reference(root: Any = None) -> str:
     from hapticop.blocks.catalogue import catalogue, to_markdown
     from hapticop.blocks.registry import BUILTIN
 
     return to_markdown(catalogue(list(BUILTIN)))
 
 
-PAGES: dict[str, Callable[[], str]] = {
+# Each page made from the `hapticop` command (only the CLI reference reads it; passed in, as this
+# module is itself one of the commands).
+PAGES: dict[str, Callable[[Any], str]] = {
     "reference/cli.md": cli_reference,
     "reference/composition.md": composition_reference,
     "blocks.md": blocks_reference,
 }
 
 
-def docs(check: bool = typer.Option(False, "--check", help="write nothing; fail if a page is not current")) -> None:
+def docs(context: typer.Context,
+         check: bool = typer.Option(False, "--check", help="write nothing; fail if a page is not current")) -> None:
     """Write the documentation pages generated from the code (CLI, composition format, blocks)."""
     if not DOCS.is_dir():
         typer.echo(f"error: no {DOCS}: the pages are written into a checkout of hapticop (pip install -e)", err=True)
@@ -162,7 +162,7 @@ def docs(check: bool = typer.Option(False, "--check", help="write nothing; fail 
     stale = []
     for name, make in PAGES.items():
         path = DOCS / name
-        text = make()
+        text = make(context.find_root().command)
         if path.exists() and path.read_text() == text:
             continue
         stale.append(name)
