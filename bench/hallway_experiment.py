@@ -4,7 +4,7 @@ Each run is systems/hallway.yaml with a merge patch choosing the force model (``
 adds the robot-side speed governor S1), the operator
 profile and a seeded operator variation (whose hand the simulated Falcon's handle carries); it runs
 to its end in simulated time and the world activity's metrics are collected. Results are appended as JSON lines, so an
-interrupted sweep keeps what it measured; `--summary` turns them into the README table.
+interrupted sweep keeps what it measured; `--summary` turns them into the table of docs/hallway-experiment.md.
 
     python bench/hallway_experiment.py --variations 50 --workers 2
     python bench/hallway_experiment.py --summary

@@ -42,6 +42,7 @@ from hapticop.cli.catalogue import blocks as _blocks  # noqa: E402
 from hapticop.cli.devices import devices as _devices  # noqa: E402
 from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
+from hapticop.cli.docpages import docs as _docs  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
 from hapticop.cli.new import new as _new  # noqa: E402
 from hapticop.cli.recordings import info as _info  # noqa: E402
@@ -61,6 +62,7 @@ app.command("recover")(_recover)
 app.command("plot")(_plot)
 app.command("replay")(_replay)
 app.command("report")(_report)
+app.command("docs")(_docs)
 
 
 class OutputFormat(str, Enum):

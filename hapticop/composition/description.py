@@ -65,7 +65,7 @@ class Thread(Strict):
         0,
         description="offset of the deadlines within the period, e.g. '500us' to run after another loop's "
         "output is ready; 'auto' staggers the threads of equal period evenly, highest priority first. "
-        "Default 0: loops of equal period wake together (README, real-time bench)",
+        "Default 0: loops of equal period wake together (docs/realtime.md, the real-time bench)",
     )
     busy_wait: Offset = Field(
         0, description="spin this long before each deadline instead of sleeping through it: "
