@@ -284,12 +284,15 @@ def expand(file: Path = typer.Argument(..., help="composition file")) -> None:
 @app.command()
 def graph(
     file: Path = typer.Argument(..., help="composition file"),
-    output: Path | None = typer.Option(None, "-o", "--output",
-                                       help="where to write (default: FILE with the format's suffix)"),
-    format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
+    view: str = typer.Option("dataflow", "--view", metavar="VIEW",
+                             help="dataflow (threads, activities, streams), nets (every net and its flags), "
+                                  "the name of one net, or all"),
+    output: Path | None = typer.Option(None, "-o", "--output", metavar="PATH",
+                                       help="where to write (default: FILE-VIEW.FORMAT in the current directory)"),
+    format: GraphFormat = typer.Option(GraphFormat.svg, "--format", metavar="FORMAT", help="svg, png, or dot text"),
 ) -> None:
-    """Draw a composition: threads with their activities, streams, nets and flag maps."""
-    from hapticop.cli.render import RenderError, render, to_dot
+    """Draw a composition: by default its dataflow; its nets and flag maps with --view nets."""
+    from hapticop.cli.render import RenderError, drawing, render, to_dot
 
     validated = validate_path(file)
     if validated.graph is None or validated.graph.loaded.composition is None:
@@ -297,22 +300,28 @@ def graph(
             typer.echo(diagnostic.to_text(), err=True)
         typer.echo(f"{file}: cannot draw a file that does not load", err=True)
         raise typer.Exit(1)
-    if not validated.report.ok:
-        typer.echo(f"{file}: note: the file has {len(validated.report.errors)} errors; drawing what loaded", err=True)
-    dot_text = to_dot(validated.graph)
+    errors = len(validated.report.errors)
+    if errors:
+        typer.echo(f"{file}: note: the file has {errors} error{'s' * (errors != 1)}; drawing what loaded", err=True)
+    try:
+        picture = drawing(validated.graph, view)
+    except RenderError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(2) from None
     if format is GraphFormat.dot and output is None:
-        typer.echo(dot_text, nl=False)
+        typer.echo(to_dot(picture), nl=False)
         return
-    target = output or file.with_suffix(f".{format.value}")
+    target = output or Path.cwd() / f"{file.stem}-{view}.{format.value}"
     if format is GraphFormat.dot:
-        target.write_text(dot_text)
-    else:
-        try:
-            render(dot_text, target, format.value)
-        except RenderError as error:
-            typer.echo(f"error: {error}", err=True)
-            raise typer.Exit(1) from None
-    typer.echo(f"wrote {target}")
+        target.write_text(to_dot(picture))
+        typer.echo(f"wrote {target}")
+        return
+    try:
+        used = render(picture, target, format.value)
+    except RenderError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"wrote {target}" + (" (without graphviz: a simple layout)" if used == "layered" else ""))
 
 
 @app.command()
