@@ -1,3 +1,5 @@
+import re
+
 import pytest
 from pydantic import BaseModel, ValidationError
 
@@ -25,16 +27,28 @@ def test_parse(text, ns):
 
 
 @pytest.mark.parametrize("text, fragment", [
-    ("1", "not a number followed by a unit"),
+    ("1", "'1' has no unit: write it with one of ns, us, ms, s, Hz or kHz, such as '1ms'"),
     ("1 parsec", "not a unit of time or rate"),
     ("0Hz", "rate of zero"),
     ("0.1ns", "shorter than one nanosecond"),
-    ("-1ms", "not a number followed by a unit"),
+    ("-1ms", "'-1ms' is negative: a period or rate must be positive"),
     ("ms", "not a number followed by a unit"),
 ])
 def test_parse_rejects(text, fragment):
-    with pytest.raises(ValueError, match=fragment):
+    with pytest.raises(ValueError, match=re.escape(fragment)):
         parse_duration_ns(text)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("5", "'5' has no unit: write it with one of ns, us, ms or s, such as '5s'"),
+    ("5Hz", "'5Hz' is a rate; write a time (ns, us, ms or s)"),
+    ("-2s", "'-2s' is negative: a duration must be positive"),
+    ("2 parsecs", "'parsecs' is not a unit of time (ns, us, ms or s)"),
+])
+def test_a_time_alone_names_only_time_units(text, fragment):
+    """A run's length (`--duration`) is a time: its messages never offer Hz or kHz."""
+    with pytest.raises(ValueError, match=re.escape(fragment)):
+        parse_duration_ns(text, rates=False)
 
 
 class Holder(BaseModel):

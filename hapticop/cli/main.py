@@ -11,6 +11,7 @@ from pathlib import Path
 
 import typer
 
+from hapticop.cli.helptext import plain_help
 from hapticop.composition.diagnostics import Report, reports_to_json
 from hapticop.validation import validate_path
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
@@ -23,6 +24,7 @@ app = typer.Typer(
 )
 
 SYSTEMS_DIR = Path("systems")
+plain_help()
 
 
 def _version(asked: bool) -> None:
@@ -121,7 +123,7 @@ def _duration(text: str | None, option: str) -> int | None:
     from hapticop.composition.units import parse_duration_ns
 
     try:
-        return parse_duration_ns(text)
+        return parse_duration_ns(text, rates=False)
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint=option) from None
 
@@ -132,7 +134,7 @@ def _valid_or_exit(file: Path, refusal: str):
     for diagnostic in validated.report.sorted():
         typer.echo(diagnostic.to_text(), err=True)
     if not validated.report.ok:
-        typer.echo(f"{file}: {refusal}: {len(validated.report.errors)} errors", err=True)
+        typer.echo(f"{file}: {refusal}: {_count(len(validated.report.errors), 'error')}", err=True)
         raise typer.Exit(1)
     return validated
 
@@ -276,7 +278,7 @@ def expand(file: Path = typer.Argument(..., help="composition file")) -> None:
     for diagnostic in validated.report.sorted():
         typer.echo(diagnostic.to_text(), err=True)
     if not validated.report.ok:
-        typer.echo(f"{file}: not expanded: {len(validated.report.errors)} errors", err=True)
+        typer.echo(f"{file}: not expanded: {_count(len(validated.report.errors), 'error')}", err=True)
         raise typer.Exit(1)
     typer.echo(dump(expanded_tree(validated.source.tree, validated.graph.loaded.expansion)), nl=False)
 
@@ -289,7 +291,7 @@ def graph(
                                   "the name of one net, or all"),
     output: Path | None = typer.Option(None, "-o", "--output", metavar="PATH",
                                        help="where to write (default: FILE-VIEW.FORMAT in the current directory)"),
-    format: GraphFormat = typer.Option(GraphFormat.svg, "--format", metavar="FORMAT", help="svg, png, or dot text"),
+    format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
     """Draw a composition: by default its dataflow; its nets and flag maps with --view nets."""
     from hapticop.cli.render import RenderError, drawing, render, to_dot
@@ -302,7 +304,7 @@ def graph(
         raise typer.Exit(1)
     errors = len(validated.report.errors)
     if errors:
-        typer.echo(f"{file}: note: the file has {errors} error{'s' * (errors != 1)}; drawing what loaded", err=True)
+        typer.echo(f"{file}: note: the file has {_count(errors, 'error')}; drawing what loaded", err=True)
     try:
         picture = drawing(validated.graph, view)
     except RenderError as error:
