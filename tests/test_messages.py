@@ -104,3 +104,20 @@ def test_help_shows_no_python_types():
             assert python_type not in result.output, (path, result.output)
     validate_help = runner.invoke(app, ["validate", "--help"], terminal_width=200).output
     assert "text|json" in validate_help and "STATE_LIMIT" in validate_help
+
+
+def test_one_broken_thread_is_one_finding_not_a_cascade():
+    """A thread set aside for a bad field takes its activities with it: none of them is 'never runs'."""
+    hallway = (SYSTEMS / "hallway.yaml").read_text()
+    report = validate_text(hallway.replace("    deploy: main", "    deploy: fork", 1), "hallway.yaml").report
+    assert [(d.rule, d.line) for d in report.sorted()] == [("bad-value", 23)], [d.to_text() for d in report.sorted()]
+
+
+def test_a_block_module_not_found_says_where_python_looks(tmp_path):
+    composition = tmp_path / "wall.yaml"
+    composition.write_text(WALL.replace("block: virtual_wall", "block: my_effects:Wall"))
+    for options in ([], ["--import-blocks"]):
+        result = runner.invoke(app, ["validate", *options, str(composition)])
+        assert result.exit_code == 1
+        assert "hint: Python looks for 'my_effects.py' (or a package of that name) beside the composition file, " \
+               "in the folders on PYTHONPATH, and among installed packages" in result.output, result.output
