@@ -121,3 +121,31 @@ def test_a_block_module_not_found_says_where_python_looks(tmp_path):
         assert result.exit_code == 1
         assert "hint: Python looks for 'my_effects.py' (or a package of that name) beside the composition file, " \
                "in the folders on PYTHONPATH, and among installed packages" in result.output, result.output
+
+
+def test_tables_print_fixed_point_and_a_ceiling_as_a_floor(tmp_path):
+    """No 1.23457e+06 in a table; a percentile in the histogram's last bin is '>= 19999', not a figure."""
+    import json
+    from io import StringIO
+
+    from rich.console import Console
+
+    from hapticop.runtime.report import print_results, print_timing
+
+    thread = {"period": "1ms", "cycles": 1000, "missed_deadlines": 0, "missed_percent": None, "cpu_percent": 12.5,
+              "wakeup_latency_us": {"p50": 12.0, "p99": 19999.0, "p99.9": 19999.0, "max": 1234567.8}}
+    data = {"threads": {"main": thread}, "latencies": {},
+            "activities": {"world": {"steps": 10, "compute_us": {"p50": 3.0, "p99": 4.5, "p99.9": 5.0, "max": 6.0}}},
+            "cpu": None}
+    (tmp_path / "results.json").write_text(json.dumps({"title": "run", "rows": [
+        {"metric": "tiny", "value": 0.00001234, "unit": "m", "target": "", "ok": None},
+        {"metric": "huge", "value": 12345678.9, "unit": "s", "target": "", "ok": True},
+        {"metric": "none", "value": None, "unit": "s", "target": "", "ok": None}]}))
+    out = StringIO()
+    console = Console(file=out, width=200)
+    print_timing(data, console, virtual=False)
+    print_results(tmp_path, console)
+    text = out.getvalue()
+    assert "e+0" not in text and "e-0" not in text
+    assert ">= 19999" in text and "1234567.8" in text
+    assert "0.00001234 m" in text and "12350000 s" in text

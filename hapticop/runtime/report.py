@@ -150,8 +150,10 @@ def print_results(run_dir: Path, console: Console) -> None:
             table.add_column(column, justify="left" if column == "metric" else "right")
         for row in data["rows"]:
             raw = row["value"]
-            shown = raw if isinstance(raw, str) else f"{significant(raw)} {row['unit']}".strip()
-            value = "-" if raw is None else shown
+            if raw is None or isinstance(raw, str):
+                value = "-" if raw is None else raw
+            else:
+                value = f"{significant(raw)} {row['unit']}".strip()
             ok = {True: "[green]yes[/]", False: "[red]no[/]", None: ""}[row["ok"]]
             table.add_row(row["metric"], value, row["target"], ok)
         console.print(table)
