@@ -3,7 +3,7 @@ import re
 import pytest
 from pydantic import BaseModel, ValidationError
 
-from hapticop.composition.units import Duration, format_duration, parse_duration_ns
+from hapticop.composition.units import Duration, format_duration, format_period, parse_duration_ns
 
 
 @pytest.mark.parametrize(
@@ -66,6 +66,8 @@ def test_model_requires_text_with_unit():
 def test_serialises_back_to_text():
     assert Holder(period="1ms").model_dump() == {"period": "1ms"}
     assert format_duration(66_666_667) == "66.6667ms"
+    assert format_period(66_666_667) == "15Hz" and format_period(1_000_000) == "1ms"
+    assert format_period(500_000) == "500us" and format_period(333_333_333) == "3Hz"
     assert format_duration(250) == "250ns"
 
 

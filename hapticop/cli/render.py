@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hapticop.composition.graph import CompositionGraph
-from hapticop.composition.units import format_duration
+from hapticop.composition.units import format_period
 
 VIEWS = ("dataflow", "nets", "all")
 MAX_SIZE_IN = 30  # a drawing larger than this (inches, 72 px each) is scaled down by graphviz
@@ -82,7 +82,7 @@ def _dataflow(cg: CompositionGraph, d: Drawing) -> None:
     for tname, thread in comp.threads.items():
         prio = f", FIFO {thread.priority}" if thread.priority else ""
         cluster = f"thread:{tname}"
-        d.clusters[cluster] = f"thread {tname}: {_period(thread.period)}{prio}, {thread.deploy}"
+        d.clusters[cluster] = f"thread {tname}: {format_period(thread.period)}{prio}, {thread.deploy}"
         placed: dict[str, list[str]] = {}
         for sid, members in thread.schedules.items():
             for member in members:
@@ -110,14 +110,6 @@ def _dataflow(cg: CompositionGraph, d: Drawing) -> None:
     for source, target, data in cg.edges_of("needs"):  # a device and its simulator, a simulator and its world
         d.edges.append(Edge(f"activity:{source[1]}", f"activity:{target[1]}", f"needs {data['need'].provides}",
                             style="dashed", color="darkorange"))
-
-
-def _period(ns: int) -> str:
-    """A period as written: 1ms, or 15Hz when it is a whole rate rather than a round duration."""
-    hz = 1e9 / ns
-    if ns % 1000 and abs(hz - round(hz)) < 1e-6 * hz:
-        return f"{round(hz)}Hz"
-    return format_duration(ns)
 
 
 def _net(cg: CompositionGraph, nname: str, d: Drawing) -> None:

@@ -62,6 +62,14 @@ def format_duration(ns: int) -> str:
     return f"{ns}ns"
 
 
+def format_period(ns: int) -> str:
+    """A thread's period as people write it: 1ms, or 15Hz when it is a whole rate, not a round time."""
+    hz = 1e9 / ns
+    if ns % 1000 and abs(hz - round(hz)) < 1e-6 * hz:
+        return f"{round(hz)}Hz"
+    return format_duration(ns)
+
+
 def _coerce_offset(value: Any) -> int:
     if value == 0 and not isinstance(value, bool):
         return 0

@@ -10,7 +10,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from hapticop.composition.units import format_duration
+from hapticop.composition.units import format_period
 from hapticop.runtime.region import Region
 from hapticop.runtime.timing import BINS, Summary
 
@@ -32,7 +32,7 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
         missed = int(region.missed[index])
         cpu_ns = int(region.cpu_ns[index] - region.cpu_base[index])
         threads[name] = {
-            "period": format_duration(composition.threads[name].period),
+            "period": format_period(composition.threads[name].period),
             "priority": composition.threads[name].priority,
             "deploy": composition.threads[name].deploy,
             "cycles": cycles,
