@@ -149,3 +149,20 @@ def test_tables_print_fixed_point_and_a_ceiling_as_a_floor(tmp_path):
     assert "e+0" not in text and "e-0" not in text
     assert ">= 19999" in text and "1234567.8" in text
     assert "0.00001234 m" in text and "12350000 s" in text
+
+
+def test_tests_keep_their_figures_out_of_the_output():
+    """A test's measured figure goes to the `figure` fixture (listed by `pytest -v`), never printed
+    into the suite's output: no print() and no capsys.disabled() in a test module."""
+    import ast
+    from pathlib import Path
+
+    stray = []
+    for module in sorted(Path(__file__).parent.glob("*.py")):
+        for node in ast.walk(ast.parse(module.read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print":
+                stray.append(f"{module.name}:{node.lineno} print()")
+            if isinstance(node, ast.Attribute) and node.attr == "disabled" and getattr(node.value, "id", "") in (
+                    "capsys", "capfd"):
+                stray.append(f"{module.name}:{node.lineno} capsys.disabled()")
+    assert stray == []
