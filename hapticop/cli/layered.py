@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from html import escape
 
-from hapticop.cli.render import Drawing, Edge
+from hapticop.cli.drawing import Drawing, Edge
 
 FONT = 12
 CHAR_W = 0.6 * FONT

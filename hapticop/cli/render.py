@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-from dataclasses import dataclass, field
 from pathlib import Path
 
+from hapticop.cli.drawing import Drawing, Edge, Node
 from hapticop.composition.graph import CompositionGraph
 from hapticop.composition.units import format_period
 
@@ -26,37 +26,6 @@ MAX_SIZE_IN = 30  # a drawing larger than this (inches, 72 px each) is scaled do
 
 class RenderError(RuntimeError):
     pass
-
-
-@dataclass
-class Node:
-    label: str  # lines joined by "\n"
-    shape: str = "box"  # box, circle, bar, note, point
-    cluster: str | None = None
-    fill: str = "white"
-    peripheries: int = 1
-
-
-@dataclass
-class Edge:
-    tail: str
-    head: str
-    label: str = ""
-    style: str = "solid"  # solid, dashed, dotted
-    color: str = "black"
-    tooltip: str = ""
-    arrowhead: str = "normal"  # normal, none, odot (an inhibitor arc)
-
-
-@dataclass
-class Drawing:
-    """What one view shows, before any layout: nodes (grouped into labelled clusters) and edges."""
-
-    title: str
-    nodes: dict[str, Node] = field(default_factory=dict)
-    edges: list[Edge] = field(default_factory=list)
-    clusters: dict[str, str] = field(default_factory=dict)  # id -> label
-    aligned: bool = False  # one ranking across clusters (tidy for threads; too wide for nets)
 
 
 def views_of(cg: CompositionGraph) -> list[str]:
