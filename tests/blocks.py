@@ -82,6 +82,19 @@ class Recorder(Block):
         np.savez(self.run_dir / f"{self.name}.npz", samples=self.samples[: self.n], stamps=self.stamps[: self.n])
 
 
+class Tally(Block):
+    """Counts its computes and writes the count on clean: what the timing's 'steps' must match."""
+
+    def create(self):
+        self.computes = 0
+
+    def compute(self):
+        self.computes += 1
+
+    def clean(self):
+        (self.run_dir / f"{self.name}.computes").write_text(str(self.computes))
+
+
 class ConstantTwistParams(Params):
     twist: tuple[float, float, float] = (0.0, 0.0, 0.0)
 

@@ -52,11 +52,13 @@ def test_strict_turns_warnings_into_failures(tmp_path):
 
 
 def test_graph_dot_and_png(tmp_path):
-    result = runner.invoke(app, ["graph", str(SYSTEMS / "hallway.yaml"), "--format", "dot"])
+    result = runner.invoke(app, ["graph", str(SYSTEMS / "hallway.yaml"), "--format", "dot", "--view", "all"])
     assert result.exit_code == 0
     dot = result.output
-    for fragment in ('subgraph "cluster_thread_fieldbus"', '"activity:ropod"', 'cluster_net_thread_scheduler',
-                     '"flag:system.exit"', 'velocity_setpoint: velocity_setpoint->velocity_setpoint'):
+    for fragment in ('subgraph "cluster_thread:fieldbus"', '"activity:ropod"', 'cluster_net:thread_scheduler',
+                     '"flag:system.exit"', 'label="velocity_setpoint"',
+                     'tooltip="haptic.velocity_setpoint -> ropod.velocity_setpoint, '
+                     'haptic.velocity_setpoint -> world.velocity_setpoint"'):
         assert fragment in dot
     png = tmp_path / "hallway.png"
     result = runner.invoke(app, ["graph", str(SYSTEMS / "hallway.yaml"), "--format", "png", "-o", str(png)])
@@ -73,8 +75,8 @@ def test_graph_draws_the_simulators_and_what_they_stand_behind():
     hallway = runner.invoke(app, ["graph", str(SYSTEMS / "hallway.yaml"), "--format", "dot"]).output
     for device, simulator, kind in (("falcon", "falcon_sim", "falcon_device"), ("lidar", "lidar_sim", "tim561"),
                                     ("ethercat", "ropod_plant", "ropod_wheels"), ("lidar_sim", "world", "hallway")):
-        assert f'"activity:{device}" -> "activity:{simulator}" [style=dashed, color=darkorange, ' \
-               f'label="needs {kind}"]' in hallway
+        assert f'"activity:{device}" -> "activity:{simulator}" [label="needs {kind}", style=dashed, ' \
+               f'color="darkorange"]' in hallway
     assert '"activity:lidar_sim" [shape=box' in hallway  # drawn in its thread's box
     hardware = runner.invoke(app, ["graph", str(SYSTEMS / "hardware.yaml"), "--format", "dot"]).output
     assert "needs " not in hardware and "_sim" not in hardware

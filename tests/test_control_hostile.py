@@ -45,7 +45,7 @@ BAD_REQUESTS = [
 ]
 
 
-def test_bad_requests_slow_clients_and_a_flood_leave_the_running_system_answering_and_unchanged(tmp_path):
+def test_bad_requests_slow_clients_and_a_flood_leave_the_running_system_answering_and_unchanged(tmp_path, figure):
     figures: dict[str, float] = {}
 
     def work(path, system):
@@ -80,7 +80,7 @@ def test_bad_requests_slow_clients_and_a_flood_leave_the_running_system_answerin
         figures["peak_rss_end_kib"] = peak_rss_kib()
 
     while_running(tmp_path, work)
-    print("\ncontrol channel figures:", json.dumps(figures))
+    figure("control channel: " + json.dumps(figures))
 
 
 VALID = "activities: {noise: {params: {sigma: 2.0}}}"
@@ -231,7 +231,7 @@ FRAGMENTS = st.sampled_from([
 BYTES = st.binary(max_size=4096) | st.lists(FRAGMENTS | st.binary(max_size=16), max_size=60).map(b"".join)
 
 
-def test_arbitrary_bytes_never_harm_the_running_system(tmp_path):
+def test_arbitrary_bytes_never_harm_the_running_system(tmp_path, figure):
     """Random bytes, embedded newlines and NULs, invalid UTF-8, partial lines: each gets one line
     back (an error unless its first line is a good status request), or the client hangs up first."""
 
@@ -259,7 +259,7 @@ def test_arbitrary_bytes_never_harm_the_running_system(tmp_path):
             watch.check()
 
         arbitrary_bytes()
-        print(f"\nslowest status between random byte requests: {watch.slowest_status_s:.3f} s")
+        figure(f"slowest status between random byte requests: {watch.slowest_status_s:.3f} s")
 
     while_running(tmp_path, work)
 
@@ -270,7 +270,7 @@ REQUESTS = st.fixed_dictionaries({}, optional={"op": OPS, "text": FIELD_VALUES, 
                                                "dry_run": FIELD_VALUES, "extra": FIELD_VALUES})
 
 
-def test_arbitrary_json_requests_never_harm_the_running_system(tmp_path):
+def test_arbitrary_json_requests_never_harm_the_running_system(tmp_path, figure):
     """Random objects of random depth, huge numbers, NaN and Infinity, known fields of the wrong type:
     a status request is answered, everything else refused, and nothing changes."""
 
@@ -294,7 +294,7 @@ def test_arbitrary_json_requests_never_harm_the_running_system(tmp_path):
             watch.check()
 
         arbitrary_json()
-        print(f"\nslowest status between random JSON requests: {watch.slowest_status_s:.3f} s")
+        figure(f"slowest status between random JSON requests: {watch.slowest_status_s:.3f} s")
 
     while_running(tmp_path, work)
 
@@ -351,7 +351,7 @@ PATCHES = (st.lists(OPERATION, min_size=1, max_size=4)
            | NEAR_VALID)
 
 
-def test_random_patches_change_nothing_unless_valid(tmp_path):
+def test_random_patches_change_nothing_unless_valid(tmp_path, figure):
     """JSON Patches and merge patches of random paths and values, sent for real: a refused one
     changes neither the description nor the running block; NaN and Infinity are never applied."""
 
@@ -372,7 +372,7 @@ def test_random_patches_change_nothing_unless_valid(tmp_path):
             assert not list(not_finite(system.composition.model_dump())), (patch, reply)
 
         random_patch()
-        print(f"\nslowest status between random patches: {watch.slowest_status_s:.3f} s; "
-              f"{watch.applied} of them valid and applied")
+        figure(f"slowest status between random patches: {watch.slowest_status_s:.3f} s; "
+               f"{watch.applied} of them valid and applied")
 
     while_running(tmp_path, work)

@@ -81,3 +81,19 @@ def test_the_bench_extends_the_hallway():
     assert composition.threads["probe_above"].priority > top and composition.threads["probe_below"].priority < low
     assert composition.activities.keys() == hallway.activities.keys()
     assert composition.duration and len(composition.latencies) == 3
+
+
+def test_a_finding_a_variant_causes_in_its_base_points_at_the_variant(tmp_path):
+    """Deleting or replacing an activity in the variant breaks lines of the base: the finding names the
+    variant's line that did it, and the base's line in its hint."""
+    base = write(tmp_path, "base.yaml", BASE)
+    deleted = write(tmp_path, "deleted.yaml", "extends: base.yaml\nactivities:\n  sink: null\n")
+    report = validate_path(deleted).report
+    assert {(d.rule, d.file, d.line) for d in report.errors} == {("unknown-activity", str(deleted), 3)}
+    assert {d.hint.split("; ", 1)[1] for d in report.errors} == {
+        f"what it blames is written at {base}:5:40; this line changes 'sink'",
+        f"what it blames is written at {base}:11:35; this line changes 'sink'"}
+    replaced = write(tmp_path, "replaced.yaml", "extends: base.yaml\nactivities:\n  sink: {block: counter}\n")
+    [error] = validate_path(replaced).report.errors
+    assert (error.rule, error.file, error.line) == ("unknown-port", str(replaced), 3)
+    assert error.hint == f"what it blames is written at {base}:11:35; this line changes 'sink'"

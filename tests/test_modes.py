@@ -60,7 +60,7 @@ def _errors(text: str):
     ("gain: {label: parked}", "mode-not-live", "mode 'held' changes 'label' of 'gain', which block"),
     ("gain: {gain: .nan}", "bad-value", "finite number"),
     ("gian: {gain: 2.0}", "unknown-activity", "unknown activity 'gian'"),
-    ("gain: {gain: fast}", "bad-value", "valid number"),
+    ("gain: {gain: fast}", "bad-value", "'gain' takes a number (got 'fast')"),
 ])
 def test_a_mode_that_cannot_hold_live_is_refused_where_it_is_written(change, rule, message):
     (error,) = _errors(MODES.replace("gain: {gain: 5.0}", change))

@@ -16,7 +16,19 @@ def test_a_run_walks_everything_to_done(tmp_path):
     threads = result.timing["threads"]
     assert threads["main"]["cycles"] >= 500 and threads["slow"]["cycles"] >= 50
     assert threads["main"]["missed_deadlines"] == 0
-    assert result.timing["activities"]["recorder"]["steps"] >= 48
+    # steps are computes: the 10 ms thread's 50 cycles less those its life cycle took to start and end
+    assert result.timing["activities"]["recorder"]["steps"] >= threads["slow"]["cycles"] - 8
+
+
+def test_only_computes_are_timed_as_computes(tmp_path):
+    """Creating, configuring and cleaning (where a world plots its run) are not the activity's compute."""
+    text = COUNTER.replace("[mediator, counter]", "[mediator, counter, tally]") + \
+        '  tally: {block: "tests.blocks:Tally"}\n'
+    result = compose(tmp_path, text, duration="200ms")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    computes = int((tmp_path / "run-c" / "tally.computes").read_text())
+    assert computes >= 150
+    assert result.timing["activities"]["tally"]["steps"] == computes
 
 
 def test_same_seed_same_run_bit_for_bit(tmp_path):

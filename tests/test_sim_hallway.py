@@ -112,7 +112,7 @@ def test_vectorised_raycast_matches_a_beam_by_beam_solve():
         np.testing.assert_allclose(out, brute_force(world, pose, g.lidar.mount, angles), atol=1e-9)
 
 
-def test_811_beams_cast_without_allocating(capsys):
+def test_811_beams_cast_without_allocating(figure):
     """The cast allocates nothing; how long it takes is printed for the reader (bench/ measures it), not judged."""
     g = HallwayGeometry.named("H4")
     world = World.from_geometry(g)
@@ -130,9 +130,8 @@ def test_811_beams_cast_without_allocating(capsys):
 
     grown = grown_bytes(cast_200)
     assert grown < 4096
-    with capsys.disabled():
-        print(f"\n[raycast] 811 beams x {len(world.segments)} segments: median {np.median(times) * 1e6:.0f} us, "
-              f"p99 {np.percentile(times, 99) * 1e6:.0f} us")
+    figure(f"raycast: 811 beams x {len(world.segments)} segments: median {np.median(times) * 1e6:.0f} us, "
+           f"p99 {np.percentile(times, 99) * 1e6:.0f} us")
 
 
 def test_named_hallways_carry_the_notes_numbers():

@@ -166,7 +166,7 @@ def test_profiles_reject_inconsistent_thresholds():
         OperatorProfile.named("reckless")
 
 
-def test_a_step_allocates_nothing(capsys):
+def test_a_step_allocates_nothing(figure):
     """How long a step takes is printed for the reader, not judged: a test asserts no speed."""
     op = BlindOperator.variant("tremor")
     fe, p, v, out = np.array([0.3, 0.0, 0.8]), np.array([0.001, 0.0, -0.02]), np.zeros(3), np.zeros(3)
@@ -182,8 +182,7 @@ def test_a_step_allocates_nothing(capsys):
     for k in range(12000, 22000):
         op.step(k * 1e-3, fe, p, out, velocity=v)
     per_step = (time.perf_counter() - t0) / 10000
-    with capsys.disabled():
-        print(f"\n[operator] step: {per_step * 1e6:.1f} us")
+    figure(f"operator: step {per_step * 1e6:.1f} us")
 
 
 def test_works_at_the_300_hz_servo_rate_too():

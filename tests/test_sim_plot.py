@@ -41,3 +41,19 @@ def test_the_plot_writes_a_png(tmp_path):
     data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
     assert plot_run(run, g, tmp_path / "pose_only.png").exists()
+
+
+def test_linear_and_angular_velocity_have_axes_of_their_own(tmp_path, monkeypatch):
+    """m/s and rad/s never share a scale: v on the left axis, omega on a twin axis on the right."""
+    from matplotlib.figure import Figure
+
+    drawn = []
+    monkeypatch.setattr(Figure, "savefig", lambda self, *args, **kwargs: drawn.append(self))
+    run, _ = straight_run(g=HallwayGeometry.named("H4"), y=lambda t: 0.2 * np.sin(t / 3))
+    plot_run(run, HallwayGeometry.named("H4"), tmp_path / "run.png")
+    (figure,) = drawn
+    velocity = [axis for axis in figure.axes if "[m/s]" in axis.get_ylabel() or "[rad/s]" in axis.get_ylabel()]
+    assert [axis.get_ylabel() for axis in velocity] == ["linear v [m/s] (solid)", "angular omega [rad/s] (dashed)"]
+    linear, angular = velocity
+    assert [line.get_label() for line in linear.lines] == ["v robot"]
+    assert [line.get_label() for line in angular.lines] == ["omega robot"]

@@ -5,6 +5,7 @@ Falcon's frames and by streams (tests/fixtures/simulation_process.yaml)."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -26,13 +27,28 @@ def test_the_operator_homes_and_drives_a_falcon_simulated_in_another_process(tmp
     run = tmp_path / "run-sim"
     assert "homed after" in (run / "falcon.log").read_text()  # frames both ways, homing bits, the LED seen
     assert "the operator starts driving" in (run / "operator.log").read_text()
-    assert "run ended at" in (run / "world.log").read_text()  # the world judged, and the net stopped the run
-    assert json.loads((run / "results.json").read_text())["title"] == "hallway H1, nominal operator"
+    assert "run judged over" in (run / "world.log").read_text()  # the world judged, and the net stopped the run
+    results = json.loads((run / "results.json").read_text())
+    assert results["title"] == "hallway H1, nominal operator"
+    # one end time: the log, the results table and the metrics' completion time tell the same one
+    [logged] = re.findall(r"run ended at ([0-9.]+) s after the operator started", (run / "world.log").read_text())
+    [row] = [r for r in results["rows"] if r["metric"].startswith("run ended at")]
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert float(logged) == pytest.approx(row["value"], abs=1e-3)
+    if metrics["ended_by"] == "stopped":
+        assert row["value"] == pytest.approx(metrics["completion_time_s"], abs=1e-3)
+    else:  # it ended without stopping: the end is the last moment recorded
+        assert row["value"] == pytest.approx(trajectory_seconds(run), abs=1e-3)
     trajectory = np.load(run / "trajectory.npz")
     assert trajectory["handle_position"][:, 2].min() < -0.01  # the operator pushed the grip forward
     assert np.abs(trajectory["force_device"]).max() > 0.1  # against the spring the Falcon rendered
     if clock == "realtime":
         assert "thread 'simulation' runs in process" in (run / "system.log").read_text()
+
+
+def trajectory_seconds(run) -> float:
+    t = np.load(run / "trajectory.npz")["t"]
+    return float(t[-1] - t[0])
 
 
 def test_under_the_virtual_clock_a_rerun_is_identical(tmp_path):

@@ -1,7 +1,9 @@
+import re
+
 import pytest
 from pydantic import BaseModel, ValidationError
 
-from hapticop.composition.units import Duration, format_duration, parse_duration_ns
+from hapticop.composition.units import Duration, format_duration, format_period, parse_duration_ns
 
 
 @pytest.mark.parametrize(
@@ -25,16 +27,28 @@ def test_parse(text, ns):
 
 
 @pytest.mark.parametrize("text, fragment", [
-    ("1", "not a number followed by a unit"),
+    ("1", "'1' has no unit: write it with one of ns, us, ms, s, Hz or kHz, such as '1ms'"),
     ("1 parsec", "not a unit of time or rate"),
     ("0Hz", "rate of zero"),
     ("0.1ns", "shorter than one nanosecond"),
-    ("-1ms", "not a number followed by a unit"),
+    ("-1ms", "'-1ms' is negative: a period or rate must be positive"),
     ("ms", "not a number followed by a unit"),
 ])
 def test_parse_rejects(text, fragment):
-    with pytest.raises(ValueError, match=fragment):
+    with pytest.raises(ValueError, match=re.escape(fragment)):
         parse_duration_ns(text)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("5", "'5' has no unit: write it with one of ns, us, ms or s, such as '5s'"),
+    ("5Hz", "'5Hz' is a rate; write a time (ns, us, ms or s)"),
+    ("-2s", "'-2s' is negative: a duration must be positive"),
+    ("2 parsecs", "'parsecs' is not a unit of time (ns, us, ms or s)"),
+])
+def test_a_time_alone_names_only_time_units(text, fragment):
+    """A run's length (`--duration`) is a time: its messages never offer Hz or kHz."""
+    with pytest.raises(ValueError, match=re.escape(fragment)):
+        parse_duration_ns(text, rates=False)
 
 
 class Holder(BaseModel):
@@ -52,6 +66,8 @@ def test_model_requires_text_with_unit():
 def test_serialises_back_to_text():
     assert Holder(period="1ms").model_dump() == {"period": "1ms"}
     assert format_duration(66_666_667) == "66.6667ms"
+    assert format_period(66_666_667) == "15Hz" and format_period(1_000_000) == "1ms"
+    assert format_period(500_000) == "500us" and format_period(333_333_333) == "3Hz"
     assert format_duration(250) == "250ns"
 
 

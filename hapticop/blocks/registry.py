@@ -117,16 +117,27 @@ def resolve(name: str) -> type[Block] | None:
     own = module_name == "hapticop" or module_name.startswith("hapticop.")
     if not own and not _importing.get():
         if not _module_exists(module_name):
-            raise UnknownBlock(name, f"cannot find module '{module_name}' for block '{name}'")
+            raise UnknownBlock(name, f"cannot find module '{module_name}' for block '{name}'",
+                               _where_python_looks(module_name))
         return None
     try:
         module = importlib.import_module(module_name)
     except ImportError as error:
-        raise UnknownBlock(name, f"cannot import module '{module_name}' for block '{name}': {error}") from None
+        missing = getattr(error, "name", None)
+        hint = (_where_python_looks(module_name) if missing and module_name.startswith(missing)
+                else f"'{module_name}' was found, but importing it failed: install what it imports")
+        raise UnknownBlock(name, f"cannot import module '{module_name}' for block '{name}': {error}", hint) from None
     cls = getattr(module, class_name, None)
     if not (isinstance(cls, type) and issubclass(cls, Block)):
         raise UnknownBlock(name, f"'{target}' is not a hapticop Block class")
     return cls
+
+
+def _where_python_looks(module_name: str) -> str:
+    """How a `module:Class` block is found, for a module that was not."""
+    return (f"Python looks for '{module_name.replace('.', '/')}.py' (or a package of that name) beside the "
+            "composition file, in the folders on PYTHONPATH, and among installed packages; an installed "
+            "package may also give its blocks short names through the 'hapticop.blocks' entry point")
 
 
 def _module_exists(module_name: str) -> bool:

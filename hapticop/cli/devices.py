@@ -56,7 +56,12 @@ def lidar_decode(
         return
     for field in dataclasses.fields(header):
         value = _plain(getattr(header, field.name))
-        if field.name != "dist":
+        if field.name in _RAW_UNITS:
+            typer.echo(f"{field.name:24s} {value} {_RAW_UNITS[field.name](value)}")
+        elif field.name in ("channels16", "channels8"):
+            for channel in value:
+                typer.echo(f"{field.name:24s} {_channel_text(channel)}")
+        elif field.name != "dist":
             typer.echo(f"{field.name:24s} {value}")
     valid = ~np.isnan(ranges)
     typer.echo(f"{'points':24s} {n} over {np.degrees(angles[-1] - angles[0]):.1f} deg, {int(valid.sum())} valid")
@@ -64,6 +69,21 @@ def lidar_decode(
         typer.echo(f"{'range min / max':24s} {np.nanmin(ranges):.3f} / {np.nanmax(ranges):.3f} m")
     for i in range(0, n, max(1, n // 9)):
         typer.echo(f"  [{i:4d}] {np.degrees(angles[i]):8.3f} deg  {ranges[i]:.3f} m")
+
+
+# The telegram's integer fields in the sensor's own units, each with its name and its value in SI
+_RAW_UNITS = {
+    "scan_frequency": lambda v: f"(1/100 Hz: {v / 100:g} Hz)",
+    "measurement_frequency": lambda v: f"(100 Hz: {v * 100 / 1000:g} kHz between neighbouring points)",
+}
+
+
+def _channel_text(channel: dict) -> str:
+    """A data channel with its angles in degrees (the telegram has 1/10000 degree) and its scale."""
+    return (f"{channel['name']}: {channel['count']} values from {channel['start_angle']} "
+            f"(1/10000 deg: {channel['start_angle'] / 10000:g} deg) in steps of {channel['angular_step']} "
+            f"(1/10000 deg: {channel['angular_step'] / 10000:g} deg), value x {channel['scale_factor']:g} "
+            f"+ {channel['scale_offset']:g}" + (" mm" if channel["name"].startswith("DIST") else ""))
 
 
 def _kinematics():
@@ -108,7 +128,12 @@ def falcon_ik(
     kinematics, _ = _kinematics()
     angles, counts = np.zeros(3), np.zeros(3, dtype=np.int64)
     if not kinematics.inverse([x, y, z], angles):
-        typer.echo(f"error: ({x}, {y}, {z}) m is outside the Falcon's reachable workspace", err=True)
+        from hapticop.devices.falcon import WORKSPACE_BOX_M
+
+        (x0, y0, z0), (x1, y1, z1) = WORKSPACE_BOX_M
+        typer.echo(f"error: ({x}, {y}, {z}) m is outside the Falcon's reachable workspace: the handle reaches "
+                   f"about x {x0:+.3f} to {x1:+.3f}, y {y0:+.3f} to {y1:+.3f}, z {z0:.3f} to {z1:.3f} m "
+                   f"(device frame; not every corner of that box)", err=True)
         raise typer.Exit(1)
     kinematics.counts_from_angles(angles, counts)
     data = {"position_m": [x, y, z], "thigh_angles_rad": angles.tolist(), "counts": counts.tolist()}
@@ -143,6 +168,11 @@ def devices(
     from hapticop.devices.falcon.usb_errors import FalconUsbError
     from hapticop.devices.sick.probe import ProbeError, probe_lidar
 
+    if not usb and not lidar:
+        typer.echo("nothing to look for: --no-usb skips the Falcons and no --lidar HOST[:PORT] was given; "
+                   "try `hapticop devices` (Falcons on USB) or `hapticop devices --no-usb --lidar 192.168.0.1`",
+                   err=True)
+        raise typer.Exit(2)
     report: dict = {}
     failed = False
     if usb:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import typer
 
+from hapticop.cli.helptext import plain_help
 from hapticop.composition.diagnostics import Report, reports_to_json
 from hapticop.validation import validate_path
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
@@ -23,6 +24,7 @@ app = typer.Typer(
 )
 
 SYSTEMS_DIR = Path("systems")
+plain_help()
 
 
 def _version(asked: bool) -> None:
@@ -127,7 +129,7 @@ def _duration(text: str | None, option: str) -> int | None:
     from hapticop.composition.units import parse_duration_ns
 
     try:
-        return parse_duration_ns(text)
+        return parse_duration_ns(text, rates=False)
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint=option) from None
 
@@ -138,7 +140,7 @@ def _valid_or_exit(file: Path, refusal: str):
     for diagnostic in validated.report.sorted():
         typer.echo(diagnostic.to_text(), err=True)
     if not validated.report.ok:
-        typer.echo(f"{file}: {refusal}: {len(validated.report.errors)} errors", err=True)
+        typer.echo(f"{file}: {refusal}: {_count(len(validated.report.errors), 'error')}", err=True)
         raise typer.Exit(1)
     return validated
 
@@ -282,7 +284,7 @@ def expand(file: Path = typer.Argument(..., help="composition file")) -> None:
     for diagnostic in validated.report.sorted():
         typer.echo(diagnostic.to_text(), err=True)
     if not validated.report.ok:
-        typer.echo(f"{file}: not expanded: {len(validated.report.errors)} errors", err=True)
+        typer.echo(f"{file}: not expanded: {_count(len(validated.report.errors), 'error')}", err=True)
         raise typer.Exit(1)
     typer.echo(dump(expanded_tree(validated.source.tree, validated.graph.loaded.expansion)), nl=False)
 
@@ -290,12 +292,15 @@ def expand(file: Path = typer.Argument(..., help="composition file")) -> None:
 @app.command()
 def graph(
     file: Path = typer.Argument(..., help="composition file"),
-    output: Path | None = typer.Option(None, "-o", "--output",
-                                       help="where to write (default: FILE with the format's suffix)"),
+    view: str = typer.Option("dataflow", "--view", metavar="VIEW",
+                             help="dataflow (threads, activities, streams), nets (every net and its flags), "
+                                  "the name of one net, or all"),
+    output: Path | None = typer.Option(None, "-o", "--output", metavar="PATH",
+                                       help="where to write (default: FILE-VIEW.FORMAT in the current directory)"),
     format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
-    """Draw a composition: threads with their activities, streams, nets and flag maps."""
-    from hapticop.cli.render import RenderError, render, to_dot
+    """Draw a composition: by default its dataflow; its nets and flag maps with --view nets."""
+    from hapticop.cli.render import RenderError, drawing, render, to_dot
 
     validated = validate_path(file)
     if validated.graph is None or validated.graph.loaded.composition is None:
@@ -303,22 +308,28 @@ def graph(
             typer.echo(diagnostic.to_text(), err=True)
         typer.echo(f"{file}: cannot draw a file that does not load", err=True)
         raise typer.Exit(1)
-    if not validated.report.ok:
-        typer.echo(f"{file}: note: the file has {len(validated.report.errors)} errors; drawing what loaded", err=True)
-    dot_text = to_dot(validated.graph)
+    errors = len(validated.report.errors)
+    if errors:
+        typer.echo(f"{file}: note: the file has {_count(errors, 'error')}; drawing what loaded", err=True)
+    try:
+        picture = drawing(validated.graph, view)
+    except RenderError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(2) from None
     if format is GraphFormat.dot and output is None:
-        typer.echo(dot_text, nl=False)
+        typer.echo(to_dot(picture), nl=False)
         return
-    target = output or file.with_suffix(f".{format.value}")
+    target = output or Path.cwd() / f"{file.stem}-{view}.{format.value}"
     if format is GraphFormat.dot:
-        target.write_text(dot_text)
-    else:
-        try:
-            render(dot_text, target, format.value)
-        except RenderError as error:
-            typer.echo(f"error: {error}", err=True)
-            raise typer.Exit(1) from None
-    typer.echo(f"wrote {target}")
+        target.write_text(to_dot(picture))
+        typer.echo(f"wrote {target}")
+        return
+    try:
+        used = render(picture, target, format.value)
+    except RenderError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"wrote {target}" + (" (without graphviz: a simple layout)" if used == "layered" else ""))
 
 
 @app.command()

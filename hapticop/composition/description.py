@@ -44,7 +44,8 @@ class Thread(Strict):
 
     period: Duration = Field(description="cycle time or rate: '1ms', '15Hz', '66.667ms'")
     priority: int | None = Field(
-        None, ge=1, le=99, description="SCHED_FIFO priority 1-98; omit for normal scheduling"
+        None, description="SCHED_FIFO priority 1-98; omit for normal scheduling",
+        json_schema_extra={"minimum": 1, "maximum": 98},
     )
     cpus: list[Annotated[int, Field(ge=0, le=4095)]] | None = Field(
         None, description="CPU affinity: the cores this thread may run on"
@@ -103,12 +104,14 @@ class Thread(Strict):
 
     @field_validator("priority")
     @classmethod
-    def _refuse_99(cls, value: int | None) -> int | None:
-        if value == 99:
+    def _in_range(cls, value: int | None) -> int | None:
+        """One range, 1 to 98, and one message for anything outside it (99 included, with why)."""
+        if value is not None and not 1 <= value <= 98:
             raise PydanticCustomError(
-                "priority_99",
-                "priority 99 is refused: a SCHED_FIFO thread at 99 never yields to the kernel's "
-                "own real-time threads (thesis 2.3.2); use 1 to 98",
+                "priority_range",
+                "priority {value} is outside 1 to 98: SCHED_FIFO runs 1 (lowest) to 99, and 99 is left to the "
+                "kernel's own real-time threads, which a thread at 99 would never yield to (thesis 2.3.2)",
+                {"value": value},
             )
         return value
 

@@ -10,7 +10,7 @@ holds the deepest part of its path.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path as FilePath
 
 from ruamel.yaml.comments import CommentedMap
@@ -31,7 +31,32 @@ class LayeredSource(Source):
     def place(self, diagnostic: Diagnostic, *, key: bool = False) -> Diagnostic:
         owner = max(self.layers, key=lambda layer: _depth(layer.tree, diagnostic.path))  # first wins ties
         line, column = locate(owner.tree, diagnostic.path, key=key)
-        return diagnostic.located(owner.file, line, column)
+        above = self.layers[:self.layers.index(owner)]
+        change = next((found for layer in above if (found := _change_named(layer, diagnostic.message))), None)
+        if change is None:
+            return diagnostic.located(owner.file, line, column)
+        # A base's line is blamed for what a file above it changed (an activity deleted or replaced):
+        # point at the change, and say where the blamed value itself is written.
+        layer, path = change
+        where = f"what it blames is written at {owner.file}:{line}:{column}; this line changes '{path[-1]}'"
+        hint = f"{diagnostic.hint}; {where}" if diagnostic.hint else where
+        return replace(diagnostic, hint=hint).located(layer.file, *locate(layer.tree, path, key=True))
+
+
+ENTRIES = (("threads",), ("activities",), ("streams",), ("modes",), ("coordination", "nets"),
+           ("coordination", "flag_maps"))
+
+
+def _change_named(layer: Source, message: str) -> tuple[Source, Path] | None:
+    """The entry (a thread, an activity...) this layer writes that the message names, if any."""
+    for collection in ENTRIES:
+        entries = layer.tree
+        for part in collection:
+            entries = entries.get(part) if isinstance(entries, CommentedMap) else None
+        for name in entries if isinstance(entries, CommentedMap) else ():
+            if f"'{name}'" in message or f"'{name}." in message:
+                return layer, (*collection, name)
+    return None
 
 
 def _depth(tree: CommentedMap, path: Path) -> int:

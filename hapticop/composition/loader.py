@@ -42,9 +42,14 @@ class Loaded:
     broken: set[tuple[str, str]] = field(default_factory=set)  # (collection, name) set aside
     diagnostics: list[Diagnostic] = field(default_factory=list)
     expansion: Expansion = field(default_factory=Expansion)  # what coordination.standard was written out as
+    scheduled_by_broken: set[str] = field(default_factory=set)  # activities a set-aside thread schedules
 
     def is_broken(self, collection: str, name: str) -> bool:
         return (collection, name) in self.broken
+
+    def scheduled_elsewhere(self, activity: str) -> bool:
+        """Named in a set-aside thread's schedules: it may well run once that thread is mended."""
+        return activity in self.scheduled_by_broken
 
 
 def load_tree(tree: dict) -> Loaded:
@@ -66,11 +71,25 @@ def load_tree(tree: dict) -> Loaded:
                 break
             if not _set_aside(work, found, broken):
                 break
-    loaded = Loaded(composition=composition, broken=broken, diagnostics=diagnostics)
+    loaded = Loaded(composition=composition, broken=broken, diagnostics=diagnostics,
+                    scheduled_by_broken=_scheduled_by_broken(tree, broken))
     if composition is not None:
         _expand_standard(loaded)
         _resolve_activities(loaded)
     return loaded
+
+
+def _scheduled_by_broken(tree: dict, broken: set[tuple[str, str]]) -> set[str]:
+    """The activities the set-aside threads' schedules name, read from the tree as written."""
+    threads = tree.get("threads") if isinstance(tree, dict) else None
+    names: set[str] = set()
+    for collection, name in broken:
+        spec = threads.get(name) if collection == "threads" and isinstance(threads, dict) else None
+        schedules = spec.get("schedules") if isinstance(spec, dict) else None
+        for members in schedules.values() if isinstance(schedules, dict) else ():
+            if isinstance(members, list):
+                names.update(m for m in members if isinstance(m, str))
+    return names
 
 
 def _expand_standard(loaded: Loaded) -> None:

@@ -108,14 +108,57 @@ def _one(item: dict, loc: Path, model: type[BaseModel], prefix: Path) -> Diagnos
         limit = item.get("ctx", {}).get(key)
         return Diagnostic(rule="bad-value", message=f"'{name}' must be {words} {limit} (got {value!r})",
                           path=path)
+    if kind in _TYPES:
+        return _wrong_type(_TYPES[kind], name, value, path)
     rule = "bad-value"
-    custom = {"priority_99": "priority-99", "duration": "bad-duration", "duration_unit": "bad-duration",
+    custom = {"priority_range": "priority-range", "duration": "bad-duration", "duration_unit": "bad-duration",
               "version": "bad-version", "stream_one_writer": "stream-writers"}
     rule = custom.get(kind, rule)
     message = item["msg"]
     if kind not in custom and value is not None and not isinstance(value, (dict, list)):
         message = f"{message} (got {value!r})"
     return Diagnostic(rule=rule, message=message, path=path)
+
+
+# pydantic's error types for a value of the wrong type, and what the field takes instead
+_TYPES = {
+    "float_parsing": "a number", "float_type": "a number",
+    "int_parsing": "a whole number", "int_type": "a whole number", "int_from_float": "a whole number",
+    "bool_parsing": "true or false", "bool_type": "true or false", "string_type": "text",
+    "list_type": "a list such as [1.0, 2.0]", "tuple_type": "a list such as [1.0, 2.0]",
+    "dict_type": "a mapping of keys to values", "model_type": "a mapping of keys to values",
+    "model_attributes_type": "a mapping of keys to values", "dataclass_type": "a mapping of keys to values",
+}
+
+# the unit a parameter's name ends with (units live in field names: `kp_n_per_m`, `timeout_s`)
+_NAME_UNITS = (
+    ("_ns_per_m", "N·s/m"), ("_n_per_m", "N/m"), ("_n_per_s", "N/s"), ("_m_per_n", "m/N"),
+    ("_nm_per_a", "N·m/A"), ("_a_per_rad_s", "A per rad/s"), ("_rad_per_s", "rad/s"), ("_m_per_s", "m/s"),
+    ("_rad_s", "rad/s"), ("_mps", "m/s"), ("_hz", "Hz"), ("_deg", "degrees"), ("_rad", "rad"),
+    ("_per_s", "1/s"), ("_per_m", "1/m"), ("_kg", "kg"), ("_nm", "N·m"), ("_ms", "ms"), ("_s", "s"),
+    ("_m", "m"), ("_n", "N"), ("_a", "A"),
+)
+
+
+def unit_of(name: str) -> str:
+    """The unit a field's name states, such as 'N/m' for `kp_n_per_m`; '' when it names none."""
+    return next((unit for suffix, unit in sorted(_NAME_UNITS, key=lambda pair: -len(pair[0]))
+                 if name.endswith(suffix)), "")
+
+
+def _wrong_type(expected: str, name: str, value: Any, path: Path) -> Diagnostic:
+    """A value of the wrong type: what the field takes, in which unit, and how to write it."""
+    unit = unit_of(name) if "number" in expected else ""
+    takes = f"{expected} in {unit}" if unit else expected
+    got = "" if isinstance(value, (dict, list)) else f" (got {value!r})"
+    hint = ""
+    if unit:
+        hint = f"write the number alone, such as 1.5: the unit ({unit}) is in the key's name"
+    elif isinstance(value, str) and "number" in expected:
+        hint = "write the number without quotes or a unit"
+    elif expected == "true or false":
+        hint = "write true or false, without quotes"
+    return Diagnostic(rule="bad-value", message=f"'{name}' takes {takes}{got}", path=path, expected=takes, hint=hint)
 
 
 def _what_pattern(pattern: str) -> str:

@@ -16,27 +16,39 @@ from pydantic_core import PydanticCustomError
 NS_PER_UNIT = {"ns": 1, "us": 1_000, "µs": 1_000, "ms": 1_000_000, "s": 1_000_000_000}
 HZ_PER_UNIT = {"Hz": 1.0, "kHz": 1_000.0}
 UNITS_TEXT = "ns, us, ms, s, Hz or kHz"
+TIME_UNITS_TEXT = "ns, us, ms or s"
 
 _QUANTITY = re.compile(r"^\s*(?P<number>[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\s*(?P<unit>[A-Za-zµ]+)\s*$")
 _NUMBER = re.compile(r"^\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?")
 
 
-def parse_duration_ns(text: str, allow_zero: bool = False) -> int:
+def parse_duration_ns(text: str, allow_zero: bool = False, rates: bool = True) -> int:
     """Parse `1ms`, `66.667ms` or `15Hz` into whole nanoseconds (rounded to the nearest);
-    `allow_zero` accepts a zero time (`0ms`) for offsets, never a zero rate."""
-    match = _QUANTITY.match(text)
+    `allow_zero` accepts a zero time (`0ms`) for offsets, never a zero rate; without `rates`
+    only a time is accepted (a run's length is no frequency)."""
+    units = UNITS_TEXT if rates else TIME_UNITS_TEXT
+    match = _QUANTITY.match(text.strip().removeprefix("-"))
+    if match and text.strip().startswith("-"):
+        least = "zero or more" if allow_zero else "positive"
+        raise ValueError(f"'{text}' is negative: a {'duration' if allow_zero or not rates else 'period or rate'} "
+                         f"must be {least}")
     if not match:
-        raise ValueError(f"'{text}' is not a number followed by a unit ({UNITS_TEXT})")
+        if _NUMBER.match(text) and not text.strip().rstrip("0123456789.eE+-"):
+            raise ValueError(f"'{text}' has no unit: write it with one of {units}, such as "
+                             f"'{text.strip()}{'ms' if rates else 's'}'")
+        raise ValueError(f"'{text}' is not a number followed by a unit ({units})")
     number = float(_NUMBER.match(text).group(0))
     unit = match.group("unit")
     if unit in NS_PER_UNIT:
         ns = number * NS_PER_UNIT[unit]
-    elif unit in HZ_PER_UNIT:
+    elif unit in HZ_PER_UNIT and rates:
         if number == 0:
             raise ValueError(f"'{text}' is a rate of zero; a cycle needs a positive rate")
         ns = 1e9 / (number * HZ_PER_UNIT[unit])
+    elif unit in HZ_PER_UNIT:
+        raise ValueError(f"'{text}' is a rate; write a time ({units}), such as '5s'")
     else:
-        raise ValueError(f"'{unit}' is not a unit of time or rate ({UNITS_TEXT})")
+        raise ValueError(f"'{unit}' is not a unit of {'time or rate' if rates else 'time'} ({units})")
     if ns < 1 and not (allow_zero and ns == 0 and unit in NS_PER_UNIT):
         raise ValueError(f"'{text}' is shorter than one nanosecond")
     return round(ns)
@@ -48,6 +60,14 @@ def format_duration(ns: int) -> str:
         if ns >= scale:
             return f"{ns / scale:.6g}{unit}"
     return f"{ns}ns"
+
+
+def format_period(ns: int) -> str:
+    """A thread's period as people write it: 1ms, or 15Hz when it is a whole rate, not a round time."""
+    hz = 1e9 / ns
+    if ns % 1000 and abs(hz - round(hz)) < 1e-6 * hz:
+        return f"{round(hz)}Hz"
+    return format_duration(ns)
 
 
 def _coerce_offset(value: Any) -> int:

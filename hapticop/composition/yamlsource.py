@@ -65,6 +65,31 @@ def _mark_error(file: str, rule: str, message: str, mark, hint: str = "") -> Sou
     return SourceError(Diagnostic(rule=rule, message=message, hint=hint, file=file, line=line, column=column))
 
 
+def _indent(line: str) -> int:
+    return len(line) - len(line.lstrip(" "))
+
+
+def _syntax_hint(reason: str, text: str, mark) -> str:
+    """What ruamel's words usually mean in a composition, and where to look."""
+    lines = text.splitlines()
+    if mark is None or not 0 <= mark.line < len(lines) or not lines:
+        return ""
+    number = mark.line + 1
+    here = lines[mark.line]
+    if "\t" in here[:_indent(here) + 1] or "'\\t'" in reason:
+        return f"line {number} is indented with a tab: YAML indents with spaces only"
+    above = next((line for line in reversed(lines[:mark.line]) if line.strip() and not line.lstrip().startswith("#")),
+                 None)
+    if "expected <block end>" in reason or "could not find expected ':'" in reason or "mapping values" in reason:
+        beside = f", the line above at column {_indent(above) + 1}" if above is not None else ""
+        return (f"check the indentation: line {number} starts at column {_indent(here) + 1}{beside}; the keys of "
+                "one mapping start in the same column, and a nested one further right (spaces, not tabs)"
+                + ("; a value holding ': ' needs quotes" if "mapping values" in reason else ""))
+    if "end of stream" in reason or "flow" in reason:
+        return "a [ or { closed by the other kind, or a quote or bracket opened before here and never closed"
+    return ""
+
+
 def parse_text(text: str, file: str = "<string>") -> Source:
     """Parse YAML text into a located tree, or raise `SourceError` with a clean message."""
     if len(text.encode("utf-8", "surrogatepass")) > MAX_FILE_BYTES:
@@ -89,8 +114,9 @@ def parse_text(text: str, file: str = "<string>") -> Source:
         ) from None
     except MarkedYAMLError as error:
         reason = " ".join(part for part in (error.context, error.problem) if part) or "malformed YAML"
-        raise _mark_error(file, "yaml-syntax", f"malformed YAML: {reason}",
-                          error.problem_mark or error.context_mark) from None
+        mark = error.problem_mark or error.context_mark
+        raise _mark_error(file, "yaml-syntax", f"malformed YAML: {reason}", mark,
+                          hint=_syntax_hint(reason, text, mark)) from None
     except (YAMLError, RecursionError, ValueError, TypeError) as error:
         # ValueError/TypeError: ruamel rejects some scalars (odd timestamps, huge ints) late.
         if huge := _HUGE_INTEGER.search(text):

@@ -6,12 +6,15 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from hapticop.composition.units import format_duration
+from hapticop.composition.units import format_period
 from hapticop.runtime.region import Region
-from hapticop.runtime.timing import Summary
+from hapticop.runtime.timing import BINS, Summary
+
+CEILING_US = BINS - 1  # the histogram's last bin: a percentile there is only known to be at least this
 
 
 def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
@@ -30,7 +33,7 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
         missed = int(region.missed[index])
         cpu_ns = int(region.cpu_ns[index] - region.cpu_base[index])
         threads[name] = {
-            "period": format_duration(composition.threads[name].period),
+            "period": format_period(composition.threads[name].period),
             "priority": composition.threads[name].priority,
             "deploy": composition.threads[name].deploy,
             "simulation": name in simulating,
@@ -90,8 +93,26 @@ def _numbers(summary: Summary) -> dict:
             "max": clean(summary.max_us)}
 
 
+def plain(value: float, digits: int = 1) -> str:
+    """A number for a table: fixed point, never scientific notation (1234567.8, not 1.23457e+06)."""
+    text = f"{value:.{digits}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
+
+
+def significant(value: float, digits: int = 4) -> str:
+    """A number to `digits` significant digits, still in fixed point (0.0001234, 1235000)."""
+    if isinstance(value, int) or not math.isfinite(value):
+        return str(value)
+    return np.format_float_positional(value, precision=digits, unique=False, fractional=False, trim="-")
+
+
 def _cell(value) -> str:
-    return "-" if value is None else f"{value:g}"
+    return "-" if value is None else plain(value)
+
+
+def _percentile(value) -> str:
+    """A percentile read off the histogram; in its last bin it is a floor, not a figure."""
+    return f">= {CEILING_US}" if value is not None and value >= CEILING_US else _cell(value)
 
 
 def print_timing(data: dict, console: Console, virtual: bool) -> None:
@@ -100,9 +121,10 @@ def print_timing(data: dict, console: Console, virtual: bool) -> None:
         table.add_column(column, justify="right" if column != "thread" else "left")
     for name, t in data["threads"].items():
         lat = t["wakeup_latency_us"]
-        missed = str(t["missed_deadlines"]) + (f" ({t['missed_percent']:g} %)" if t.get("missed_percent") else "")
-        table.add_row(name, t["period"], str(t["cycles"]), _cell(lat["p50"]), _cell(lat["p99"]),
-                      _cell(lat["p99.9"]), _cell(lat["max"]), missed, _cell(t.get("cpu_percent")))
+        missed = str(t["missed_deadlines"]) + (f" ({plain(t['missed_percent'], 3)} %)" if t.get("missed_percent")
+                                               else "")
+        table.add_row(name, t["period"], str(t["cycles"]), _percentile(lat["p50"]), _percentile(lat["p99"]),
+                      _percentile(lat["p99.9"]), _cell(lat["max"]), missed, _cell(t.get("cpu_percent")))
     console.print(table)
     if data.get("latencies"):
         table = Table(title="end-to-end latencies", title_justify="left")
@@ -111,21 +133,22 @@ def print_timing(data: dict, console: Console, virtual: bool) -> None:
                              else "left")
         for name, e in data["latencies"].items():
             lat = e["latency_us"]
-            table.add_row(name, e["from"], e["to"], str(e["samples"]), _cell(lat["p50"]), _cell(lat["p99"]),
-                          _cell(lat["p99.9"]), _cell(lat["max"]))
+            table.add_row(name, e["from"], e["to"], str(e["samples"]), _percentile(lat["p50"]),
+                          _percentile(lat["p99"]), _percentile(lat["p99.9"]), _cell(lat["max"]))
         console.print(table)
     table = Table(title="activities", title_justify="left")
     for column in ("activity", "steps", "compute p50 us", "p99", "max", "of which simulation us"):
         table.add_column(column, justify="right" if column != "activity" else "left")
     for name, a in data["activities"].items():
         c = a["compute_us"]
-        table.add_row(name, str(a["steps"]), _cell(c["p50"]), _cell(c["p99"]), _cell(c["max"]),
+        table.add_row(name, str(a["steps"]), _percentile(c["p50"]), _percentile(c["p99"]), _cell(c["max"]),
                       _cell(a.get("simulation_us_per_step")))
     console.print(table)
     if data.get("cpu"):
         cpu = data["cpu"]
-        console.print(f"CPU of the loops: {cpu['loops_percent']:g} % of one core, of which simulated devices "
-                      f"{cpu['simulators_percent']:g} %: the system itself {cpu['without_simulators_percent']:g} %")
+        console.print(f"CPU of the loops: {plain(cpu['loops_percent'])} % of one core, of which simulated devices "
+                      f"{plain(cpu['simulators_percent'])} %: the system itself "
+                      f"{plain(cpu['without_simulators_percent'])} %")
 
 
 def write_timing(data: dict, run_dir: Path) -> Path:
@@ -143,7 +166,10 @@ def print_results(run_dir: Path, console: Console) -> None:
             table.add_column(column, justify="left" if column == "metric" else "right")
         for row in data["rows"]:
             raw = row["value"]
-            value = "-" if raw is None else (raw if isinstance(raw, str) else f"{raw:g} {row['unit']}".strip())
+            if raw is None or isinstance(raw, str):
+                value = "-" if raw is None else raw
+            else:
+                value = f"{significant(raw)} {row['unit']}".strip()
             ok = {True: "[green]yes[/]", False: "[red]no[/]", None: ""}[row["ok"]]
             table.add_row(row["metric"], value, row["target"], ok)
         console.print(table)

@@ -72,15 +72,20 @@ def plot_run(
     if mid.lines:
         mid.legend(loc="upper right", fontsize=8, ncol=4)
 
-    for key, label in (("cmd", "cmd"), ("cmd_exec", "exec"), ("robot_velocity", "robot")):
+    # Linear and angular velocity have axes of their own (m/s left, rad/s right), one colour per source.
+    spin = low.twinx()
+    for (key, label), colour in zip((("cmd", "cmd"), ("cmd_exec", "exec"), ("robot_velocity", "robot")),
+                                    ("tab:blue", "tab:orange", "tab:green")):
         if key in d:
-            low.plot(t, d[key][:, 0], lw=0.9, label=f"v {label} [m/s]")
-            low.plot(t, d[key][:, 1], lw=0.7, ls="--", label=f"omega {label} [rad/s]")
+            low.plot(t, d[key][:, 0], lw=0.9, color=colour, label=f"v {label}")
+            spin.plot(t, d[key][:, 1], lw=0.7, ls="--", color=colour, label=f"omega {label}")
     low.set_xlabel("t [s]")
-    low.set_ylabel("velocity")
+    low.set_ylabel("linear v [m/s] (solid)")
+    spin.set_ylabel("angular omega [rad/s] (dashed)")
     low.grid(alpha=0.3)
     if low.lines:
-        low.legend(loc="upper right", fontsize=8, ncol=3)
+        low.legend(low.lines + spin.lines, [line.get_label() for line in low.lines + spin.lines],
+                   loc="upper right", fontsize=8, ncol=3)
 
     path = Path(path)
     fig.savefig(path, dpi=dpi)

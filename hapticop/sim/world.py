@@ -115,8 +115,8 @@ class HallwayWorld(Block):
             self.ended = "operator done"
         elif t >= self.params.time_limit_s:
             self.ended = "time limit"
-        if self.ended:
-            self.log.always("run ended at %.2f s: %s", t, self.ended)
+        if self.ended:  # its time is told once, from the metrics, when the world cleans
+            self.log.always("run judged over: %s", self.ended)
             self.flags["finished"] = True
 
     def clean(self) -> None:
@@ -133,6 +133,8 @@ class HallwayWorld(Block):
         metrics = compute_metrics(self.recorder, self.geometry)
         extra = {"tank_level_min_j": self.tank_lowest_j} if self.tank_lowest_j < math.inf else None
         (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra))
+        self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
+                        metrics.ended_by)
         if self.params.plot:
             try:
                 from hapticop.sim.plot import plot_run
@@ -160,7 +162,7 @@ class HallwayWorld(Block):
             row(f"stop error against dist2 = {g.dist2_m} m (+ early)", m.e_stop_m, "m", "-0.05 to +0.10", "e_stop"),
             row(f"least side clearance (dist1 = {g.dist1_m} m)", m.side_clearance_min_m, "m",
                 f">= {g.dist1_m - 0.10:.2f}", "side_clearance"),
-            row("completion time", m.completion_time_s, "s", "", None),
+            row("run ended at (after the operator started)", end_time_s(m, self.recorder), "s", "", None),
             row("peak force", m.force_peak_n, "N", "<= 8", "force_peak"),
             row("rms force", m.force_rms_n, "N", "", None),
             row("rms force rate", m.force_rate_rms_nps, "N/s", "<= 30", "force_rate"),
@@ -168,6 +170,14 @@ class HallwayWorld(Block):
         results = {"title": f"hallway {self.params.hallway}, {self.variant} operator",
                    "rows": rows, "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
+
+
+def end_time_s(metrics, recorder) -> float:
+    """The run's one end time, on the recording's clock: when the robot came to rest for good (the
+    completion time), or the last moment recorded when it crashed or ran out of time."""
+    if metrics.completion_time_s == metrics.completion_time_s:  # not NaN: it stopped
+        return float(metrics.completion_time_s)
+    return float(recorder.t[recorder.n - 1] - recorder.t[0])
 
 
 def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray) -> np.ndarray:

@@ -59,7 +59,8 @@ def needs(cg: G.CompositionGraph) -> Check:
                 f"declare an activity whose block provides '{need.provides}' ({_builtin_providers(need.provides)})")
             yield Diagnostic("missing-need", f"'{u[1]}' needs '{need.activity}' to provide '{need.provides}'{why}, "
                              f"but its block '{cg.g.nodes[v]['spec'].block}' does not", data["path"], hint=hint)
-        elif cg.threads_of(u[1]) and not cg.threads_of(need.activity):  # it runs, and would wait forever
+        elif (cg.threads_of(u[1]) and not cg.threads_of(need.activity)  # it runs, and would wait forever
+              and not cg.loaded.scheduled_elsewhere(need.activity)):
             yield Diagnostic("missing-need", f"'{u[1]}' needs '{need.activity}'{why}, which is in no thread's "
                              "schedule: it would wait for it forever", data["path"],
                              hint=f"schedule '{need.activity}' on a thread (beside '{u[1]}' for identical reruns)")
@@ -107,7 +108,7 @@ def schedules(cg: G.CompositionGraph) -> Check:
                              f"activity '{activity_name}' is scheduled on threads '{threads[0]}' and '{threads[1]}'",
                              second, hint="an activity belongs to one thread; its state is not shared between them")
     for node, data in cg.nodes_of("activity"):
-        if node[1] not in placed:
+        if node[1] not in placed and not cg.loaded.scheduled_elsewhere(node[1]):  # not a follow-on finding
             yield Diagnostic("activity-unscheduled",
                              f"activity '{node[1]}' is in no thread's schedule, so it never runs",
                              data["path"], severity=Severity.WARNING)

@@ -1,0 +1,111 @@
+"""`hapticop graph` as a user reads it: one view at a time, a bounded size, labels once, the file
+where the user is, and a picture even without graphviz."""
+
+import re
+import sys
+import xml.etree.ElementTree as ET
+
+import pytest
+from typer.testing import CliRunner
+
+from hapticop.cli import app
+from hapticop.cli import render as render_module
+from hapticop.cli.layered import MAX_WIDTH
+from hapticop.cli.render import MAX_SIZE_IN, drawing, to_dot
+from hapticop.validation import validate_path
+
+from .conftest import SYSTEMS
+
+runner = CliRunner()
+HALLWAY = SYSTEMS / "hallway.yaml"
+VIEWS = ("dataflow", "nets", "mediator", "all")
+
+
+@pytest.fixture(scope="module")
+def hallway():
+    return validate_path(HALLWAY).graph
+
+
+@pytest.fixture
+def without_graphviz(monkeypatch):
+    """Neither the dot program nor the pygraphviz wheel: the base install."""
+    monkeypatch.setattr(render_module.shutil, "which", lambda name: None)
+    monkeypatch.setitem(sys.modules, "pygraphviz", None)  # import fails as if not installed
+    assert render_module.renderer() == "layered"
+
+
+def _svg_size(path) -> tuple[float, float]:
+    root = ET.parse(path).getroot()
+    return tuple(float(re.match(r"[\d.]+", root.get(side)).group()) for side in ("width", "height"))
+
+
+def test_each_view_shows_only_its_part(hallway):
+    dataflow = to_dot(drawing(hallway, "dataflow"))
+    assert '"activity:haptic"' in dataflow and "place:" not in dataflow and "flag:" not in dataflow
+    nets = to_dot(drawing(hallway, "nets"))
+    assert "activity:" not in nets
+    assert all(f"cluster_net:{name}" in nets for name in ("mediator", "thread_lcsm", "thread_scheduler"))
+    one = to_dot(drawing(hallway, "thread_scheduler"))
+    assert "cluster_net:thread_scheduler" in one and "cluster_net:mediator" not in one
+    assert '"flag:flags.select_schedules"' in one  # the flags its flag maps bind come with it
+    everything = to_dot(drawing(hallway, "all"))
+    assert '"activity:haptic"' in everything and "cluster_net:mediator" in everything
+
+
+def test_a_stream_is_labelled_once(hallway):
+    """A stream with two readers fans out from one junction: its name is written once."""
+    comp = hallway.loaded.composition
+    dataflow = to_dot(drawing(hallway, "dataflow"))
+    for name in comp.streams:
+        assert dataflow.count(f'label="{name}') == 1, name
+    assert '"activity:haptic" -> "stream:velocity_setpoint" [label="velocity_setpoint", arrowhead=none' in dataflow
+    assert '"stream:velocity_setpoint" -> "activity:ropod"' in dataflow
+    assert '"stream:velocity_setpoint" -> "activity:world"' in dataflow
+
+
+@pytest.mark.parametrize("view", VIEWS)
+def test_each_view_renders_within_a_screen(view, tmp_path):
+    target = tmp_path / f"{view}.svg"
+    result = runner.invoke(app, ["graph", str(HALLWAY), "--view", view, "-o", str(target)])
+    assert result.exit_code == 0, result.output
+    width, height = _svg_size(target)  # graphviz writes points
+    assert 0 < width <= MAX_SIZE_IN * 72 and 0 < height <= MAX_SIZE_IN * 72
+
+
+@pytest.mark.parametrize("view", VIEWS)
+def test_without_graphviz_the_svg_comes_from_the_layered_layout(view, tmp_path, without_graphviz):
+    target = tmp_path / f"{view}.svg"
+    result = runner.invoke(app, ["graph", str(HALLWAY), "--view", view, "-o", str(target)])
+    assert result.exit_code == 0, result.output
+    assert "without graphviz" in result.output
+    width, height = _svg_size(target)
+    assert 0 < width <= MAX_WIDTH and height > 0
+    text = target.read_text()
+    assert "haptic_controller" in text if view in ("dataflow", "all") else "START" in text
+
+
+def test_without_graphviz_a_png_says_what_to_install(tmp_path, without_graphviz):
+    result = runner.invoke(app, ["graph", str(HALLWAY), "--format", "png", "-o", str(tmp_path / "x.png")])
+    assert result.exit_code == 1
+    assert "apt-get install graphviz" in result.output and "SVG (the default)" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_the_picture_lands_where_the_user_is(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    before = set(SYSTEMS.iterdir())
+    result = runner.invoke(app, ["graph", str(HALLWAY), "--view", "nets"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "hallway-nets.svg").is_file()
+    assert f"wrote {tmp_path / 'hallway-nets.svg'}" in result.output
+    assert set(SYSTEMS.iterdir()) == before  # never beside the shipped compositions
+    elsewhere = tmp_path / "out" / "picture.dot"
+    elsewhere.parent.mkdir()
+    assert runner.invoke(app, ["graph", str(HALLWAY), "--format", "dot", "-o", str(elsewhere)]).exit_code == 0
+    assert elsewhere.read_text().startswith('digraph "hallway (dataflow)"')
+
+
+def test_an_unknown_view_lists_the_views():
+    result = runner.invoke(app, ["graph", str(HALLWAY), "--view", "medaitor"])
+    assert result.exit_code == 2
+    assert "no view 'medaitor': choose one of dataflow, nets, all, mediator" in result.output
