@@ -100,6 +100,9 @@ class ZenohBridge(Block):
         self.next_ping_ns = 0
         self.links = ({w.stream: EmulatedLink(p.emulate, wire.SAMPLE.size + w.port().nbytes, np.uint8)
                        for w in p.receive} if p.emulate is not None else {})
+        self.rtts = np.zeros(1 << 16, dtype=np.int64)  # every answered ping's round trip, for the run's table
+        self.answered = 0
+        self.was_lost = False
         self.net = None
 
     def configure_resources(self) -> bool:
@@ -141,6 +144,9 @@ class ZenohBridge(Block):
             self.state_out.put(self._state(ended=True))
             self.net.close()
             self.net = None
+        if self.answered:
+            write_link_table(self.run_dir, self)
+
 
     # -- the cycle --------------------------------------------------------------------
     def _service(self) -> None:
@@ -191,6 +197,8 @@ class ZenohBridge(Block):
                 if 0 <= slot < len(self.pinged_at[peer]) and self.pinged_at[peer][slot] == t1:
                     clock.answered(slot, t1, t2, t3, now)
                     self.heard_ns[peer] = now
+                    self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
+                    self.answered += 1
 
     def _take_states(self, now: int) -> None:
         for peer, receiver in self.states_in.items():
@@ -240,6 +248,12 @@ class ZenohBridge(Block):
         loss = max((c.loss for c in self.clocks.values()), default=0.0)
         self.flags["link_up"] = synced and not lost
         self.flags["link_lost"] = synced and lost
+        if synced and lost != self.was_lost:
+            self.was_lost = lost
+            if lost:
+                self.log.warning("link lost: nothing heard for %g ms", p.lost_after_ms)
+            else:
+                self.log.info("link up again")
         self.flags["link_degraded"] = rtt > p.degraded_rtt_ms * 1e6 or loss > p.degraded_loss
         if publish and self.clocks:
             clock = next(iter(self.clocks.values()))
@@ -253,3 +267,30 @@ class ZenohBridge(Block):
         """This host's session, whether its run ended, and the exported places that hold a token."""
         holding = ",".join(p for p in self.params.export_flags if self.flags[f"out_{p.lower()}"])
         return wire.STATE.pack(self.session_id, ended) + holding.encode()
+
+
+def write_link_table(run_dir, bridge: ZenohBridge) -> None:
+    """The link's figures over the run, as a results table (printed at the end, kept in the run directory)."""
+    import json
+
+    rtts = bridge.rtts[: min(bridge.answered, len(bridge.rtts))] / 1e6
+    clock = next(iter(bridge.clocks.values()))
+
+    def row(metric: str, value, unit: str = "") -> dict:
+        return {"metric": metric, "value": value, "unit": unit, "target": "", "ok": None}
+
+    rows = [row("round trip p50", round(float(np.percentile(rtts, 50)), 3), "ms"),
+            row("round trip p99", round(float(np.percentile(rtts, 99)), 3), "ms"),
+            row("round trip max", round(float(rtts.max()), 3), "ms"),
+            row("jitter (smoothed)", round(clock.jitter_ns / 1e6, 3), "ms"),
+            row("ping loss (last pings)", round(clock.loss, 4)),
+            row("clock offset", round(clock.offset_ns / 1e6, 3), "ms"),
+            row("offset error bound", round(clock.error_ns / 1e6, 3), "ms")]
+    for stream, count in bridge.sequence.items():
+        rows.append(row(f"{stream}: sent", count))
+    for stream, arrivals in bridge.arrivals.items():
+        rows.append(row(f"{stream}: received", arrivals.delivered))
+        rows.append(row(f"{stream}: late or duplicate, dropped", arrivals.late))
+        rows.append(row(f"{stream}: never arrived", arrivals.skipped))
+    data = {"title": f"link of host '{bridge.params.host}' to {', '.join(bridge.params.peers)}", "rows": rows}
+    (run_dir / "results-link.json").write_text(json.dumps(data, indent=1))

@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 from pydantic_core import PydanticCustomError
 
 from hapticop.composition.units import Duration, Offset
+from hapticop.network.link import LinkParams
 
 VERSION = 1
 
@@ -387,6 +388,9 @@ class Host(Strict):
     endpoints: list[Annotated[str, Field(pattern=r"^(tcp|udp|quic|tls)/[^/]+:[0-9]+$")]] = Field(
         min_length=1, description="where this host's bridge listens, e.g. 'tcp/10.0.0.1:7447'; the other hosts "
         "connect to them")
+    emulate: LinkParams | None = Field(
+        None, description="make what this host receives worse on purpose (delay, jitter, loss: a seeded emulated "
+        "link in its bridge), to test or measure a good network as a bad one")
     doc: str = ""
 
 

@@ -128,6 +128,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                 entry.pop("max_age", None)  # 'hold': the last sample stays in use however old
     exports, imports, ended = _split_standard(out, composition, placement, host, local)
     peers = [e for h, spec in composition.hosts.items() if h != host for e in spec.endpoints]
+    emulate = tree["hosts"][host].get("emulate")
     out.setdefault("activities", {})[BRIDGE] = {
         "block": "zenoh_bridge",
         "doc": f"host '{host}': the network streams and coordination flags to and from the other hosts",
@@ -135,7 +136,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                    "peers": [h for h in composition.hosts if h != host],
                    "listen": list(composition.hosts[host].endpoints), "connect": peers,
                    "send": sends, "receive": receives, "export_flags": exports, "import_flags": imports,
-                   "peer_end": ended},
+                   "peer_end": ended, **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
     }
     out.setdefault("threads", {})[BRIDGE_THREAD] = {
         "period": BRIDGE_PERIOD, "deploy": "process", "schedules": {0: [BRIDGE]},

@@ -73,8 +73,9 @@ def _check_hosts(source: Source, loaded: Loaded, cg: CompositionGraph, report: R
     for host in loaded.composition.hosts:
         tree = for_host(source.tree, loaded.composition, host, ports)
         part = check_source(hosts.HostSource(file=source.file, tree=tree, text="", origin=source), state_limit)
-        report.extend(d for d in part.report.diagnostics
-                      if d not in report.diagnostics and not _needs_elsewhere(d, loaded.composition, host))
+        part.report.diagnostics = [d for d in part.report.diagnostics
+                                   if not _needs_elsewhere(d, loaded.composition, host)]
+        report.extend(d for d in part.report.diagnostics if d not in report.diagnostics)
         validated.hosts[host] = part
     return validated
 
