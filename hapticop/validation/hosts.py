@@ -98,6 +98,8 @@ def network_loops(composition: Composition) -> Check:
             flow.add_edge(stream.writer.split(".")[0], reader.split(".")[0], stream=name)
     seen = set()
     for cycle in nx.simple_cycles(flow, length_bound=LOOP_LENGTH):
+        first = cycle.index(min(cycle))  # told the same way whichever node the search began at
+        cycle = cycle[first:] + cycle[:first]
         for u, v in zip(cycle, cycle[1:] + cycle[:1]):
             name = flow.edges[u, v]["stream"]
             qos = composition.streams[name].network
