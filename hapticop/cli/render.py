@@ -1,6 +1,7 @@
 """`hapticop graph`: one picture of deployment, dataflow and coordination.
 
-Threads are boxes holding their activities (labelled with the schedule IDs that run
+Hosts are boxes holding their threads (network streams are bold purple arrows with their QoS),
+threads are boxes holding their activities (labelled with the schedule IDs that run
 them), streams are arrows between activities, dashed orange arrows join an activity to one it
 needs (a device block to its simulator), each Petri net is a box of places (circles)
 and transitions (bars), and flag-map bindings are dashed arrows between flags and places.
@@ -14,12 +15,32 @@ import shutil
 import subprocess
 from pathlib import Path
 
+from hapticop.composition.description import Composition, Thread
 from hapticop.composition.graph import CompositionGraph
+from hapticop.composition.placement import Placement, place
 from hapticop.composition.units import format_duration
 
 
 class RenderError(RuntimeError):
     pass
+
+
+def _by_host(comp: Composition) -> list[tuple[str, Thread]]:
+    """The threads, each host's together (a host is a box around its threads' boxes)."""
+    hosts = list(comp.hosts)
+    return sorted(comp.threads.items(), key=lambda item: hosts.index(item[1].host) if item[1].host in hosts else -1)
+
+
+def _first_of_host(comp: Composition, host: str) -> str | None:
+    return next((name for name, t in _by_host(comp) if t.host == host), None)
+
+
+def _last_of_host(comp: Composition, host: str) -> str | None:
+    return next((name for name, t in reversed(_by_host(comp)) if t.host == host), None)
+
+
+def _on_hosts(where: Placement | None, activity: str) -> int:
+    return len(where.activity_hosts.get(activity, ())) if where is not None else 1
 
 
 def _q(text: str) -> str:
@@ -39,7 +60,13 @@ def to_dot(cg: CompositionGraph) -> str:
         "  node [fontname=Helvetica, fontsize=10];",
         "  edge [fontname=Helvetica, fontsize=9];",
     ]
-    for tname, thread in comp.threads.items():
+    where = place(comp) if comp.hosts else None
+    for tname, thread in _by_host(comp):
+        if where is not None and thread.host in comp.hosts and tname == _first_of_host(comp, thread.host):
+            spec = comp.hosts[thread.host]
+            label = f"host {thread.host}\\n{', '.join(spec.endpoints)}"
+            lines.append(f"  subgraph {_q('cluster_host_' + thread.host)} {{")
+            lines.append(f"    label={_q(label)}; style=filled; fillcolor=aliceblue; color=gray40;")
         prio = f", FIFO {thread.priority}" if thread.priority else ""
         label = f"thread {tname}\\n{format_duration(thread.period)}{prio}, {thread.deploy}"
         lines.append(f"  subgraph {_q('cluster_thread_' + tname)} {{")
@@ -54,16 +81,25 @@ def to_dot(cg: CompositionGraph) -> str:
                 continue
             block = cg.loaded.activities[member].spec.block
             label = f"{member}\\n({block}) schedules {','.join(ids)}"
-            lines.append(f"    {_id('activity', member)} [shape=box, style=filled, fillcolor=lightyellow, "
-                         f"label={_q(label)}];")
+            node = _id('activity', member, thread.host) if _on_hosts(where, member) > 1 else _id('activity', member)
+            lines.append(f"    {node} [shape=box, style=filled, fillcolor=lightyellow, label={_q(label)}];")
         lines.append("  }")
+        if where is not None and thread.host in comp.hosts and tname == _last_of_host(comp, thread.host):
+            lines.append("  }")
     for sname, stream in comp.streams.items():
         writer = stream.writer.split(".")
         for reader in stream.readers:
             reader_parts = reader.split(".")
             policy = stream.policy.kind + (f"[{stream.policy.capacity}]" if stream.policy.kind == "queue" else "")
+            style = ""
+            crosses = where is not None and where.port_host(reader) != where.port_host(stream.writer)
+            if crosses and stream.network is not None:
+                qos = stream.network
+                deadline = format_duration(qos.deadline) if qos.deadline else "no deadline"
+                policy = f"network {qos.priority}, {qos.keep}, {deadline}, stale {qos.stale}"
+                style = ", color=purple, penwidth=2"
             lines.append(f"  {_id('activity', writer[0])} -> {_id('activity', reader_parts[0])} "
-                         f"[label={_q(f'{sname}: {writer[1]}->{reader_parts[1]} ({policy})')}];")
+                         f"[label={_q(f'{sname}: {writer[1]}->{reader_parts[1]} ({policy})')}{style}];")
     for source, target, data in cg.edges_of("needs"):  # a device and its simulator, a simulator and its world
         lines.append(f"  {_id('activity', source[1])} -> {_id('activity', target[1])} [style=dashed, "
                      f"color=darkorange, label={_q('needs ' + data['need'].provides)}];")
