@@ -97,6 +97,16 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     assert "bridge" in robot.coordination.standard.wait_for
 
 
+def test_graph_draws_each_host_around_its_threads_and_the_network_streams():
+    from hapticop.cli.render import to_dot
+
+    dot = to_dot(validate_path(ROOT / "systems" / "teleop.yaml").graph)
+    assert '"cluster_host_operator"' in dot and '"cluster_host_robot"' in dot
+    setpoint = [line for line in dot.splitlines() if "velocity_setpoint->velocity_setpoint" in line and "ropod" in line]
+    assert "network real_time, newest, 100ms, stale zero" in setpoint[0] and "purple" in setpoint[0]
+    assert not any("purple" in line for line in dot.splitlines() if '[label="handle_position:' in line)
+
+
 # -- two runtimes -----------------------------------------------------------------------------
 def _free_port() -> int:
     with socket.socket() as s:
@@ -159,6 +169,12 @@ def stop(process: subprocess.Popen, sig: int = signal.SIGINT) -> str:
     return out
 
 
+def status(system: str) -> str:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    return subprocess.run([sys.executable, "-m", "hapticop.cli", "status", system], cwd=ROOT, env=env,
+                          capture_output=True, text=True).stdout
+
+
 def log_says(path: Path, text: str) -> bool:
     return path.exists() and text in path.read_text()
 
@@ -176,7 +192,8 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path):
     bridge_log = tmp_path / "b" / "bridge.log"
     try:
         wait_for("link up on b", lambda: log_says(bridge_log, "running"), [a, b])
-        time.sleep(2.0)  # samples flow for a while (no timing is judged on it)
+        wait_for("the link's figures in b's status",
+                 lambda: "link bridge to a: up, round trip" in status(f"two{os.getpid()}_b"), [a, b])
         stop(a, signal.SIGKILL)  # the operator's side dies without a word
         wait_for("link lost on b", lambda: log_says(bridge_log, "link lost"), [b])
         a = start(path, "a", tmp_path / "a2")

@@ -18,12 +18,15 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from hapticop import published
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port
 from hapticop.network import wire
 from hapticop.network.arrivals import Arrivals
 from hapticop.network.clock import OffsetEstimator
 from hapticop.network.link import EmulatedLink, LinkParams
+
+STATUS_PERIOD_NS = 1_000_000_000  # how often `hapticop status` learns the link's figures
 
 LINK_OUTPUTS = {
     "rtt": Port("float64", (), "s", "round trip to the other host (median of the last pings)"),
@@ -103,6 +106,7 @@ class ZenohBridge(Block):
         self.rtts = np.zeros(1 << 16, dtype=np.int64)  # every answered ping's round trip, for the run's table
         self.answered = 0
         self.was_lost = False
+        self.next_status_ns = 0
         self.net = None
 
     def configure_resources(self) -> bool:
@@ -177,25 +181,30 @@ class ZenohBridge(Block):
         self.senders[stream].put(header + port.value.tobytes())
 
     def _ping(self, now: int) -> None:
-        for peer, clock in self.clocks.items():  # every estimator has the same slot: they advance together
+        for peer, clock in self.clocks.items():
             slot = clock.sent()
-            self.pinged_at[peer][slot] = now
-            self.ping_out.put(wire.PING.pack(self.session_id, slot, now))
+            t1 = self.clock.now_ns()  # as it leaves, not the cycle's start
+            self.pinged_at[peer][slot] = t1
+            self.ping_out.put(wire.PING.pack(self.session_id, slot, t1))
         self.state_out.put(self._state(ended=False))
 
     def _answer_pings(self, now: int) -> None:
         for peer, receiver in self.pings_in.items():
             while (data := receiver.take()) is not None:
+                # t2 when taken, not the cycle's start: a ping sent after the cycle began would otherwise
+                # look received before it was sent, and pass for the best (shortest) exchange
+                t2 = self.clock.now_ns()
                 if len(data) == wire.PING.size:
                     _, slot, t1 = wire.PING.unpack(data)
-                    self.pong_out[peer].put(wire.PONG.pack(slot, t1, now, self.clock.now_ns()))
+                    self.pong_out[peer].put(wire.PONG.pack(slot, t1, t2, self.clock.now_ns()))
 
     def _take_pongs(self, now: int) -> None:
         while (data := self.pongs_in.take()) is not None:
+            t4 = self.clock.now_ns()
             slot, t1, t2, t3 = wire.PONG.unpack(data)
             for peer, clock in self.clocks.items():  # the pong names the ping by its send time
                 if 0 <= slot < len(self.pinged_at[peer]) and self.pinged_at[peer][slot] == t1:
-                    clock.answered(slot, t1, t2, t3, now)
+                    clock.answered(slot, t1, t2, t3, t4)
                     self.heard_ns[peer] = now
                     self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
                     self.answered += 1
@@ -220,12 +229,14 @@ class ZenohBridge(Block):
             while (data := receiver.take()) is not None:
                 if link is None:
                     self._deliver(w.stream, data, clock, now)
-                else:
-                    link.send(now / 1e9, np.frombuffer(data, np.uint8))
-            while link is not None and (slot := link.receive(now / 1e9)) >= 0:
+                else:  # delayed from when it arrived, not from the cycle's start (the bridge may have stalled since)
+                    link.send(self.clock.now_ns() / 1e9, np.frombuffer(data, np.uint8))
+            while link is not None and (slot := link.receive(self.clock.now_ns() / 1e9)) >= 0:
                 self._deliver(w.stream, link.payload(slot).tobytes(), clock, now)
 
     def _deliver(self, stream: str, data: bytes, clock: OffsetEstimator | None, now: int) -> None:
+        if clock is None or not clock.synced:  # its age cannot be told yet: a sample of unknown age is none
+            return
         session, sequence, sent = wire.SAMPLE.unpack_from(data)
         arrivals = self.arrivals[stream]
         if session != self.peer_sessions[stream]:
@@ -236,7 +247,7 @@ class ZenohBridge(Block):
         port = getattr(self.outputs, f"in_{stream}")
         port.value[...] = np.frombuffer(data, port.value.dtype, offset=wire.SAMPLE.size).reshape(port.value.shape)
         # the send time on this host's clock, never in the future: a reader's max_age counts the network
-        port.stamp_ns = min(now, clock.to_local(sent)) if clock is not None and clock.synced else now
+        port.stamp_ns = min(now, clock.to_local(sent))
         port.publish()
 
     def _judge_link(self, now: int, publish: bool) -> None:
@@ -255,6 +266,13 @@ class ZenohBridge(Block):
             else:
                 self.log.info("link up again")
         self.flags["link_degraded"] = rtt > p.degraded_rtt_ms * 1e6 or loss > p.degraded_loss
+        if publish and self.clocks and now >= self.next_status_ns:
+            self.next_status_ns = now + STATUS_PERIOD_NS
+            clock = next(iter(self.clocks.values()))
+            published.publish(self.run_dir, "network", self.name, {
+                "peers": p.peers, "up": self.flags["link_up"], "lost": self.flags["link_lost"],
+                "degraded": self.flags["link_degraded"], "rtt_ms": rtt / 1e6, "jitter_ms": clock.jitter_ns / 1e6,
+                "loss": loss, "offset_ms": clock.offset_ns / 1e6, "offset_error_ms": clock.error_ns / 1e6})
         if publish and self.clocks:
             clock = next(iter(self.clocks.values()))
             for name, value in (("rtt", rtt / 1e9), ("jitter", clock.jitter_ns / 1e9), ("loss", loss),

@@ -301,6 +301,11 @@ def status(
     if state.get("modes") is not None:
         typer.echo(f"  modes holding: {', '.join(state['modes']) or 'none'}")
     typer.echo(f"  flags set: {', '.join(state['flags'])}")
+    for name, link in state.get("links", {}).items():
+        health = "lost" if link["lost"] else "degraded" if link["degraded"] else "up" if link["up"] else "waiting"
+        typer.echo(f"  link {name} to {', '.join(link['peers'])}: {health}, round trip {link['rtt_ms']:.2f} ms, "
+                   f"jitter {link['jitter_ms']:.2f} ms, loss {link['loss']:.1%}, clock offset "
+                   f"{link['offset_ms']:+.3f} ms (within {link['offset_error_ms']:.3f})")
 
 
 @app.command()
