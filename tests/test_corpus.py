@@ -151,6 +151,8 @@ CASES = [
     # hosts: placement, each network stream's QoS, loops through the network (docs/teleop.md)
     ("invalid-host-unknown.yaml", "host-unknown", 16, "placed on host 'robto'", "hosts: desk, robot"),
     ("invalid-host-missing.yaml", "host-missing", 13, "thread 'robot_main' names no host", None),
+    ("invalid-host-unknown-place.yaml", "host-unknown-place", 4, "would hold place 'WHEEL_FAULT' while the link",
+     "name a place of coordination.standard.sources"),
     ("invalid-host-split-activity.yaml", "host-split-activity", 11, "'counter' is scheduled on hosts desk, robot",
      None),
     ("invalid-network-no-qos.yaml", "network-qos", 24, "crosses from host 'desk' to 'robot' and states no", None),

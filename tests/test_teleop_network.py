@@ -95,6 +95,9 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     assert robot.coordination.standard.sinks["bridge.out_wheel_fault"] == "WHEEL_FAULT"
     assert operator.coordination.standard.ends == {"bridge.peer_ended": "FINISHED"}
     assert "bridge" in robot.coordination.standard.wait_for
+    # a lost link holds the operator's side as a wheel fault would, until the robot is heard again
+    bridge = validated.hosts["operator"].graph.loaded.activities["bridge"].params
+    assert bridge.hold_when_lost == ["WHEEL_FAULT"] and "WHEEL_FAULT" in bridge.import_flags
 
 
 def test_graph_draws_each_host_around_its_threads_and_the_network_streams():

@@ -65,6 +65,7 @@ class BridgeParams(Params):
     export_flags: list[str] = Field(default_factory=list, description="mediator places other hosts mirror")
     import_flags: list[str] = Field(default_factory=list, description="other hosts' places mirrored here")
     peer_end: bool = Field(False, description="raise 'peer_ended' when another host's run ends")
+    hold_when_lost: list[str] = Field(default_factory=list, description="imported places held while the link is lost")
     ping_period_ms: float = Field(50.0, gt=0, description="pings (and this host's state) this often")
     lost_after_ms: float = Field(250.0, gt=0, description="nothing heard for this long: 'link_lost'")
     degraded_rtt_ms: float = Field(300.0, gt=0, description="a round trip above this: 'link_degraded'")
@@ -105,7 +106,10 @@ class ZenohBridge(Block):
                        for w in p.receive} if p.emulate is not None else {})
         self.rtts = np.zeros(1 << 16, dtype=np.int64)  # every answered ping's round trip, for the run's table
         self.answered = 0
+        self.pinged = 0
+        self.offset_seen = (0.0, float("inf"))
         self.was_lost = False
+        self.remote_holding: frozenset[str] = frozenset()  # the other host's exported places that hold a token
         self.next_status_ns = 0
         self.net = None
 
@@ -183,6 +187,7 @@ class ZenohBridge(Block):
     def _ping(self, now: int) -> None:
         for peer, clock in self.clocks.items():
             slot = clock.sent()
+            self.pinged += 1
             t1 = self.clock.now_ns()  # as it leaves, not the cycle's start
             self.pinged_at[peer][slot] = t1
             self.ping_out.put(wire.PING.pack(self.session_id, slot, t1))
@@ -208,6 +213,7 @@ class ZenohBridge(Block):
                     self.heard_ns[peer] = now
                     self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
                     self.answered += 1
+                    self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
 
     def _take_states(self, now: int) -> None:
         for peer, receiver in self.states_in.items():
@@ -215,9 +221,7 @@ class ZenohBridge(Block):
             if data is None:
                 continue
             _, ended = wire.STATE.unpack_from(data)
-            holding = set(data[wire.STATE.size:].decode().split(","))
-            for place in self.params.import_flags:
-                self.flags[f"in_{place.lower()}"] = place in holding
+            self.remote_holding = frozenset(data[wire.STATE.size:].decode().split(","))
             if ended and self.params.peer_end:
                 self.flags["peer_ended"] = True
             self.heard_ns[peer] = now
@@ -266,13 +270,16 @@ class ZenohBridge(Block):
             else:
                 self.log.info("link up again")
         self.flags["link_degraded"] = rtt > p.degraded_rtt_ms * 1e6 or loss > p.degraded_loss
+        for place in p.import_flags:  # the other host's places, or the safe side of them while it is out of reach
+            self.flags[f"in_{place.lower()}"] = place in self.remote_holding or (lost and place in p.hold_when_lost)
         if publish and self.clocks and now >= self.next_status_ns:
             self.next_status_ns = now + STATUS_PERIOD_NS
             clock = next(iter(self.clocks.values()))
             published.publish(self.run_dir, "network", self.name, {
                 "peers": p.peers, "up": self.flags["link_up"], "lost": self.flags["link_lost"],
                 "degraded": self.flags["link_degraded"], "rtt_ms": rtt / 1e6, "jitter_ms": clock.jitter_ns / 1e6,
-                "loss": loss, "offset_ms": clock.offset_ns / 1e6, "offset_error_ms": clock.error_ns / 1e6})
+                "loss": loss, "offset_ms": clock.offset_ns / 1e6,
+                "offset_error_ms": clock.error_ns / 1e6 if clock.synced else None})
         if publish and self.clocks:
             clock = next(iter(self.clocks.values()))
             for name, value in (("rtt", rtt / 1e9), ("jitter", clock.jitter_ns / 1e9), ("loss", loss),
@@ -301,14 +308,14 @@ def write_link_table(run_dir, bridge: ZenohBridge) -> None:
             row("round trip p99", round(float(np.percentile(rtts, 99)), 3), "ms"),
             row("round trip max", round(float(rtts.max()), 3), "ms"),
             row("jitter (smoothed)", round(clock.jitter_ns / 1e6, 3), "ms"),
-            row("ping loss (last pings)", round(clock.loss, 4)),
-            row("clock offset", round(clock.offset_ns / 1e6, 3), "ms"),
-            row("offset error bound", round(clock.error_ns / 1e6, 3), "ms")]
+            row("pings unanswered", round(1 - bridge.answered / max(1, bridge.pinged), 4)),
+            row("clock offset (last estimate)", round(bridge.offset_seen[0] / 1e6, 3), "ms"),
+            row("offset error bound", round(bridge.offset_seen[1] / 1e6, 3), "ms")]
     for stream, count in bridge.sequence.items():
         rows.append(row(f"{stream}: sent", count))
     for stream, arrivals in bridge.arrivals.items():
         rows.append(row(f"{stream}: received", arrivals.delivered))
         rows.append(row(f"{stream}: late or duplicate, dropped", arrivals.late))
-        rows.append(row(f"{stream}: never arrived", arrivals.skipped))
+        rows.append(row(f"{stream}: superseded or lost", arrivals.skipped))
     data = {"title": f"link of host '{bridge.params.host}' to {', '.join(bridge.params.peers)}", "rows": rows}
     (run_dir / "results-link.json").write_text(json.dumps(data, indent=1))

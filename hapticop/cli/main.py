@@ -303,9 +303,11 @@ def status(
     typer.echo(f"  flags set: {', '.join(state['flags'])}")
     for name, link in state.get("links", {}).items():
         health = "lost" if link["lost"] else "degraded" if link["degraded"] else "up" if link["up"] else "waiting"
+        error = link["offset_error_ms"]
+        within = f" (within {error:.3f})" if error is not None else " (not yet measured)"
         typer.echo(f"  link {name} to {', '.join(link['peers'])}: {health}, round trip {link['rtt_ms']:.2f} ms, "
                    f"jitter {link['jitter_ms']:.2f} ms, loss {link['loss']:.1%}, clock offset "
-                   f"{link['offset_ms']:+.3f} ms (within {link['offset_error_ms']:.3f})")
+                   f"{link['offset_ms']:+.3f} ms{within}")
 
 
 @app.command()

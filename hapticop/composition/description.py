@@ -391,6 +391,10 @@ class Host(Strict):
     emulate: LinkParams | None = Field(
         None, description="make what this host receives worse on purpose (delay, jitter, loss: a seeded emulated "
         "link in its bridge), to test or measure a good network as a bad one")
+    on_link_lost: list[PlaceName] = Field(
+        default_factory=list, description="places of the other hosts' mediators this host holds while the link is "
+        "lost, as if they had a token (a robot out of reach is treated as a held one: 'WHEEL_FAULT'); they follow "
+        "the other host again once it is heard")
     doc: str = ""
 
 

@@ -136,7 +136,8 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                    "peers": [h for h in composition.hosts if h != host],
                    "listen": list(composition.hosts[host].endpoints), "connect": peers,
                    "send": sends, "receive": receives, "export_flags": exports, "import_flags": imports,
-                   "peer_end": ended, **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
+                   "peer_end": ended, "hold_when_lost": list(composition.hosts[host].on_link_lost),
+                   **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
     }
     out.setdefault("threads", {})[BRIDGE_THREAD] = {
         "period": BRIDGE_PERIOD, "deploy": "process", "schedules": {0: [BRIDGE]},

@@ -45,6 +45,15 @@ def placement(composition: Composition) -> Check:
         elif thread.host not in hosts:
             yield Diagnostic("host-unknown", f"thread '{name}' is placed on host '{thread.host}', which 'hosts:' "
                              "does not declare", ("threads", name, "host"), hint=f"hosts: {', '.join(hosts)}")
+    standard = composition.coordination.standard
+    shared = set(standard.sources.values()) if standard is not None else set()
+    for name, host in hosts.items():
+        for i, held in enumerate(host.on_link_lost):
+            if held not in shared:
+                yield Diagnostic("host-unknown-place", f"host '{name}' would hold place '{held}' while the link is "
+                                 "lost, but no flag of another host's activity reaches it", ("hosts", name,
+                                 "on_link_lost", i), hint="name a place of coordination.standard.sources"
+                                 + (f" ({', '.join(sorted(shared))})" if shared else ""))
     where = place(composition)
     for activity, on in where.activity_hosts.items():
         spec = composition.activities.get(activity)
