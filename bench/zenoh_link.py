@@ -3,11 +3,14 @@
 
     sudo python bench/zenoh_link.py transport [--runs 3] [--count 3000]
     sudo python bench/zenoh_link.py loops [--runs 3] [--seconds 10]
+    python bench/zenoh_link.py linkloss [--runs 3] [--seconds 10]
 
 `transport` makes two namespaces joined by a veth and echoes 64-byte messages paced at 1 kHz, first over
 Zenoh as the bridges use it (peer mode, explicit endpoints, no scouting, express, REAL_TIME, a ring
 channel of 1), then over a plain UDP socket. `loops` runs a 1 kHz real-time loop whose samples cross to
-a second host through the bridges, and the same loop and reader on one host without them. Figures go to
+a second host through the bridges, and the same loop and reader on one host without them. `linkloss`
+kills the operator's side of systems/teleop.yaml after it has driven for a while and measures, on the
+robot's recording, how long after the last setpoint's send time the robot stands still. Figures go to
 bench/results/zenoh-link.json and docs/teleop.md; none is judged here.
 """
 
@@ -209,13 +212,61 @@ def loop_runs(runs: int, seconds: int) -> dict:
     return results
 
 
+def linkloss_runs(runs: int, drive_s: float) -> dict:
+    """The operator's side of systems/teleop.yaml killed while the robot drives: from the last setpoint's
+    send time to the wheels commanded to zero (the deadman) and to the robot standing still."""
+    from hapticop.recording.reading import series
+
+    results = []
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    with tempfile.TemporaryDirectory() as tmp:
+        for run in range(runs):
+            base = Path(tmp) / f"run{run}"
+
+            def side(host: str, *extra: str) -> subprocess.Popen:
+                return subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", "systems/teleop.yaml",
+                                         "--host", host, "--run-dir", str(base / host), *extra], cwd=ROOT, env=env,
+                                        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+            robot = side("robot", "--record")
+            operator = side("operator")
+            operator_log = base / "operator" / "operator.log"
+            while not (operator_log.exists() and "starts driving" in operator_log.read_text()):
+                time.sleep(0.2)
+            time.sleep(drive_s)
+            os.killpg(operator.pid, 9)  # the operator's host dies without a word
+            operator.wait()
+            time.sleep(3.0)
+            os.killpg(robot.pid, 2)
+            robot.wait(timeout=120)
+            recording = base / "robot" / "teleop_robot.mcap"
+            setpoints = series(recording, "velocity_setpoint")
+            twist = series(recording, "robot_twist")
+            commands = series(recording, "platform_velocity")
+            last_sent = int(setpoints.publish_ns[-1])
+            moving = np.abs(twist.values[:, 0]) > 0.01
+            after = twist.publish_ns > last_sent
+            still = np.flatnonzero(after & ~moving)
+            speed = float(np.abs(twist.values[after][0, 0])) if after.any() else 0.0
+            figures = {"speed_at_loss_mps": round(speed, 3),
+                       "last_setpoint_value": [round(float(v), 3) for v in setpoints.values[-1]],
+                       "still_after_ms": round((int(twist.publish_ns[still[0]]) - last_sent) / 1e6, 1)
+                       if len(still) else None,
+                       "platform_velocity_samples_after": int((commands.publish_ns > last_sent).sum())}
+            results.append(figures)
+            print("linkloss", figures, flush=True)
+    return {"runs": results}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=["transport", "loops", "echo-zenoh", "ping-zenoh", "echo-udp", "ping-udp"])
+    parser.add_argument("what", choices=["transport", "loops", "linkloss", "echo-zenoh", "ping-zenoh", "echo-udp",
+                                         "ping-udp"])
     parser.add_argument("args", nargs="*")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--count", type=int, default=3000, help="round trips per transport run")
-    parser.add_argument("--seconds", type=int, default=10, help="length of each loops run")
+    parser.add_argument("--seconds", type=int, default=10,
+                        help="length of each loops run; with linkloss, how long the operator drives before its death")
     options = parser.parse_args()
     a = options.args
     if options.what == "echo-zenoh":
@@ -232,6 +283,8 @@ def main() -> None:
         saved = json.loads(out.read_text()) if out.exists() else {}
         if options.what == "transport":
             saved["transport"] = transport_runs(options.runs, options.count)
+        elif options.what == "linkloss":
+            saved["linkloss"] = linkloss_runs(options.runs, options.seconds)
         else:
             saved["loops"] = loop_runs(options.runs, options.seconds)
         saved["machine"] = {"cpus": os.cpu_count(), "kernel": os.uname().release, "date": time.strftime("%Y-%m-%d")}
