@@ -26,6 +26,7 @@ from hapticop.network.arrivals import Arrivals
 from hapticop.network.clock import OffsetEstimator
 from hapticop.network.link import EmulatedLink, LinkParams
 
+WINDOW = 64  # pings the clock estimate looks back over (3.2 s at the default 50 ms)
 STATUS_PERIOD_NS = 1_000_000_000  # how often `hapticop status` learns the link's figures
 
 LINK_OUTPUTS = {
@@ -98,8 +99,8 @@ class ZenohBridge(Block):
         self.sequence = {w.stream: 0 for w in p.send}
         self.arrivals = {w.stream: Arrivals() for w in p.receive}
         self.peer_sessions = {w.stream: 0 for w in p.receive}
-        self.clocks = {peer: OffsetEstimator() for peer in p.peers}
-        self.pinged_at = {peer: np.zeros(64, dtype=np.int64) for peer in p.peers}
+        self.clocks = {peer: OffsetEstimator(WINDOW) for peer in p.peers}
+        self.pinged_at = {peer: np.zeros(WINDOW, dtype=np.int64) for peer in p.peers}
         self.heard_ns = {peer: 0 for peer in p.peers}
         self.next_ping_ns = 0
         self.links = ({w.stream: EmulatedLink(p.emulate, wire.SAMPLE.size + w.port().nbytes, np.uint8)
@@ -131,7 +132,6 @@ class ZenohBridge(Block):
         self.pongs_in = transport.Receiver(self.net, wire.pong_key(p.system, p.host), 64)
         self.state_out = transport.Sender(self.net, wire.state_key(p.system, p.host), "interactive", True)
         self.states_in = {peer: transport.Receiver(self.net, wire.state_key(p.system, peer), 1) for peer in p.peers}
-        self.pong_peer = {}
         return True
 
     def configure_capabilities(self) -> bool:
@@ -155,17 +155,16 @@ class ZenohBridge(Block):
         if self.answered:
             write_link_table(self.run_dir, self)
 
-
     # -- the cycle --------------------------------------------------------------------
     def _service(self) -> None:
         now = self.clock.now_ns()
         self._send_samples()
-        self._answer_pings(now)
+        self._answer_pings()
         due = now >= self.next_ping_ns
         if due:
             self.next_ping_ns = now + int(self.params.ping_period_ms * 1e6)
             self._ping(now)
-        self._take_pongs(now)
+        self._take_pongs()
         self._take_states(now)
         self._take_samples(now)
         self._judge_link(now, publish=due)
@@ -185,15 +184,18 @@ class ZenohBridge(Block):
         self.senders[stream].put(header + port.value.tobytes())
 
     def _ping(self, now: int) -> None:
-        for peer, clock in self.clocks.items():
+        """One ping to every other host; each answers with its name, so each has its own estimate."""
+        t1 = self.clock.now_ns()  # as it leaves, not the cycle's start
+        slot = 0
+        for peer, clock in self.clocks.items():  # they advance together: one slot for all
             slot = clock.sent()
-            self.pinged += 1
-            t1 = self.clock.now_ns()  # as it leaves, not the cycle's start
             self.pinged_at[peer][slot] = t1
+        if self.clocks:
+            self.pinged += 1
             self.ping_out.put(wire.PING.pack(self.session_id, slot, t1))
         self.state_out.put(self._state(ended=False))
 
-    def _answer_pings(self, now: int) -> None:
+    def _answer_pings(self) -> None:
         for peer, receiver in self.pings_in.items():
             while (data := receiver.take()) is not None:
                 # t2 when taken, not the cycle's start: a ping sent after the cycle began would otherwise
@@ -201,19 +203,22 @@ class ZenohBridge(Block):
                 t2 = self.clock.now_ns()
                 if len(data) == wire.PING.size:
                     _, slot, t1 = wire.PING.unpack(data)
-                    self.pong_out[peer].put(wire.PONG.pack(slot, t1, t2, self.clock.now_ns()))
+                    pong = wire.PONG.pack(slot, t1, t2, self.clock.now_ns()) + self.params.host.encode()
+                    self.pong_out[peer].put(pong)
 
-    def _take_pongs(self, now: int) -> None:
+    def _take_pongs(self) -> None:
         while (data := self.pongs_in.take()) is not None:
             t4 = self.clock.now_ns()
-            slot, t1, t2, t3 = wire.PONG.unpack(data)
-            for peer, clock in self.clocks.items():  # the pong names the ping by its send time
-                if 0 <= slot < len(self.pinged_at[peer]) and self.pinged_at[peer][slot] == t1:
-                    clock.answered(slot, t1, t2, t3, t4)
-                    self.heard_ns[peer] = now
-                    self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
-                    self.answered += 1
-                    self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
+            slot, t1, t2, t3 = wire.PONG.unpack_from(data)
+            peer = data[wire.PONG.size:].decode(errors="replace")
+            clock = self.clocks.get(peer)
+            # the pong names its ping by slot and send time: an old pong of a reused slot is ignored
+            if clock is not None and 0 <= slot < WINDOW and self.pinged_at[peer][slot] == t1:
+                clock.answered(slot, t1, t2, t3, t4)
+                self.heard_ns[peer] = t4
+                self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
+                self.answered += 1
+                self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
 
     def _take_states(self, now: int) -> None:
         for peer, receiver in self.states_in.items():

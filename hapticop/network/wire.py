@@ -12,7 +12,7 @@ import struct
 
 SAMPLE = struct.Struct("<QQq")  # session, sequence, send time (ns, sender's clock)
 PING = struct.Struct("<QQq")  # session, slot, t1
-PONG = struct.Struct("<Qqqq")  # slot, t1, t2, t3
+PONG = struct.Struct("<Qqqq")  # slot, t1, t2, t3; then the answering host's name
 STATE = struct.Struct("<Q?")  # session, ended; then the names of the exported places holding, comma-separated
 
 
