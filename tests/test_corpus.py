@@ -159,6 +159,7 @@ CASES = [
     ("invalid-network-no-deadline.yaml", "network-deadline", 27, "without a 'deadline'", None),
     ("invalid-network-unbounded.yaml", "network-unbounded", 27, "as a queue without 'depth'", None),
     ("invalid-network-blocking.yaml", "network-blocking", 28, "samples of real-time thread 'main'", None),
+    ("invalid-host-part-unknown-port.yaml", "unknown-port", 25, "has no output port 'cont'", "did you mean 'count'?"),
     ("invalid-network-loop.yaml", "network-loop", 22,
      "the loop here -> there -> here closes through the network within one period", "keep the loop's"),
 ]

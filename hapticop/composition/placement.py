@@ -101,7 +101,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
     for name in list(out.get("streams", {})):
         entry, spec = out["streams"][name], composition.streams[name]
         readers = [r for r in spec.readers if is_local(r)]
-        net = placement.network.get(name)
+        net = placement.network.get(name) if name in ports else None  # no port known: each host checks its part
         if net is None or (net.writer_host != host and host not in net.reader_hosts):
             if is_local(spec.writer):
                 entry["to"] = readers

@@ -136,12 +136,16 @@ CHECKS = (placement, network_qos, network_loops)
 
 
 def port_specs(loaded: Loaded) -> dict[str, dict]:
-    """Each network stream's writer port as the bridges carry it: dtype, shape, unit."""
+    """Each network stream's samples as the bridges carry them (dtype, shape, unit): its writer port's,
+    or a reader's when the writer names no port it has (that host's own checks then say so)."""
     specs = {}
     for name in place(loaded.composition).network:
-        activity, port = loaded.composition.streams[name].writer.split(".")
-        resolved = loaded.activities.get(activity)
-        spec = resolved.interface.outputs.get(port) if resolved else None
-        if spec is not None:
-            specs[name] = {"dtype": spec.dtype, "shape": list(spec.shape), "unit": spec.unit}
+        stream = loaded.composition.streams[name]
+        for ref, side in ((stream.writer, "outputs"), *((r, "inputs") for r in stream.readers)):
+            activity, port = ref.split(".")
+            resolved = loaded.activities.get(activity)
+            spec = getattr(resolved.interface, side).get(port) if resolved else None
+            if spec is not None:
+                specs[name] = {"dtype": spec.dtype, "shape": list(spec.shape), "unit": spec.unit}
+                break
     return specs
