@@ -110,6 +110,13 @@ def test_graph_draws_each_host_around_its_threads_and_the_network_streams():
     assert not any("purple" in line for line in dot.splitlines() if '[label="handle_position:' in line)
 
 
+def test_compose_refuses_the_virtual_clock_and_an_unknown_host():
+    for extra, said in ((["--clock", "virtual"], "runs in real time"), (["--host", "nobody"], "no host 'nobody'")):
+        done = subprocess.run([sys.executable, "-m", "hapticop.cli", "compose", "systems/teleop.yaml", *extra],
+                              cwd=ROOT, capture_output=True, text=True, timeout=PATIENCE_S)
+        assert done.returncode == 2 and said in done.stderr
+
+
 # -- two runtimes -----------------------------------------------------------------------------
 def _free_port() -> int:
     with socket.socket() as s:
