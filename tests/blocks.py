@@ -348,3 +348,34 @@ class BadDeclaration(Block):
     @classmethod
     def interface(cls, params):
         raise ZeroDivisionError("division by zero")
+
+
+class AgeProbeParams(Params):
+    capacity: int = Field(200_000, ge=1)
+
+
+class AgeProbe(Block):
+    """Reads a sample each cycle; keeps each new sample's age on arrival and every cycle's validity
+    (the stream's max_age), and writes them to the run directory on clean."""
+
+    Params = AgeProbeParams
+    inputs = {"sample": Port("float64", (3,), "1")}
+
+    def create(self):
+        n = self.params.capacity
+        self.arrived = np.zeros((n, 2), dtype=np.int64)  # [now, stamp] of each new sample
+        self.cycles = np.zeros((n, 3), dtype=np.int64)  # [now, valid, stamp] each cycle
+        self.n_arrived = self.n_cycles = 0
+
+    def compute(self):
+        port, now = self.inputs.sample, self.clock.now_ns()
+        if port.fresh and self.n_arrived < len(self.arrived):
+            self.arrived[self.n_arrived] = (now, port.stamp_ns)
+            self.n_arrived += 1
+        if self.n_cycles < len(self.cycles):
+            self.cycles[self.n_cycles] = (now, port.valid, port.stamp_ns)
+            self.n_cycles += 1
+
+    def clean(self):
+        np.savez(self.run_dir / f"{self.name}.npz", arrived=self.arrived[: self.n_arrived],
+                 cycles=self.cycles[: self.n_cycles])

@@ -148,6 +148,20 @@ CASES = [
      None),
     ("invalid-standard-place-twice.yaml", "standard-clash", 18,
      "place 'STOPPING_THREADS' of net 'mediator' would be written twice", None),
+    # hosts: placement, each network stream's QoS, loops through the network (docs/teleop.md)
+    ("invalid-host-unknown.yaml", "host-unknown", 16, "placed on host 'robto'", "hosts: desk, robot"),
+    ("invalid-host-missing.yaml", "host-missing", 13, "thread 'robot_main' names no host", None),
+    ("invalid-host-unknown-place.yaml", "host-unknown-place", 4, "would hold place 'WHEEL_FAULT' while the link",
+     "name a place of coordination.standard.sources"),
+    ("invalid-host-split-activity.yaml", "host-split-activity", 11, "'counter' is scheduled on hosts desk, robot",
+     None),
+    ("invalid-network-no-qos.yaml", "network-qos", 24, "crosses from host 'desk' to 'robot' and states no", None),
+    ("invalid-network-no-deadline.yaml", "network-deadline", 27, "without a 'deadline'", None),
+    ("invalid-network-unbounded.yaml", "network-unbounded", 27, "as a queue without 'depth'", None),
+    ("invalid-network-blocking.yaml", "network-blocking", 28, "samples of real-time thread 'main'", None),
+    ("invalid-host-part-unknown-port.yaml", "unknown-port", 25, "has no output port 'cont'", "did you mean 'count'?"),
+    ("invalid-network-loop.yaml", "network-loop", 22,
+     "the loop here -> there -> here closes through the network within one period", "keep the loop's"),
 ]
 
 # Files that are sound but for one likely mistake: (file, rule, line, substring of the message)

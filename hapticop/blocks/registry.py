@@ -54,6 +54,7 @@ BUILTIN: dict[str, str] = {
     "ropod_plant": "hapticop.sim.devices.ropod_plant:RopodPlantSimulator",
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
+    "zenoh_bridge": "hapticop.blocks.bridge:ZenohBridge",
 }
 
 _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")

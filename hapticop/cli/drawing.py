@@ -33,4 +33,5 @@ class Drawing:
     nodes: dict[str, Node] = field(default_factory=dict)
     edges: list[Edge] = field(default_factory=list)
     clusters: dict[str, str] = field(default_factory=dict)  # id -> label
+    parents: dict[str, str] = field(default_factory=dict)  # a cluster drawn inside another (a host's threads)
     aligned: bool = False  # one ranking across clusters (tidy for threads; too wide for nets)

@@ -164,6 +164,8 @@ def compose(
         None, "--record", metavar="[FILE]",
         help="record the streams to an MCAP file (default: NAME.mcap in the run directory); every stream "
              "unless the file's 'record:' chooses"),
+    host: str | None = typer.Option(
+        None, help="with 'hosts:' in the file, run this host's side only (default: every host here, side by side)"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -172,6 +174,8 @@ def compose(
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = _valid_or_exit(file, "not started")
+    if validated.hosts:
+        validated = _one_host(validated, file, host, clock, run_dir, group_readable, sys.argv)
     # What the run writes (logs, results, recordings) is its owner's alone, or also their group's
     # to read; its child processes inherit the mask.
     os.umask(0o027 if group_readable else 0o077)
@@ -199,6 +203,40 @@ def compose(
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
     raise typer.Exit(int(result.outcome.status))
+
+
+def _one_host(validated, file: Path, host: str | None, clock: ClockKind, run_dir: Path | None,
+              group_readable: bool, argv: list[str]):
+    """The side of a composition on several hosts that `--host` names; without it, every side here
+    (each a `compose --host` child), and this process exits with their status."""
+    if clock is not ClockKind.realtime:
+        typer.echo(f"{file}: a composition with hosts runs in real time (its bridges cross a real network)", err=True)
+        raise typer.Exit(2)
+    if host is None:
+        from hapticop.cli.hosts import run_every_host
+        from hapticop.runtime.rundirs import new_run_directory, private_directory
+
+        parent = private_directory(run_dir) if run_dir else new_run_directory(
+            validated.composition.name or file.stem, group=group_readable)
+        typer.echo(f"{file}: hosts {', '.join(validated.hosts)} beside each other; runs in {parent}", err=True)
+        raise typer.Exit(run_every_host(file, list(validated.hosts), parent, _passed_on(argv)))
+    if host not in validated.hosts:
+        typer.echo(f"{file}: no host '{host}' (hosts: {', '.join(validated.hosts)})", err=True)
+        raise typer.Exit(2)
+    return validated.hosts[host]
+
+
+def _passed_on(argv: list[str]) -> list[str]:
+    """The compose options a host's child takes as they were given (not the file, --host or --run-dir)."""
+    out, skip = [], False
+    for arg in argv[argv.index("compose") + 2 if "compose" in argv else 0:]:
+        if skip:
+            skip = False
+        elif arg in ("--run-dir", "--host"):
+            skip = True
+        elif not arg.startswith(("--run-dir=", "--host=")):
+            out.append(arg)
+    return out
 
 
 def _ask(system: str, message: dict) -> dict:
@@ -271,6 +309,13 @@ def status(
     if state.get("modes") is not None:
         typer.echo(f"  modes holding: {', '.join(state['modes']) or 'none'}")
     typer.echo(f"  flags set: {', '.join(state['flags'])}")
+    for name, link in state.get("links", {}).items():
+        health = "lost" if link["lost"] else "degraded" if link["degraded"] else "up" if link["up"] else "waiting"
+        error = link["offset_error_ms"]
+        within = f" (within {error:.3f})" if error is not None else " (not yet measured)"
+        typer.echo(f"  link {name} to {', '.join(link['peers'])}: {health}, round trip {link['rtt_ms']:.2f} ms, "
+                   f"jitter {link['jitter_ms']:.2f} ms, loss {link['loss']:.1%}, clock offset "
+                   f"{link['offset_ms']:+.3f} ms{within}")
 
 
 @app.command()

@@ -18,7 +18,8 @@ from pathlib import Path
 
 from hapticop.cli.drawing import Drawing, Edge, Node
 from hapticop.composition.graph import CompositionGraph
-from hapticop.composition.units import format_period
+from hapticop.composition.placement import place
+from hapticop.composition.units import format_duration, format_period
 
 VIEWS = ("dataflow", "nets", "all")
 MAX_SIZE_IN = 30  # a drawing larger than this (inches, 72 px each) is scaled down by graphviz
@@ -48,10 +49,14 @@ def drawing(cg: CompositionGraph, view: str = "dataflow") -> Drawing:
 
 def _dataflow(cg: CompositionGraph, d: Drawing) -> None:
     comp = cg.loaded.composition
+    for hname, host in comp.hosts.items():  # a host is a box around its threads' boxes
+        d.clusters[f"host:{hname}"] = f"host {hname}: {', '.join(host.endpoints)}"
     for tname, thread in comp.threads.items():
         prio = f", FIFO {thread.priority}" if thread.priority else ""
         cluster = f"thread:{tname}"
         d.clusters[cluster] = f"thread {tname}: {format_period(thread.period)}{prio}, {thread.deploy}"
+        if thread.host in comp.hosts:
+            d.parents[cluster] = f"host:{thread.host}"
         placed: dict[str, list[str]] = {}
         for sid, members in thread.schedules.items():
             for member in members:
@@ -63,19 +68,26 @@ def _dataflow(cg: CompositionGraph, d: Drawing) -> None:
                                                      cluster=cluster, fill="lightyellow")
     for name in cg.loaded.activities:  # never scheduled: drawn outside every thread
         d.nodes.setdefault(f"activity:{name}", Node(f"{name}\n{cg.loaded.activities[name].spec.block}"))
+    where = place(comp) if comp.hosts else None
     for sname, stream in comp.streams.items():
         writer, writer_port = stream.writer.split(".", 1)
         policy = "" if stream.policy.kind == "latest" else f" (queue {stream.policy.capacity})"
+        color = "black"
+        if where is not None and sname in where.network:  # crosses hosts: its QoS on the arrow
+            qos = stream.network
+            deadline = format_duration(qos.deadline) if qos.deadline else "no deadline"
+            policy = f" (network {qos.priority}, {qos.keep}, {deadline}, stale {qos.stale})"
+            color = "purple"
         ports = ", ".join(f"{stream.writer} -> {reader}" for reader in stream.readers)
         tail = f"activity:{writer}"
         if len(stream.readers) > 1:  # one label, then a fan-out to every reader
             junction = f"stream:{sname}"
             d.nodes[junction] = Node("", shape="point")
-            d.edges.append(Edge(tail, junction, sname + policy, tooltip=ports, arrowhead="none"))
+            d.edges.append(Edge(tail, junction, sname + policy, color=color, tooltip=ports, arrowhead="none"))
             tail = junction
         for reader in stream.readers:
             label = "" if len(stream.readers) > 1 else sname + policy
-            d.edges.append(Edge(tail, f"activity:{reader.split('.', 1)[0]}", label, tooltip=ports))
+            d.edges.append(Edge(tail, f"activity:{reader.split('.', 1)[0]}", label, color=color, tooltip=ports))
     for source, target, data in cg.edges_of("needs"):  # a device and its simulator, a simulator and its world
         d.edges.append(Edge(f"activity:{source[1]}", f"activity:{target[1]}", f"needs {data['need'].provides}",
                             style="dashed", color="darkorange"))
@@ -141,12 +153,18 @@ def to_dot(d: Drawing) -> str:
         rings = f", peripheries={node.peripheries}" if node.peripheries != 1 else ""
         return f"{_q(nid)} [{_SHAPES[node.shape]}{fill}{rings}, label={_q(node.label)}];"
 
-    for cid, label in d.clusters.items():
+    def cluster_lines(cid: str, indent: str) -> list[str]:
         style = "dashed" if cid.startswith("net:") else "rounded"
-        lines.append(f"  subgraph {_q('cluster_' + cid)} {{")
-        lines.append(f"    label={_q(label)}; style={style}; color=steelblue;")
-        lines.extend(f"    {node_line(nid, node)}" for nid, node in d.nodes.items() if node.cluster == cid)
-        lines.append("  }")
+        inner = [child for child, parent in d.parents.items() if parent == cid]
+        return [f"{indent}subgraph {_q('cluster_' + cid)} {{",
+                f"{indent}  label={_q(d.clusters[cid])}; style={style}; color=steelblue;",
+                *(f"{indent}  {node_line(nid, node)}" for nid, node in d.nodes.items() if node.cluster == cid),
+                *(line for child in inner for line in cluster_lines(child, indent + "  ")),
+                f"{indent}}}"]
+
+    for cid in d.clusters:
+        if cid not in d.parents:
+            lines.extend(cluster_lines(cid, "  "))
     lines.extend(f"  {node_line(nid, node)}" for nid, node in d.nodes.items() if node.cluster is None)
     for edge in d.edges:
         attrs = [f"label={_q(edge.label)}"] if edge.label else []

@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 from pydantic_core import PydanticCustomError
 
 from hapticop.composition.units import Duration, Offset
+from hapticop.network.link import LinkParams
 
 VERSION = 1
 
@@ -79,6 +80,7 @@ class Thread(Strict):
     )
     start: StartPolicy = Field("auto", description=START_DOC)
     log: LogLevel = Field("info", description="the most detailed level written to this thread's log")
+    host: Name | None = Field(None, description="with 'hosts:', the host this thread (and its process) runs on")
     doc: str = ""
 
     @field_validator("process")
@@ -159,6 +161,33 @@ class QueuePolicy(Strict):
 StreamPolicy = Annotated[LatestPolicy | QueuePolicy, Field(discriminator="kind")]
 
 
+class NetworkQoS(Strict):
+    """How a stream whose writer and readers are on different hosts crosses the network (docs/teleop.md).
+
+    Only the hosts' bridges touch the network: the real-time threads read and write the shared
+    region as they do for any stream, so nothing here can make them wait."""
+
+    priority: Literal["real_time", "interactive", "data", "background"] = Field(
+        "data", description="Zenoh priority: 'real_time' for setpoints, 'data' for scans")
+    keep: Literal["newest", "queue"] = Field(
+        "newest", description="'newest': a late sample replaces an older one and an older one is dropped (state); "
+        "'queue': every sample in order, up to 'depth' (events)")
+    depth: Annotated[int, Field(ge=1, le=65536)] | None = Field(
+        None, description="with keep 'queue': samples held at most; required, a queue without a bound grows "
+        "without one while the reader lags")
+    reliability: Literal["best_effort", "reliable"] = Field(
+        "best_effort", description="'reliable' retransmits (TCP); 'best_effort' never waits for a lost sample")
+    congestion: Literal["drop", "block"] = Field(
+        "drop", description="a full link: 'drop' the sample, or 'block' the bridge until it leaves")
+    deadline: Duration | None = Field(
+        None, description="a sample older than this when read (send time mapped to the reader's clock) is stale; "
+        "required")
+    stale: Literal["zero", "hold"] | None = Field(
+        None, description="what the reading side does with a stale sample: 'zero' treats it as no sample "
+        "(a setpoint ramps the wheels down), 'hold' keeps using the last one (a scan); required")
+    doc: str = ""
+
+
 class Stream(Strict):
     """One writer port to one or more reader ports, with an explicit connection policy."""
 
@@ -166,6 +195,9 @@ class Stream(Strict):
     readers: list[PortRef] = Field(alias="to", min_length=1, description="the reading ports")
     policy: StreamPolicy = Field(default_factory=LatestPolicy)
     max_age: Duration | None = Field(None, description="older samples count as missing")
+    network: NetworkQoS | None = Field(
+        None, description="with 'hosts:', how the stream crosses the network when its writer and readers are on "
+        "different hosts")
     doc: str = ""
 
     @model_validator(mode="before")
@@ -352,12 +384,31 @@ class Record(Strict):
     doc: str = ""
 
 
+class Host(Strict):
+    """A machine the composition runs on: its own runtime, and a bridge that reaches the others
+    over Zenoh in peer mode at these endpoints (no multicast scouting)."""
+
+    endpoints: list[Annotated[str, Field(pattern=r"^(tcp|udp|quic|tls)/[^/]+:[0-9]+$")]] = Field(
+        min_length=1, description="where this host's bridge listens, e.g. 'tcp/10.0.0.1:7447'; the other hosts "
+        "connect to them")
+    emulate: LinkParams | None = Field(
+        None, description="make what this host receives worse on purpose (delay, jitter, loss: a seeded emulated "
+        "link in its bridge), to test or measure a good network as a bad one")
+    on_link_lost: list[PlaceName] = Field(
+        default_factory=list, description="places of the other hosts' mediators this host holds while the link is "
+        "lost, as if they had a token (a robot out of reach is treated as a held one: 'WHEEL_FAULT'); they follow "
+        "the other host again once it is heard")
+    doc: str = ""
+
+
 class Composition(Strict):
     """A whole hapticop system: what runs, where, how it is wired and coordinated."""
 
     version: Literal[1] = Field(description="composition format version")
     name: Name | None = None
     doc: str = ""
+    hosts: dict[Name, Host] = Field(
+        default_factory=dict, description="the machines the composition runs on; each thread names its 'host:'")
     threads: dict[Name, Thread] = Field(min_length=1)
     activities: dict[Name, Activity] = Field(min_length=1)
     streams: dict[Name, Stream] = Field(default_factory=dict)
@@ -393,6 +444,7 @@ class Composition(Strict):
 
 # Where the named entries live; used to drop a broken entry and keep checking the rest.
 COLLECTIONS: tuple[tuple[str, ...], ...] = (
+    ("hosts",),
     ("threads",),
     ("activities",),
     ("streams",),

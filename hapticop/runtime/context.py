@@ -97,11 +97,12 @@ class OutputPort:
 
     Where a measured latency starts at this port (`origin_slots`), each sample is stamped as
     an origin: at `origin_ns` if the block set it (e.g. when a telegram's last byte arrived),
-    else at publication.
+    else at publication. A sample is stamped with the time of publication, or with `stamp_ns` when
+    the block set it (a network bridge: the sample's send time on the writing host).
     """
 
     __slots__ = ("name", "spec", "value", "transports", "published", "origins", "origin_slots", "origin_ns",
-                 "_clock")
+                 "stamp_ns", "_clock")
 
     def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
@@ -111,9 +112,11 @@ class OutputPort:
         self.origins = np.zeros(ORIGINS, dtype=np.int64) if track_origins else None
         self.origin_slots: tuple[int, ...] = ()
         self.origin_ns = 0
+        self.stamp_ns = 0
 
     def publish(self) -> None:
-        now = self._clock()
+        now = self.stamp_ns or self._clock()
+        self.stamp_ns = 0
         origins = self.origins
         if self.origin_slots:
             for slot in self.origin_slots:

@@ -8,6 +8,7 @@ from pathlib import Path
 from hapticop.composition.description import Composition
 from hapticop.composition.lcsm import State
 from hapticop.coordination.coordinator import Coordinator
+from hapticop.published import published
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.control import ControlError, ControlServer, is_system_name, socket_path
 from hapticop.runtime.lifecycle import OK
@@ -35,13 +36,18 @@ def control_path(socket: str | None, system: str) -> Path:
     return path
 
 
+LINKS = "network"  # the published facts a network bridge keeps up to date (hapticop.blocks.bridge)
+
+
 class ControlService:
     """Requests are handled on the control server's thread; patches are only prepared there
     and handed to the main thread through `live.pending`."""
 
     def __init__(self, name: str, live: LiveChanges, region: Region, clock: RealtimeClock | VirtualClock,
-                 coordinator: Coordinator, composition: Callable[[], Composition], log: Logger):
+                 coordinator: Coordinator, composition: Callable[[], Composition], log: Logger,
+                 run_dir: Path | None = None):
         self.name, self.live, self.region, self.clock = name, live, region, clock
+        self.run_dir = run_dir  # where activities publish what `status` shows of them (a bridge's link)
         self.coordinator, self.composition, self.log = coordinator, composition, log  # composition(): the running one
         self.server: ControlServer | None = None
 
@@ -107,7 +113,19 @@ class ControlService:
             "modes": [name for name, mode in composition.modes.items()
                       if mode.when in layout.flag_index and region.flag(mode.when)],
             "timing": timing(region, composition),
+            "links": self._links(),
         }
+
+    def _links(self) -> dict:
+        """Each network bridge's link as it last told it (round trip, jitter, loss, offset, state)."""
+        if self.run_dir is None:
+            return {}
+        found = {}
+        for path in sorted((self.run_dir / LINKS).glob("*.pickle")):
+            value = published(self.run_dir, LINKS, path.stem)
+            if value is not None:
+                found[path.stem] = value
+        return found
 
 
 PATCH_FIELDS = {"text": (str, "the patch's text"), "file": (str, "a file name"), "dry_run": (bool, "true or false")}

@@ -133,7 +133,7 @@ class System:
         self.live = LiveChanges(self, Path(self.file).name, self.supervisor.reasons)
         self.modes = Modes(self, self.flag_index, self.region.flags)
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
-                                      lambda: self.description.composition, self.log)
+                                      lambda: self.description.composition, self.log, self.run_dir)
         self.main.supervisor = self._between_cycles
         if self.layout.recorded:
             path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"

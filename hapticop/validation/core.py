@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from hapticop.composition.description import Composition
 from hapticop.composition.diagnostics import Diagnostic, Report
 from hapticop.composition.graph import CompositionGraph
 from hapticop.composition.loader import Loaded, load_tree
+from hapticop.composition.placement import for_host, place
 from hapticop.composition.yamlsource import Source
-from hapticop.validation import coordination, modes, structure
+from hapticop.validation import coordination, hosts, modes, structure
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 
 
@@ -23,6 +24,7 @@ class Validated:
     report: Report
     source: Source | None = None
     graph: CompositionGraph | None = None
+    hosts: dict[str, Validated] = field(default_factory=dict)  # with 'hosts:', each host's own composition
 
     @property
     def composition(self) -> Composition | None:
@@ -40,6 +42,8 @@ def check_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> Vali
     loaded: Loaded = load_tree(source.tree)
     report.extend(source.place(d, key=d.rule == "unknown-key") for d in loaded.diagnostics)
     cg = CompositionGraph(loaded)
+    if loaded.composition is not None and loaded.composition.hosts:
+        return _check_hosts(source, loaded, cg, report, state_limit)
     if loaded.composition is not None:
         for check in structure.CHECKS + coordination.CHECKS + modes.CHECKS:
             found = check(cg, state_limit) if check is coordination.reachability else check(cg)
@@ -56,3 +60,31 @@ def placed(source: Source, loaded: Loaded, diagnostic: Diagnostic) -> Diagnostic
     at = source.place(replace(diagnostic, path=origin))
     note = f"written out from {'.'.join(map(str, origin))}: `hapticop expand FILE` prints it"
     return replace(at, path=diagnostic.path, hint=f"{diagnostic.hint} ({note})" if diagnostic.hint else note)
+
+
+def _check_hosts(source: Source, loaded: Loaded, cg: CompositionGraph, report: Report, state_limit: int) -> Validated:
+    """The whole file's placement and network streams, then each host's composition with every check."""
+    for check in hosts.CHECKS:
+        report.extend(source.place(d) for d in check(loaded.composition))
+    validated = Validated(report, source, cg)
+    if not report.ok:
+        return validated
+    ports = hosts.port_specs(loaded)
+    for host in loaded.composition.hosts:
+        tree = for_host(source.tree, loaded.composition, host, ports)
+        part = check_source(hosts.HostSource(file=source.file, tree=tree, text="", origin=source), state_limit)
+        part.report.diagnostics = [d for d in part.report.diagnostics
+                                   if not _needs_elsewhere(d, loaded.composition, host)]
+        report.extend(d for d in part.report.diagnostics if d not in report.diagnostics)
+        validated.hosts[host] = part
+    return validated
+
+
+def _needs_elsewhere(diagnostic, composition, host: str) -> bool:
+    """A simulator's need met by an activity on another host: the hosts run beside each other in one
+    run directory when simulated, so its published facts reach it."""
+    path = diagnostic.path
+    if diagnostic.rule != "missing-need" or len(path) != 4 or path[0] != "activities":
+        return False
+    named = composition.activities[path[1]].params.get(path[3])
+    return isinstance(named, str) and place(composition).elsewhere(named, host)

@@ -1,0 +1,326 @@
+"""One host's bridge: its network streams and coordination flags to and from the other hosts, over Zenoh.
+
+A composition with `hosts:` gives every host one bridge, on a thread of normal scheduling in a
+process of its own (docs/teleop.md): the real-time loops read and write the shared region as for
+any stream and never wait on the network. Each cycle the bridge sends the new samples of the
+streams it reads, takes what arrived for the streams it writes (newest first: a late or duplicate
+sample is dropped by its sequence number), stamps each with its send time on this host's clock
+(through the estimated clock offset), so a reader's `max_age` counts the network too, and pings
+the other hosts to estimate the offset, round trip, jitter and loss, which it publishes as ordinary
+streams and as the flags `link_up`, `link_lost` and `link_degraded`.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from hapticop import published
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Interface, Params, Port
+from hapticop.network import wire
+from hapticop.network.arrivals import Arrivals
+from hapticop.network.clock import OffsetEstimator
+from hapticop.network.link import EmulatedLink, LinkParams
+
+WINDOW = 64  # pings the clock estimate looks back over (3.2 s at the default 50 ms)
+STATUS_PERIOD_NS = 1_000_000_000  # how often `hapticop status` learns the link's figures
+
+LINK_OUTPUTS = {
+    "rtt": Port("float64", (), "s", "round trip to the other host (median of the last pings)"),
+    "jitter": Port("float64", (), "s", "smoothed change of the round trip between pings"),
+    "loss": Port("float64", (), "1", "fraction of the last pings not answered"),
+    "offset": Port("float64", (), "s", "the other host's clock minus this one's"),
+}
+
+
+class WireStream(BaseModel):
+    """A network stream as one bridge sees it (written by the host split, docs/teleop.md)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    stream: str
+    dtype: str
+    shape: tuple[int, ...] = ()
+    unit: str = "1"
+    priority: Literal["real_time", "interactive", "data", "background"] = "data"
+    keep: Literal["newest", "queue"] = "newest"
+    depth: int | None = Field(None, ge=1, le=65536)
+    reliability: Literal["best_effort", "reliable"] = "best_effort"
+    congestion: Literal["drop", "block"] = "drop"
+
+    def port(self) -> Port:
+        return Port(self.dtype, self.shape, self.unit, f"stream '{self.stream}' across the network")
+
+
+class BridgeParams(Params):
+    host: str = Field(description="the host this bridge serves")
+    system: str = Field("hapticop", description="the composition's name: the Zenoh keys' prefix")
+    peers: list[str] = Field(default_factory=list, description="the other hosts' names")
+    listen: list[str] = Field(description="this host's Zenoh endpoints")
+    connect: list[str] = Field(default_factory=list, description="the other hosts' endpoints")
+    send: list[WireStream] = Field(default_factory=list, description="streams written here, read elsewhere")
+    receive: list[WireStream] = Field(default_factory=list, description="streams written elsewhere, read here")
+    export_flags: list[str] = Field(default_factory=list, description="mediator places other hosts mirror")
+    import_flags: list[str] = Field(default_factory=list, description="other hosts' places mirrored here")
+    peer_end: bool = Field(False, description="raise 'peer_ended' when another host's run ends")
+    hold_when_lost: list[str] = Field(default_factory=list, description="imported places held while the link is lost")
+    ping_period_ms: float = Field(50.0, gt=0, description="pings (and this host's state) this often")
+    lost_after_ms: float = Field(250.0, gt=0, description="nothing heard for this long: 'link_lost'")
+    degraded_rtt_ms: float = Field(300.0, gt=0, description="a round trip above this: 'link_degraded'")
+    degraded_loss: float = Field(0.2, ge=0, le=1, description="a ping loss above this: 'link_degraded'")
+    emulate: LinkParams | None = Field(
+        None, description="impair what arrives (delay, jitter, loss) with a seeded emulated link, for tests and "
+        "experiments on a good network")
+
+
+class ZenohBridge(Block):
+    """Moves a host's network streams and coordination flags across Zenoh (docs/teleop.md)."""
+
+    Params = BridgeParams
+
+    @classmethod
+    def interface(cls, params: BridgeParams) -> Interface:
+        flags = {"link_up": "the other hosts answer", "link_lost": f"nothing heard for {params.lost_after_ms:g} ms",
+                 "link_degraded": "round trip or loss above the limits",
+                 "peer_ended": "another host's run ended"}
+        flags.update({f"in_{p.lower()}": f"place {p} of another host's mediator" for p in params.import_flags})
+        return Interface(
+            inputs={f"out_{w.stream}": w.port() for w in params.send},
+            outputs={**{f"in_{w.stream}": w.port() for w in params.receive}, **LINK_OUTPUTS},
+            flags_written=flags,
+            flags_read={f"out_{p.lower()}": f"place {p} of this host's mediator" for p in params.export_flags})
+
+    def create(self) -> None:
+        p = self.params
+        self.session_id = int.from_bytes(os.urandom(8), "little")
+        self.sequence = {w.stream: 0 for w in p.send}
+        self.arrivals = {w.stream: Arrivals() for w in p.receive}
+        self.peer_sessions = {w.stream: 0 for w in p.receive}
+        self.clocks = {peer: OffsetEstimator(WINDOW) for peer in p.peers}
+        self.pinged_at = {peer: np.zeros(WINDOW, dtype=np.int64) for peer in p.peers}
+        self.heard_ns = {peer: 0 for peer in p.peers}
+        self.next_ping_ns = 0
+        self.links = ({w.stream: EmulatedLink(p.emulate, wire.SAMPLE.size + w.port().nbytes, np.uint8)
+                       for w in p.receive} if p.emulate is not None else {})
+        self.rtts = np.zeros(1 << 16, dtype=np.int64)  # every answered ping's round trip, for the run's table
+        self.answered = 0
+        self.pinged = 0
+        self.offset_seen = (0.0, float("inf"))
+        self.was_lost = False
+        self.remote_holding: frozenset[str] = frozenset()  # the other host's exported places that hold a token
+        self.next_status_ns = 0
+        self.net = None
+
+    def configure_resources(self) -> bool:
+        from hapticop.network import transport  # Zenoh only where a bridge runs
+
+        p = self.params
+        self.net = transport.session(p.listen, p.connect)
+        self.senders = {w.stream: transport.Sender(self.net, wire.sample_key(p.system, w.stream), w.priority,
+                                                   w.reliability == "reliable", w.congestion == "block")
+                        for w in p.send}
+        self.receivers = {w.stream: transport.Receiver(self.net, wire.sample_key(p.system, w.stream),
+                                                       w.depth if w.keep == "queue" and w.depth else 1)
+                          for w in p.receive}
+        self.ping_out = transport.Sender(self.net, wire.ping_key(p.system, p.host), "real_time")
+        self.pong_out = {peer: transport.Sender(self.net, wire.pong_key(p.system, peer), "real_time")
+                         for peer in p.peers}
+        self.pings_in = {peer: transport.Receiver(self.net, wire.ping_key(p.system, peer), 8) for peer in p.peers}
+        self.pongs_in = transport.Receiver(self.net, wire.pong_key(p.system, p.host), 64)
+        self.state_out = transport.Sender(self.net, wire.state_key(p.system, p.host), "interactive", True)
+        self.states_in = {peer: transport.Receiver(self.net, wire.state_key(p.system, peer), 1) for peer in p.peers}
+        return True
+
+    def configure_capabilities(self) -> bool:
+        """Running once every other host has answered a ping: the link is up."""
+        self._service()
+        up = self.flags["link_up"]
+        self.context.waiting_for(None if up else f"the other hosts ({', '.join(self.params.peers)}) to answer")
+        return up
+
+    def compute(self) -> None:
+        self._service()
+
+    def pausing(self) -> None:
+        self._service()
+
+    def clean(self) -> None:
+        if self.net is not None:
+            self.state_out.put(self._state(ended=True))
+            self.net.close()
+            self.net = None
+        if self.answered:
+            write_link_table(self.run_dir, self)
+
+    # -- the cycle --------------------------------------------------------------------
+    def _service(self) -> None:
+        now = self.clock.now_ns()
+        self._send_samples()
+        self._answer_pings()
+        due = now >= self.next_ping_ns
+        if due:
+            self.next_ping_ns = now + int(self.params.ping_period_ms * 1e6)
+            self._ping(now)
+        self._take_pongs()
+        self._take_states(now)
+        self._take_samples(now)
+        self._judge_link(now, publish=due)
+
+    def _send_samples(self) -> None:
+        for w in self.params.send:
+            port = getattr(self.inputs, f"out_{w.stream}")
+            if port.queue:
+                while port.pop():
+                    self._send(w.stream, port)
+            elif port.fresh:
+                self._send(w.stream, port)
+
+    def _send(self, stream: str, port) -> None:
+        self.sequence[stream] += 1
+        header = wire.SAMPLE.pack(self.session_id, self.sequence[stream], port.stamp_ns)
+        self.senders[stream].put(header + port.value.tobytes())
+
+    def _ping(self, now: int) -> None:
+        """One ping to every other host; each answers with its name, so each has its own estimate."""
+        t1 = self.clock.now_ns()  # as it leaves, not the cycle's start
+        slot = 0
+        for peer, clock in self.clocks.items():  # they advance together: one slot for all
+            slot = clock.sent()
+            self.pinged_at[peer][slot] = t1
+        if self.clocks:
+            self.pinged += 1
+            self.ping_out.put(wire.PING.pack(self.session_id, slot, t1))
+        self.state_out.put(self._state(ended=False))
+
+    def _answer_pings(self) -> None:
+        for peer, receiver in self.pings_in.items():
+            while (data := receiver.take()) is not None:
+                # t2 when taken, not the cycle's start: a ping sent after the cycle began would otherwise
+                # look received before it was sent, and pass for the best (shortest) exchange
+                t2 = self.clock.now_ns()
+                if len(data) == wire.PING.size:
+                    _, slot, t1 = wire.PING.unpack(data)
+                    pong = wire.PONG.pack(slot, t1, t2, self.clock.now_ns()) + self.params.host.encode()
+                    self.pong_out[peer].put(pong)
+
+    def _take_pongs(self) -> None:
+        while (data := self.pongs_in.take()) is not None:
+            t4 = self.clock.now_ns()
+            slot, t1, t2, t3 = wire.PONG.unpack_from(data)
+            peer = data[wire.PONG.size:].decode(errors="replace")
+            clock = self.clocks.get(peer)
+            # the pong names its ping by slot and send time: an old pong of a reused slot is ignored
+            if clock is not None and 0 <= slot < WINDOW and self.pinged_at[peer][slot] == t1:
+                clock.answered(slot, t1, t2, t3, t4)
+                self.heard_ns[peer] = t4
+                self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
+                self.answered += 1
+                self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
+
+    def _take_states(self, now: int) -> None:
+        for peer, receiver in self.states_in.items():
+            data = receiver.take()
+            if data is None:
+                continue
+            _, ended = wire.STATE.unpack_from(data)
+            self.remote_holding = frozenset(data[wire.STATE.size:].decode().split(","))
+            if ended and self.params.peer_end:
+                self.flags["peer_ended"] = True
+            self.heard_ns[peer] = now
+
+    def _take_samples(self, now: int) -> None:
+        clock = next(iter(self.clocks.values()), None)
+        for w in self.params.receive:
+            receiver, link = self.receivers[w.stream], self.links.get(w.stream)
+            while (data := receiver.take()) is not None:
+                if link is None:
+                    self._deliver(w.stream, data, clock, now)
+                else:  # delayed from when it arrived, not from the cycle's start (the bridge may have stalled since)
+                    link.send(self.clock.now_ns() / 1e9, np.frombuffer(data, np.uint8))
+            while link is not None and (slot := link.receive(self.clock.now_ns() / 1e9)) >= 0:
+                self._deliver(w.stream, link.payload(slot).tobytes(), clock, now)
+
+    def _deliver(self, stream: str, data: bytes, clock: OffsetEstimator | None, now: int) -> None:
+        if clock is None or not clock.synced:  # its age cannot be told yet: a sample of unknown age is none
+            return
+        session, sequence, sent = wire.SAMPLE.unpack_from(data)
+        arrivals = self.arrivals[stream]
+        if session != self.peer_sessions[stream]:
+            self.peer_sessions[stream] = session
+            arrivals.restart()
+        if not arrivals.accept(sequence):
+            return
+        port = getattr(self.outputs, f"in_{stream}")
+        port.value[...] = np.frombuffer(data, port.value.dtype, offset=wire.SAMPLE.size).reshape(port.value.shape)
+        # the send time on this host's clock, never in the future: a reader's max_age counts the network
+        port.stamp_ns = min(now, clock.to_local(sent))
+        port.publish()
+
+    def _judge_link(self, now: int, publish: bool) -> None:
+        p = self.params
+        lost_ns = int(p.lost_after_ms * 1e6)
+        lost = any(now - heard > lost_ns for heard in self.heard_ns.values())
+        synced = all(clock.synced for clock in self.clocks.values())
+        rtt = max((c.rtt_ns for c in self.clocks.values()), default=0.0)
+        loss = max((c.loss for c in self.clocks.values()), default=0.0)
+        self.flags["link_up"] = synced and not lost
+        self.flags["link_lost"] = synced and lost
+        if synced and lost != self.was_lost:
+            self.was_lost = lost
+            if lost:
+                self.log.warning("link lost: nothing heard for %g ms", p.lost_after_ms)
+            else:
+                self.log.info("link up again")
+        self.flags["link_degraded"] = rtt > p.degraded_rtt_ms * 1e6 or loss > p.degraded_loss
+        for place in p.import_flags:  # the other host's places, or the safe side of them while it is out of reach
+            self.flags[f"in_{place.lower()}"] = place in self.remote_holding or (lost and place in p.hold_when_lost)
+        if publish and self.clocks and now >= self.next_status_ns:
+            self.next_status_ns = now + STATUS_PERIOD_NS
+            clock = next(iter(self.clocks.values()))
+            published.publish(self.run_dir, "network", self.name, {
+                "peers": p.peers, "up": self.flags["link_up"], "lost": self.flags["link_lost"],
+                "degraded": self.flags["link_degraded"], "rtt_ms": rtt / 1e6, "jitter_ms": clock.jitter_ns / 1e6,
+                "loss": loss, "offset_ms": clock.offset_ns / 1e6,
+                "offset_error_ms": clock.error_ns / 1e6 if clock.synced else None})
+        if publish and self.clocks:
+            clock = next(iter(self.clocks.values()))
+            for name, value in (("rtt", rtt / 1e9), ("jitter", clock.jitter_ns / 1e9), ("loss", loss),
+                                ("offset", clock.offset_ns / 1e9)):
+                port = getattr(self.outputs, name)
+                port.value[...] = value
+                port.publish()
+
+    def _state(self, ended: bool) -> bytes:
+        """This host's session, whether its run ended, and the exported places that hold a token."""
+        holding = ",".join(p for p in self.params.export_flags if self.flags[f"out_{p.lower()}"])
+        return wire.STATE.pack(self.session_id, ended) + holding.encode()
+
+
+def write_link_table(run_dir, bridge: ZenohBridge) -> None:
+    """The link's figures over the run, as a results table (printed at the end, kept in the run directory)."""
+    import json
+
+    rtts = bridge.rtts[: min(bridge.answered, len(bridge.rtts))] / 1e6
+    clock = next(iter(bridge.clocks.values()))
+
+    def row(metric: str, value, unit: str = "") -> dict:
+        return {"metric": metric, "value": value, "unit": unit, "target": "", "ok": None}
+
+    rows = [row("round trip p50", round(float(np.percentile(rtts, 50)), 3), "ms"),
+            row("round trip p99", round(float(np.percentile(rtts, 99)), 3), "ms"),
+            row("round trip max", round(float(rtts.max()), 3), "ms"),
+            row("jitter (smoothed)", round(clock.jitter_ns / 1e6, 3), "ms"),
+            row("pings unanswered", round(1 - bridge.answered / max(1, bridge.pinged), 4)),
+            row("clock offset (last estimate)", round(bridge.offset_seen[0] / 1e6, 3), "ms"),
+            row("offset error bound", round(bridge.offset_seen[1] / 1e6, 3), "ms")]
+    for stream, count in bridge.sequence.items():
+        rows.append(row(f"{stream}: sent", count))
+    for stream, arrivals in bridge.arrivals.items():
+        rows.append(row(f"{stream}: received", arrivals.delivered))
+        rows.append(row(f"{stream}: late or duplicate, dropped", arrivals.late))
+        rows.append(row(f"{stream}: superseded or lost", arrivals.skipped))
+    data = {"title": f"link of host '{bridge.params.host}' to {', '.join(bridge.params.peers)}", "rows": rows}
+    (run_dir / "results-link.json").write_text(json.dumps(data, indent=1))

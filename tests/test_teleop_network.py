@@ -1,0 +1,276 @@
+"""Two hosts over Zenoh: the clock offset estimator, the arrival order, the host split, and two
+runtimes joined by their bridges on loopback (setpoint age, the deadman, link loss and recovery)
+and, as root, between two network namespaces over a veth the test makes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hapticop.composition.placement import place
+from hapticop.network.arrivals import Arrivals
+from hapticop.network.clock import OffsetEstimator
+from hapticop.validation import validate_path
+
+ROOT = Path(__file__).resolve().parent.parent
+PATIENCE_S = 60.0  # a bound on hangs on a loaded machine, never a speed requirement
+
+
+# -- the libraries --------------------------------------------------------------------------
+def test_offset_estimator_finds_a_skewed_clock_within_its_bound():
+    """The remote clock runs 3.7 s ahead; each direction takes 0.2 ms plus a random queueing delay
+    of up to 5 ms, so single exchanges are off by up to 2.5 ms. The estimate is within its own
+    bound (half the shortest round trip), and that bound is near the true half round trip."""
+    rng = np.random.default_rng(7)
+    skew = 3_700_000_000
+    clock = OffsetEstimator(window=64)
+    local = 1_000_000_000
+    for _ in range(200):
+        slot = clock.sent()
+        t1 = local
+        t2 = t1 + 200_000 + int(rng.uniform(0, 5e6)) + skew
+        t3 = t2 + 50_000
+        t4 = t3 - skew + 200_000 + int(rng.uniform(0, 5e6))
+        clock.answered(slot, t1, t2, t3, t4)
+        local = t4 + 10_000_000
+    assert abs(clock.offset_ns - skew) <= clock.error_ns
+    assert clock.error_ns < 1_000_000
+    assert clock.to_local(t3) == pytest.approx(t3 - skew, abs=clock.error_ns)
+    assert clock.loss == 0.0
+
+
+def test_offset_estimator_counts_unanswered_pings_and_ignores_stale_pongs():
+    clock = OffsetEstimator(window=8)
+    assert not clock.synced and clock.offset_ns == 0.0
+    slots = [clock.sent() for _ in range(5)]
+    clock.answered(slots[0], 0, 10, 20, 30)  # rtt 20, offset 0
+    clock.answered(slots[0], 0, 10, 20, 30)  # a duplicate: counted once
+    clock.answered(slots[2], 100, 1_000_110, 1_000_120, 130)  # rtt 20, offset 1e6
+    assert clock.synced
+    # pings 1 and 3 unanswered, 4 (the newest) may still be in flight
+    assert clock.loss == pytest.approx(2 / 4)
+    clock.answered(slots[3], 100, 50, 80, 90)  # a pong claiming a negative round trip: refused
+    assert clock.loss == pytest.approx(2 / 4)
+
+
+def test_arrivals_keep_the_newest_drop_late_and_duplicates_and_count_gaps():
+    arrivals = Arrivals()
+    delivered = [s for s in (1, 2, 4, 3, 4, 7, 6, 8) if arrivals.accept(s)]
+    assert delivered == [1, 2, 4, 7, 8]  # 3 and 6 arrived after a newer one: late; the second 4 a duplicate
+    assert arrivals.late == 3
+    assert arrivals.skipped == 3  # 3, 5, 6 were never delivered
+    arrivals.restart()  # the sender restarted: its numbers begin again
+    assert arrivals.accept(1)
+
+
+# -- the host split ---------------------------------------------------------------------------
+def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
+    validated = validate_path(ROOT / "systems" / "teleop.yaml")
+    assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    assert set(validated.hosts) == {"operator", "robot"}
+    network = place(validated.graph.loaded.composition).network
+    assert network["velocity_setpoint"].writer_host == "operator"
+    assert network["scan_ranges"].writer_host == "robot"
+    assert "handle_position" not in network  # the handle loop stays on the operator's host
+    robot = validated.hosts["robot"].composition
+    operator = validated.hosts["operator"].composition
+    assert set(robot.threads) == {"robot_main", "simulation", "lidar", "fieldbus", "watchdog", "bridge"}
+    assert "haptic" not in robot.activities and "ropod" not in operator.activities
+    setpoint = robot.streams["velocity_setpoint"]
+    assert setpoint.writer == "bridge.in_velocity_setpoint"
+    assert setpoint.max_age == 100_000_000  # the deadline: an older setpoint is none, the wheels stop
+    assert "bridge.out_velocity_setpoint" in operator.streams["velocity_setpoint"].readers
+    assert robot.threads["bridge"].priority is None and robot.threads["bridge"].deploy == "process"
+    # the wheel fault the robot's watchdog raises reaches the operator's mediator through the bridges
+    assert operator.coordination.standard.sources["bridge.in_wheel_fault"] == "WHEEL_FAULT"
+    assert robot.coordination.standard.sinks["bridge.out_wheel_fault"] == "WHEEL_FAULT"
+    assert operator.coordination.standard.ends == {"bridge.peer_ended": "FINISHED"}
+    assert "bridge" in robot.coordination.standard.wait_for
+    # a lost link holds the operator's side as a wheel fault would, until the robot is heard again
+    bridge = validated.hosts["operator"].graph.loaded.activities["bridge"].params
+    assert bridge.hold_when_lost == ["WHEEL_FAULT"] and "WHEEL_FAULT" in bridge.import_flags
+
+
+def test_graph_draws_each_host_around_its_threads_and_the_network_streams():
+    from hapticop.cli.render import to_dot
+
+    dot = to_dot(validate_path(ROOT / "systems" / "teleop.yaml").graph)
+    assert '"cluster_host:operator"' in dot and '"cluster_host:robot"' in dot
+    at = {name: dot.index(f'subgraph "cluster_{name}"') for name in
+          ("host:operator", "thread:main", "host:robot", "thread:fieldbus")}  # each host's box holds its threads'
+    assert at["host:operator"] < at["thread:main"] < at["host:robot"] < at["thread:fieldbus"]
+    setpoint = [line for line in dot.splitlines() if 'label="velocity_setpoint (network' in line]
+    assert "network real_time, newest, 100ms, stale zero" in setpoint[0] and "purple" in setpoint[0]
+    assert not any("purple" in line for line in dot.splitlines() if '[label="handle_position' in line)
+
+
+def test_compose_refuses_the_virtual_clock_and_an_unknown_host():
+    for extra, said in ((["--clock", "virtual"], "runs in real time"), (["--host", "nobody"], "no host 'nobody'")):
+        done = subprocess.run([sys.executable, "-m", "hapticop.cli", "compose", "systems/teleop.yaml", *extra],
+                              cwd=ROOT, capture_output=True, text=True, timeout=PATIENCE_S)
+        assert done.returncode == 2 and said in done.stderr
+
+
+# -- two runtimes -----------------------------------------------------------------------------
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "two") -> Path:
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(textwrap.dedent(f"""\
+        version: 1
+        name: {name}{os.getpid()}
+        hosts:
+          a: {{endpoints: [{a}]}}
+          b:
+            endpoints: [{b}]
+            {emulate}
+        threads:
+          main_a: {{period: 1ms, deploy: main, host: a, schedules: {{0: [mediator, noise]}}}}
+          main_b: {{period: 1ms, deploy: main, host: b, schedules: {{0: [mediator, probe]}}}}
+        activities:
+          mediator: {{block: mediator}}
+          noise: {{block: "tests.blocks:Noise"}}
+          probe: {{block: "tests.blocks:AgeProbe"}}
+        streams:
+          sample:
+            from: noise.sample
+            to: [probe.sample]
+            network: {{priority: real_time, deadline: 100ms, stale: zero}}
+        """))
+    return path
+
+
+def start(path: Path, host: str, run_dir: Path, netns: str | None = None) -> subprocess.Popen:
+    command = [sys.executable, "-m", "hapticop.cli", "compose", str(path), "--host", host, "--run-dir", str(run_dir)]
+    if netns is not None:
+        command = ["ip", "netns", "exec", netns, *command]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    return subprocess.Popen(command, cwd=ROOT, env=env, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def wait_for(what: str, condition, processes=()) -> None:
+    deadline = time.monotonic() + PATIENCE_S
+    while not condition():
+        for process in processes:
+            assert process.poll() is None, f"a host ended while waiting for {what}:\n{process.stdout.read()}"
+        assert time.monotonic() < deadline, f"no {what} within {PATIENCE_S} s"
+        time.sleep(0.1)
+
+
+def stop(process: subprocess.Popen, sig: int = signal.SIGINT) -> str:
+    if process.poll() is None:
+        os.killpg(process.pid, sig)
+    try:
+        out, _ = process.communicate(timeout=PATIENCE_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        out, _ = process.communicate()
+    return out
+
+
+def status(system: str) -> str:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    return subprocess.run([sys.executable, "-m", "hapticop.cli", "status", system], cwd=ROOT, env=env,
+                          capture_output=True, text=True).stdout
+
+
+def log_says(path: Path, text: str) -> bool:
+    return path.exists() and text in path.read_text()
+
+
+def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path):
+    """b receives a's samples through an emulated 20 ms one-way delay; each arrives stamped with its
+    send time, so its age on arrival includes the network. Then a is killed: b's samples turn
+    invalid at their deadline, never later, b's bridge reports the link lost; a restarts, and
+    b's samples and link come back by themselves."""
+    delay_ms = 20
+    path = two_hosts(tmp_path, f"tcp/127.0.0.1:{_free_port()}", f"tcp/127.0.0.1:{_free_port()}",
+                     f"emulate: {{delay_s: {delay_ms / 1000}, seed: 3}}")
+    b = start(path, "b", tmp_path / "b")  # b first: starting either side first works
+    a = start(path, "a", tmp_path / "a1")
+    bridge_log = tmp_path / "b" / "bridge.log"
+    try:
+        wait_for("link up on b", lambda: log_says(bridge_log, "running"), [a, b])
+        wait_for("the link's figures in b's status",
+                 lambda: "link bridge to a: up, round trip" in status(f"two{os.getpid()}_b"), [a, b])
+        stop(a, signal.SIGKILL)  # the operator's side dies without a word
+        wait_for("link lost on b", lambda: log_says(bridge_log, "link lost"), [b])
+        a = start(path, "a", tmp_path / "a2")
+        wait_for("link up again on b", lambda: log_says(bridge_log, "link up again"), [a, b])
+        time.sleep(1.0)
+    finally:
+        stop(a)
+        out = stop(b)
+    data = np.load(tmp_path / "b" / "probe.npz")
+    arrived, cycles = data["arrived"], data["cycles"]
+    assert len(arrived), out
+    ages_ms = (arrived[:, 0] - arrived[:, 1]) / 1e6
+    # stamped with the send time (through the offset, whose error is well under a millisecond here)
+    assert ages_ms.min() >= delay_ms - 1.0
+    print(f"age on arrival: p50 {np.percentile(ages_ms, 50):.2f} ms, p99 {np.percentile(ages_ms, 99):.2f} ms "
+          f"for a {delay_ms} ms one-way delay")
+    # the deadman: a sample is valid only while younger than the deadline, and turns invalid once older
+    now, valid, stamp = cycles[:, 0], cycles[:, 1].astype(bool), cycles[:, 2]
+    seen = stamp > 0
+    assert not np.any(valid & (now - stamp > 100_000_000))
+    assert np.all(valid[seen & (now - stamp <= 100_000_000)])
+    gap = np.flatnonzero(seen[:-1] & valid[:-1] & ~valid[1:])
+    assert len(gap) >= 1, "the samples never went stale while a was dead"
+    after = arrived[:, 0] > now[gap[0]]
+    assert after.any(), "no sample arrived after a came back"
+
+
+ROOT_PROBLEM = None if os.geteuid() == 0 else "needs root to make network namespaces"
+if ROOT_PROBLEM is None and subprocess.run(["ip", "netns", "list"], capture_output=True).returncode != 0:
+    ROOT_PROBLEM = "the 'ip' command cannot list network namespaces"
+
+
+@pytest.mark.skipif(ROOT_PROBLEM is not None, reason=f"Zenoh over a veth: {ROOT_PROBLEM}")
+def test_two_hosts_in_two_network_namespaces_over_a_veth(tmp_path):
+    tag = f"{os.getpid() % 100000}"
+    ns_a, ns_b = f"hopa{tag}", f"hopb{tag}"
+    subnet = 10 + os.getpid() % 200
+
+    def ip(*args: str) -> None:
+        subprocess.run(["ip", *args], check=True, capture_output=True)
+
+    ip("netns", "add", ns_a)
+    ip("netns", "add", ns_b)
+    try:
+        ip("link", "add", f"va{tag}", "type", "veth", "peer", "name", f"vb{tag}")
+        ip("link", "set", f"va{tag}", "netns", ns_a)
+        ip("link", "set", f"vb{tag}", "netns", ns_b)
+        for ns, dev, addr in ((ns_a, f"va{tag}", 1), (ns_b, f"vb{tag}", 2)):
+            ip("-n", ns, "addr", "add", f"10.{subnet}.77.{addr}/24", "dev", dev)
+            ip("-n", ns, "link", "set", dev, "up")
+            ip("-n", ns, "link", "set", "lo", "up")
+        path = two_hosts(tmp_path, f"tcp/10.{subnet}.77.1:7447", f"tcp/10.{subnet}.77.2:7447", name="veth")
+        a = start(path, "a", tmp_path / "a", netns=ns_a)
+        b = start(path, "b", tmp_path / "b", netns=ns_b)
+        try:
+            wait_for("link up on b", lambda: log_says(tmp_path / "b" / "bridge.log", "running"), [a, b])
+            time.sleep(1.0)
+        finally:
+            stop(a)
+            out = stop(b)
+        arrived = np.load(tmp_path / "b" / "probe.npz")["arrived"]
+        assert len(arrived) > 0, out
+        ages_ms = (arrived[:, 0] - arrived[:, 1]) / 1e6
+        print(f"over the veth: {len(arrived)} samples, age p50 {np.percentile(ages_ms, 50):.2f} ms")
+    finally:
+        subprocess.run(["ip", "netns", "del", ns_a], capture_output=True)
+        subprocess.run(["ip", "netns", "del", ns_b], capture_output=True)
