@@ -214,16 +214,16 @@ def test_odometry_integrates_a_twist_held_between_samples():
     assert sideways[-1] == pytest.approx([-1.0, 0.0, np.pi / 2])  # the robot's left is -x when it faces +y
 
 
-def test_a_wall_clock_recording_replays_cycle_for_cycle(tmp_path):
+def test_a_wall_clock_recording_replays_cycle_for_cycle(tmp_path, figure):
     """On the wall clock the cycles and what each saw are inferred from the stamps (docs/recording.md,
     Replay): all but a sample or two published at the very instant of a read line up, overruns and
-    stale scans included. The figure is printed; the bound fails a replay that slips cycles."""
+    stale scans included. The figure is kept (`pytest -v`); the bound fails a replay that slips cycles."""
     text = (ROOT / "systems" / "hallway.yaml").read_text() + "\nrecord: {}\n"
     result = compose(tmp_path, text, clock="realtime", duration="4s", name="hallway")
     assert not any(s["dropped"] for s in result.recording["streams"].values())
     [haptic] = replay(tmp_path / "run-hallway" / "hallway.mcap")
     for c in haptic.compared:
-        print(f"{c.stream}: {c.samples} samples, {c.mismatches} differ, max |diff| {c.max_diff:g}")
+        figure(f"{c.stream}: {c.samples} samples, {c.mismatches} differ, max |diff| {c.max_diff:g}")
         assert c.samples > 1000 and c.missing == 0 and c.extra == 0
         assert c.mismatches <= c.samples // 200
 

@@ -101,9 +101,9 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
 
 
 def test_graph_draws_each_host_around_its_threads_and_the_network_streams():
-    from hapticop.cli.render import to_dot
+    from hapticop.cli.render import drawing, to_dot
 
-    dot = to_dot(validate_path(ROOT / "systems" / "teleop.yaml").graph)
+    dot = to_dot(drawing(validate_path(ROOT / "systems" / "teleop.yaml").graph))
     assert '"cluster_host:operator"' in dot and '"cluster_host:robot"' in dot
     at = {name: dot.index(f'subgraph "cluster_{name}"') for name in
           ("host:operator", "thread:main", "host:robot", "thread:fieldbus")}  # each host's box holds its threads'
@@ -192,7 +192,7 @@ def log_says(path: Path, text: str) -> bool:
     return path.exists() and text in path.read_text()
 
 
-def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path):
+def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     """b receives a's samples through an emulated 20 ms one-way delay; each arrives stamped with its
     send time, so its age on arrival includes the network. Then a is killed: b's samples turn
     invalid at their deadline, never later, b's bridge reports the link lost; a restarts, and
@@ -221,8 +221,8 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path):
     ages_ms = (arrived[:, 0] - arrived[:, 1]) / 1e6
     # stamped with the send time (through the offset, whose error is well under a millisecond here)
     assert ages_ms.min() >= delay_ms - 1.0
-    print(f"age on arrival: p50 {np.percentile(ages_ms, 50):.2f} ms, p99 {np.percentile(ages_ms, 99):.2f} ms "
-          f"for a {delay_ms} ms one-way delay")
+    figure(f"age on arrival: p50 {np.percentile(ages_ms, 50):.2f} ms, p99 {np.percentile(ages_ms, 99):.2f} ms "
+           f"for a {delay_ms} ms one-way delay")
     # the deadman: a sample is valid only while younger than the deadline, and turns invalid once older
     now, valid, stamp = cycles[:, 0], cycles[:, 1].astype(bool), cycles[:, 2]
     seen = stamp > 0
@@ -240,7 +240,7 @@ if ROOT_PROBLEM is None and subprocess.run(["ip", "netns", "list"], capture_outp
 
 
 @pytest.mark.skipif(ROOT_PROBLEM is not None, reason=f"Zenoh over a veth: {ROOT_PROBLEM}")
-def test_two_hosts_in_two_network_namespaces_over_a_veth(tmp_path):
+def test_two_hosts_in_two_network_namespaces_over_a_veth(tmp_path, figure):
     tag = f"{os.getpid() % 100000}"
     ns_a, ns_b = f"hopa{tag}", f"hopb{tag}"
     subnet = 10 + os.getpid() % 200
@@ -270,7 +270,7 @@ def test_two_hosts_in_two_network_namespaces_over_a_veth(tmp_path):
         arrived = np.load(tmp_path / "b" / "probe.npz")["arrived"]
         assert len(arrived) > 0, out
         ages_ms = (arrived[:, 0] - arrived[:, 1]) / 1e6
-        print(f"over the veth: {len(arrived)} samples, age p50 {np.percentile(ages_ms, 50):.2f} ms")
+        figure(f"over the veth: {len(arrived)} samples, age p50 {np.percentile(ages_ms, 50):.2f} ms")
     finally:
         subprocess.run(["ip", "netns", "del", ns_a], capture_output=True)
         subprocess.run(["ip", "netns", "del", ns_b], capture_output=True)
