@@ -25,6 +25,7 @@ from hapticop.composition.description import Composition, Record
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
+from hapticop.recording.live import LiveOptions
 from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of, make_runner, make_transports
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
@@ -58,6 +59,7 @@ class RunOptions:
     control: str | None = None  # control socket name or path (default: the composition's name)
     group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
     record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
+    view: LiveOptions | None = None  # serve the recorded streams (every stream if none is) live to Foxglove
 
 
 @dataclass
@@ -83,7 +85,8 @@ class System:
     def __init__(self, validated: Validated, options: RunOptions):
         source, loaded = validated.source, validated.graph.loaded
         tree = source.tree
-        if options.record is not None and loaded.composition.record is None:
+        self.records = options.record is not None or loaded.composition.record is not None  # to a file
+        if (options.record is not None or options.view is not None) and loaded.composition.record is None:
             tree, loaded = _recording_all(tree, loaded)
         composition = loaded.composition
         if options.duration_ns is None and composition.duration is not None:
@@ -136,8 +139,9 @@ class System:
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
         if self.layout.recorded:
-            path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"
-            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual)
+            path = None if not self.records else Path(options.record) if options.record else \
+                self.run_dir / f"{self.name}.mcap"
+            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual, self.run_dir, options.view)
             self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
                              RecorderProcess(plan, self.region.name))
         if not self.virtual:
@@ -182,6 +186,8 @@ class System:
         """The main thread's duty before each of its cycles: live changes, then supervision."""
         self.live.apply_due(self.clock.now_ns() - int(self.region.system[Region.STARTED_NS]))
         self.modes.apply_due()  # after the patches: a mode's values stay over a patched activity's
+        if self.virtual and self.recorder is not None:
+            self.recorder.between_cycles()
         self.supervisor.check(self.description)
 
     # -- what a live patch may touch (live.LiveTarget) -----------------------------------
@@ -216,6 +222,12 @@ class System:
                 self.log.error(failed)
                 self.recorder.stop()
                 self.recorder = None
+            elif self.recorder.view_error:
+                self.supervisor.reasons.append(self.recorder.view_error)
+                self.log.error(self.recorder.view_error)
+            elif self.recorder.address:
+                self.log.always("live view at %s (Foxglove: open a connection, Foxglove WebSocket)",
+                                self.recorder.address)
         previous = self.supervisor.install_signals()
         if not self.virtual:
             self.service.start(self.control_path)
