@@ -156,6 +156,12 @@ def compose(
         None, "--record", metavar="[FILE]",
         help="record the streams to an MCAP file (default: NAME.mcap in the run directory); every stream "
              "unless the file's 'record:' chooses"),
+    view: str | None = typer.Option(
+        None, "--view", metavar="[PORT]",
+        help="show the run live in Foxglove (a Foxglove WebSocket connection to this port, default 8765): the "
+             "recorded streams, or every stream, with the scan, frames, force arrow, logs and loop timing"),
+    view_host: str = typer.Option("127.0.0.1", help="where --view listens (default: this machine only)"),
+    view_rate: float = typer.Option(30.0, help="most messages a second --view sends per channel"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -163,13 +169,14 @@ def compose(
     from hapticop.runtime.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
+    live = None if view is None else _live_options(view, view_host, view_rate)
     validated = _valid_or_exit(file, "not started")
     # What the run writes (logs, results, recordings) is its owner's alone, or also their group's
     # to read; its child processes inherit the mask.
     os.umask(0o027 if group_readable else 0o077)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
-                         control=control, group_readable=group_readable, record=record)
+                         control=control, group_readable=group_readable, record=record, view=live)
     console = Console(stderr=True)
     if not console.is_terminal:
         console.width = 160  # a log or a pipe: no need to wrap the tables
@@ -191,6 +198,21 @@ def compose(
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
     raise typer.Exit(int(result.outcome.status))
+
+
+def _live_options(port: str, host: str, rate_hz: float):
+    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number)."""
+    from hapticop.recording.live import DEFAULT_PORT, LiveOptions, LiveViewUnavailable, require_sdk
+
+    try:
+        require_sdk()
+        return LiveOptions(host, int(port) if port else DEFAULT_PORT, rate_hz)
+    except LiveViewUnavailable as missing:
+        typer.echo(f"hapticop: {missing}", err=True)
+        raise typer.Exit(2) from None
+    except ValueError as error:
+        raise typer.BadParameter(str(error) if port.isdigit() or not port else f"not a port: {port!r}",
+                                 param_hint="--view") from None
 
 
 def _ask(system: str, message: dict) -> dict:
@@ -389,7 +411,7 @@ def main() -> None:
     from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
-        app(args=_bare_option(sys.argv[1:], "--record"))
+        app(args=_bare_option(_bare_option(sys.argv[1:], "--record"), "--view"))
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))

@@ -140,8 +140,12 @@ def print_recording(recording: dict, console: Console) -> None:
     streams = recording["streams"]
     recorded = sum(s["recorded"] for s in streams.values())
     dropped = {name: s["dropped"] for name, s in streams.items() if s["dropped"]}
-    console.print(f"recording: {recording['path']} ({recorded} samples of {len(streams)} streams, "
-                  f"{recording['clock']} clock)")
+    if recording.get("view"):
+        view = recording["view"]
+        console.print(f"live view: {view['address']}, {view['sent']} messages sent")
+    if recording["path"] is not None:
+        console.print(f"recording: {recording['path']} ({recorded} samples of {len(streams)} streams, "
+                      f"{recording['clock']} clock)")
     if dropped:
         lost = ", ".join(f"{name} {n}" for name, n in dropped.items())
         console.print(f"[red]recorder dropped {sum(dropped.values())} samples[/]: {lost}")
