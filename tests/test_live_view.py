@@ -15,8 +15,8 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from hapticop.recording.live import LiveOptions
+from hapticop.recording.mcapfile import LOG_TOPIC
 from hapticop.recording.scene import ARROW_TOPIC, FRAMES_TOPIC, SCAN_TOPIC
-from hapticop.runtime.log_channel import LOG_TOPIC
 from hapticop.runtime.system import RunOptions, run_system
 from hapticop.validation import validate_path
 

@@ -11,7 +11,7 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-from hapticop.runtime.log_channel import LOG_TOPIC
+from hapticop.recording.mcapfile import LOG_TOPIC
 from hapticop.runtime.logs import Level, format_line, parse_line
 from hapticop.runtime.timing_channels import WINDOW_NS
 

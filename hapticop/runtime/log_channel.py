@@ -12,10 +12,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from hapticop.recording import scene
+from hapticop.recording.mcapfile import LOG_TOPIC
 from hapticop.recording.outputs import Output
 from hapticop.runtime.logs import Level, parse_line
 
-LOG_TOPIC = "/log"
 RESCAN_NS = 1_000_000_000  # new owners' files are looked for once a second
 _FOXGLOVE_LEVEL = {Level.ALWAYS: "Info", Level.ERROR: "Error", Level.WARNING: "Warning", Level.INFO: "Info",
                    Level.DEBUG: "Debug"}  # foxglove.messages.LogLevel's names

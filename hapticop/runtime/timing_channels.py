@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from hapticop.composition.description import Composition
+from hapticop.recording.mcapfile import TIMING_TOPIC
 from hapticop.recording.outputs import Output
 from hapticop.runtime.region import Layout
 from hapticop.runtime.timing import BINS
 
 WINDOW_NS = 100_000_000  # ten points a second per loop
-TIMING_TOPIC = "/timing/{}"
 SECTIONS = ("cycles", "missed", "cpu_ns", "latency", "latency_max", "compute", "compute_max")
 _NUMBER = {"type": "number"}
 SCHEMA = {
