@@ -201,3 +201,49 @@ def test_without_the_sdk_view_says_so_in_one_line(tmp_path, monkeypatch):
     assert result.output.strip() == "hapticop: the live view needs foxglove-sdk: pip install 'hapticop[foxglove]'"
     assert _bare_option(["compose", "c.yaml", "--view"], "--view") == ["compose", "c.yaml", "--view", ""]
     assert _bare_option(["compose", "--view", "9000", "c.yaml"], "--view")[2] == "9000"
+
+
+def test_a_running_system_is_shown_from_outside_without_being_touched(tmp_path):
+    """`hapticop view`: the control socket says where the region is; a viewer of its own reads the
+    latest slots, timing and logs, and leaves every queue ring to its reader."""
+    from hapticop.runtime.control import request
+    from hapticop.runtime.viewer import Attachment, view
+
+    from .control_helpers import while_running
+    from .test_recording import counters
+
+    seen: dict = {}
+
+    def work(socket, system) -> None:
+        answer = request(str(socket), {"op": "attach"}, timeout=10)
+        assert answer["ok"] and answer["attach"]["region"] == system.region.name
+        addresses, stop, summary = [], threading.Event(), {}
+        viewer = threading.Thread(target=lambda: summary.update(view(
+            Attachment(**answer["attach"]), LiveOptions(port=0), lambda line: addresses.append(line.split()[4]),
+            stop.is_set)), daemon=True)
+        viewer.start()
+        deadline = time.monotonic() + PATIENCE_S
+        while not addresses and time.monotonic() < deadline:
+            time.sleep(0.02)
+
+        def enough(seen: dict) -> bool:
+            got = seen.get("messages", {})
+            return len(got.get("/streams/count", [])) >= 5 and "/timing/main" in got
+
+        client = threading.Thread(target=lambda: asyncio.run(asyncio.wait_for(
+            _watch(addresses[0], enough, seen), PATIENCE_S)), daemon=True)
+        client.start()
+        while "enough" not in seen and time.monotonic() < deadline:
+            time.sleep(0.02)
+        stop.set()
+        viewer.join(timeout=10)
+        client.join(timeout=10)
+        assert summary["streams"]["count"]["written"] > 0 and "slow" not in summary["streams"]
+
+    while_running(tmp_path, work, counters(record=""), ready="counter")
+    assert "enough" in seen
+    topics = set(_topics(seen))
+    assert {"/streams/count", "/timing/main", "/timing/slow", LOG_TOPIC} <= topics
+    assert "/streams/slow" not in topics  # a queue stream's rings have their own readers
+    shown = [int.from_bytes(data[-8:], "little") for _, data in seen["messages"]["/streams/count"]]
+    assert shown == sorted(set(shown)) and shown[0] > 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
 import threading
 from enum import Enum
@@ -198,6 +199,32 @@ def compose(
         console.print(f"[red]{reason}[/]")
     console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
     raise typer.Exit(int(result.outcome.status))
+
+
+@app.command("view")
+def view_running(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket's path)"),
+    port: int = typer.Option(8765, help="the port Foxglove connects to (Foxglove WebSocket)"),
+    host: str = typer.Option("127.0.0.1", help="where to listen (default: this machine only)"),
+    rate: float = typer.Option(30.0, help="most messages a second per channel"),
+) -> None:
+    """Show a running system live in Foxglove, from a process of its own: every stream's newest
+    sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
+    from hapticop.runtime.viewer import Attachment, view
+
+    options = _live_options(str(port), host, rate)
+    answer = _ask(system, {"op": "attach"})
+    if not answer.get("ok"):
+        typer.echo(f"hapticop: {system}: {answer.get('error')}", err=True)
+        raise typer.Exit(1)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        summary = view(Attachment(**answer["attach"]), options, lambda line: typer.echo(f"{line}; Ctrl+C stops",
+                                                                                        err=True), stop.is_set)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    typer.echo(f"{summary['view']['sent']} messages sent", err=True)
 
 
 def _live_options(port: str, host: str, rate_hz: float):

@@ -42,6 +42,7 @@ from hapticop.recording.scene import views_for
 from hapticop.runtime.log_channel import LogChannel
 from hapticop.runtime.region import Layout
 from hapticop.runtime.streams import SpscQueue, sample_dtype
+from hapticop.runtime.taps import LatestTap, tapped_streams
 from hapticop.runtime.timing_channels import LoopTiming, TimingPlan
 
 DRAIN_INTERVAL_NS = 50_000_000  # the recorder wakes 20 times a second (each pass costs ~30 µs a stream
@@ -93,6 +94,7 @@ class RecordedRing:
     offset: int
     nbytes: int
     capacity: int
+    kind: str = "ring"  # or "latest": the stream's own latest slot, tapped for the live view (`taps`)
 
     def port(self) -> Port:
         return Port(self.info.dtype, self.info.shape, self.info.unit)
@@ -112,6 +114,13 @@ class RecorderPlan:
     timing: TimingPlan | None = None  # the loops' timing counters, for `/timing/THREAD`
     run_dir: Path | None = None  # the run's log files, for `/log`
     name: str = "hapticop"
+
+    @property
+    def drain_ns(self) -> int:
+        """How often to drain: a tapped slot holds one sample, so as often as the view may send."""
+        if self.live is not None and any(ring.kind == "latest" for ring in self.rings):
+            return min(DRAIN_INTERVAL_NS, int(1e9 / self.live.rate_hz))
+        return DRAIN_INTERVAL_NS
 
 
 class Recorder:
@@ -192,7 +201,8 @@ class Recorder:
         return {"path": str(self.plan.path) if self.file is not None else None, "clock": self.plan.clock,
                 "messages": self.file.messages if self.file is not None else 0,
                 "view": {"address": self.address, "sent": self.live.sent} if self.live is not None else None,
-                "view_error": self.view_error, "cpu_s": time.process_time() - self.cpu_started, "streams": {
+                "view_error": self.view_error, "cpu_s": time.process_time() - self.cpu_started,
+                "elapsed_s": (self.clock() - self.started_ns) / 1e9, "streams": {
             name: {"written": int(ring.written), "recorded": self.recorded[name], "dropped": int(ring.dropped)}
             for name, ring in self.rings.items()}}
 
@@ -222,7 +232,8 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
             run_dir: Path | None = None, live: LiveOptions | None = None) -> RecorderPlan:
     """What a run records (the layout placed the rings), with the composition as it runs (`extends`
     resolved, `--record` applied) and every activity's resolved parameters attached; the loops'
-    timing and the log files of `run_dir` beside the streams; served live too with `live`."""
+    timing and the log files of `run_dir` beside the streams; served live too with `live`. With no
+    file (`path` None) nothing is recorded: every stream's latest slot is tapped for the view."""
     import json
     import platform
 
@@ -230,7 +241,8 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
 
     composition = loaded.composition
     plan = recorded_streams(composition)
-    rings = []
+    rings = [] if path is not None else [RecordedRing(info, offset, nbytes, 1, "latest")  # shown, not recorded
+                                         for info, offset, nbytes in tapped_streams(loaded, layout)]
     for name, transport in layout.recorded.items():
         spec = composition.streams[name]
         activity, port_name = spec.writer.split(".")
@@ -261,7 +273,8 @@ def _library() -> str:
         return "hapticop"
 
 
-def _sources(plan: RecorderPlan, buffer) -> list[Source]:
+def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
+    """The loops' timing and the run's log, as the plan asks."""
     sources: list[Source] = []
     if plan.timing is not None:
         sources.append(LoopTiming(plan.timing, buffer))
@@ -270,9 +283,13 @@ def _sources(plan: RecorderPlan, buffer) -> list[Source]:
     return sources
 
 
-def _rings(plan: RecorderPlan, buffer) -> dict[str, SpscQueue]:
-    return {ring.info.name: SpscQueue(np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset),
-                                      ring.port(), ring.capacity, "drop_oldest") for ring in plan.rings}
+def rings_of(plan: RecorderPlan, buffer) -> dict[str, SpscQueue | LatestTap]:
+    rings: dict[str, SpscQueue | LatestTap] = {}
+    for ring in plan.rings:
+        view = np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset)
+        rings[ring.info.name] = (LatestTap(view, ring.port()) if ring.kind == "latest" else
+                                 SpscQueue(view, ring.port(), ring.capacity, "drop_oldest"))
+    return rings
 
 
 # -- on the wall clock: a process of its own ---------------------------------------------------
@@ -298,10 +315,10 @@ def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> 
     except OSError:
         pass  # without the right (CAP_SYS_NICE), at the ordinary weight
     memory = shared_memory.SharedMemory(name=region_name, create=False)
-    rings = _rings(plan, memory.buf)
+    rings = rings_of(plan, memory.buf)
     recorder = sources = None
     try:
-        sources = _sources(plan, memory.buf)
+        sources = sources_of(plan, memory.buf)
         try:
             recorder = Recorder(plan, rings, time.monotonic_ns, sources)
         except LiveViewUnavailable as error:
@@ -310,7 +327,7 @@ def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> 
         messages.send(("started", (recorder.address, recorder.view_error)))
         while not orphaned.is_set():
             recorder.drain()
-            if messages.poll(DRAIN_INTERVAL_NS / 1e9):
+            if messages.poll(plan.drain_ns / 1e9):
                 break  # the parent's stop: its loops are done, the rings hold their last samples
         summary = recorder.finish()
         if not orphaned.is_set():
@@ -387,10 +404,11 @@ class InlineRecorder:
     `DRAIN_INTERVAL_NS` of simulated time has passed: deterministic, so tests count exactly."""
 
     def __init__(self, plan: RecorderPlan, buffer, clock: Callable[[], int]):
-        self.rings = _rings(plan, buffer)
-        self.recorder = Recorder(plan, self.rings, clock, _sources(plan, buffer))
+        self.rings = rings_of(plan, buffer)
+        self.recorder = Recorder(plan, self.rings, clock, sources_of(plan, buffer))
         self.clock = clock
-        self.next_ns = clock() + DRAIN_INTERVAL_NS
+        self.drain_ns = plan.drain_ns
+        self.next_ns = clock() + self.drain_ns
         self.address, self.view_error = self.recorder.address, self.recorder.view_error
 
     @staticmethod
@@ -401,7 +419,7 @@ class InlineRecorder:
         now = self.clock()
         if now >= self.next_ns:
             self.recorder.drain()
-            self.next_ns = now + DRAIN_INTERVAL_NS
+            self.next_ns = now + self.drain_ns
 
     def stop(self) -> tuple[dict | None, str | None]:
         try:

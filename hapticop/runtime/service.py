@@ -40,8 +40,10 @@ class ControlService:
     and handed to the main thread through `live.pending`."""
 
     def __init__(self, name: str, live: LiveChanges, region: Region, clock: RealtimeClock | VirtualClock,
-                 coordinator: Coordinator, composition: Callable[[], Composition], log: Logger):
+                 coordinator: Coordinator, composition: Callable[[], Composition], log: Logger,
+                 attach: Callable[[], dict] | None = None):
         self.name, self.live, self.region, self.clock = name, live, region, clock
+        self.attach = attach  # what `hapticop view` needs to read the region from outside (viewer.Attachment)
         self.coordinator, self.composition, self.log = coordinator, composition, log  # composition(): the running one
         self.server: ControlServer | None = None
 
@@ -62,8 +64,10 @@ class ControlService:
         op = request.get("op")
         if op == "status":
             return {"ok": True, "status": self.status()}
+        if op == "attach" and self.attach is not None:
+            return {"ok": True, "attach": self.attach()}
         if op != "patch":
-            return {"ok": False, "error": f"unknown request {op!r}; expected 'status' or 'patch'"}
+            return {"ok": False, "error": f"unknown request {op!r}; expected 'status', 'attach' or 'patch'"}
         if wrong := _wrong_field(request):
             return {"ok": False, "error": f"malformed request: {wrong}"}
         file = request.get("file", "<patch>")

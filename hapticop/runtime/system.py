@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
+import json
+import os
 import signal
 import sys
 import threading
@@ -59,7 +61,7 @@ class RunOptions:
     control: str | None = None  # control socket name or path (default: the composition's name)
     group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
     record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
-    view: LiveOptions | None = None  # serve the recorded streams (every stream if none is) live to Foxglove
+    view: LiveOptions | None = None  # serve live to Foxglove the recorded streams (the latest slots if none is)
 
 
 @dataclass
@@ -86,7 +88,7 @@ class System:
         source, loaded = validated.source, validated.graph.loaded
         tree = source.tree
         self.records = options.record is not None or loaded.composition.record is not None  # to a file
-        if (options.record is not None or options.view is not None) and loaded.composition.record is None:
+        if options.record is not None and loaded.composition.record is None:
             tree, loaded = _recording_all(tree, loaded)
         composition = loaded.composition
         if options.duration_ns is None and composition.duration is not None:
@@ -135,10 +137,16 @@ class System:
                                      finish=self._finish)
         self.live = LiveChanges(self, Path(self.file).name, self.supervisor.reasons)
         self.modes = Modes(self, self.flag_index, self.region.flags)
+        flags = list(validated.flags)
+
+        def attach() -> dict:  # what `hapticop view` needs: the region as the children lay it out from the tree
+            return {"region": self.region.name, "flags": flags, "tree": json.loads(json.dumps(tree, default=str)),
+                    "run_dir": str(self.run_dir), "pid": os.getpid(), "name": self.name}
+
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
-                                      lambda: self.description.composition, self.log)
+                                      lambda: self.description.composition, self.log, attach)
         self.main.supervisor = self._between_cycles
-        if self.layout.recorded:
+        if self.layout.recorded or options.view is not None:
             path = None if not self.records else Path(options.record) if options.record else \
                 self.run_dir / f"{self.name}.mcap"
             plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual, self.run_dir, options.view)
