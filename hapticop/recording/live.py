@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hapticop.recording import arrays
-from hapticop.recording.mcapfile import StreamInfo, topic_of
+from hapticop.recording.mcapfile import LOG_TOPIC, StreamInfo, topic_of
 
 DEFAULT_PORT = 8765
 DEFAULT_HOST = "127.0.0.1"  # this machine only: the protocol has no authentication
@@ -57,6 +57,7 @@ class _Live:
 
     channel: object  # foxglove.Channel
     prefix: bytes = b""  # a stream channel's protobuf prefix (`arrays`)
+    thinned: bool = True  # log records are events, each its own: never thinned
     next_ns: int = 0  # a view's channel: the next message's earliest stamp
     period: int = -1  # a stream's channel: the last display period a sample was sent in
 
@@ -93,7 +94,7 @@ class LiveServer:
         schema = self._schemas[schema_id - 1] if schema_id else None
         channel = foxglove.Channel(topic, schema=schema, message_encoding=message_encoding, context=self.context,
                                    metadata=dict(metadata))
-        self._channels.append(_Live(channel))
+        self._channels.append(_Live(channel, thinned=topic != LOG_TOPIC))
         return len(self._channels)
 
     def stream_channel(self, info: StreamInfo) -> int:
@@ -104,7 +105,7 @@ class LiveServer:
 
     def write(self, channel: int, log_time_ns: int, data: bytes, publish_time_ns: int, sequence: int) -> None:
         live = self._channels[channel - 1]
-        if publish_time_ns < live.next_ns or not live.channel.has_sinks():
+        if (live.thinned and publish_time_ns < live.next_ns) or not live.channel.has_sinks():
             return
         live.next_ns = publish_time_ns + self.period_ns
         live.channel.log(data, log_time=int(publish_time_ns))
