@@ -37,7 +37,7 @@ def hallway_layout() -> str:
         topics={SCAN_TOPIC: fl.BaseRendererLaserScanTopicSettings(visible=True, point_size=4, color_mode="flat",
                                                                   flat_color="#2ca02c"),
                 ARROW_TOPIC: fl.BaseRendererSceneUpdateTopicSettings(visible=True)}))
-    timing = fl.PlotPanel(title="Wake-up latency, worst per 100 ms (us)", config=fl.PlotConfig(
+    timing = fl.PlotPanel(title="Wake-up latency, worst per timing window (us)", config=fl.PlotConfig(
         paths=[fl.PlotSeries(value=f"{TIMING_TOPIC.format(loop)}.latency_max_us", label=loop, enabled=True,
                              timestamp_method="publishTime") for loop in LOOPS],
         show_legend=True, legend_display="floating", x_axis_val="timestamp", following_view_width=30))

@@ -97,10 +97,12 @@ class LiveServer:
         self._channels.append(_Live(channel, thinned=topic != LOG_TOPIC))
         return len(self._channels)
 
-    def stream_channel(self, info: StreamInfo) -> int:
+    def stream_channel(self, info: StreamInfo, thinned: bool = True) -> int:
+        """A stream's channel; `thinned=False` for samples already taken at the display rate (`runtime.taps`)."""
         schema = self.schema(arrays.schema_name(info.dtype), arrays.SCHEMA_ENCODING, arrays.schema_data(info.dtype))
         id_ = self.channel(topic_of(info.name), arrays.MESSAGE_ENCODING, schema, info.metadata())
         self._channels[id_ - 1].prefix = arrays.prefix(info.nbytes)
+        self._channels[id_ - 1].thinned = thinned
         return id_
 
     def write(self, channel: int, log_time_ns: int, data: bytes, publish_time_ns: int, sequence: int) -> None:
@@ -115,6 +117,11 @@ class LiveServer:
         """The first sample of each display period, with the loop's stamp as its time."""
         live = self._channels[channel - 1]
         if not len(samples) or not live.channel.has_sinks():
+            return
+        if not live.thinned:
+            for k in range(len(samples)):
+                live.channel.log(live.prefix + samples["payload"][k].tobytes(), log_time=int(samples["stamp_ns"][k]))
+            self.sent += len(samples)
             return
         periods = samples["stamp_ns"].astype(np.int64) // self.period_ns
         chosen = np.flatnonzero(np.diff(periods, prepend=live.period) > 0)

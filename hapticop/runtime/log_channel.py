@@ -17,6 +17,7 @@ from hapticop.recording.outputs import Output
 from hapticop.runtime.logs import Level, parse_line
 
 RESCAN_NS = 1_000_000_000  # new owners' files are looked for once a second
+READ_NS = 200_000_000  # the files are read five times a second
 _FOXGLOVE_LEVEL = {Level.ALWAYS: "Info", Level.ERROR: "Error", Level.WARNING: "Warning", Level.INFO: "Info",
                    Level.DEBUG: "Debug"}  # foxglove.messages.LogLevel's names
 
@@ -31,6 +32,7 @@ class LogChannel:
         self.out: Output | None = None
         self.sequence = 0
         self.now_ns = 0
+        self.read_ns = 0
         self.last_ns, self.last_level = 0, Level.INFO  # a continuation line's, taken from the line before it
 
     def start(self, out: Output) -> None:
@@ -45,9 +47,9 @@ class LogChannel:
                                    {"from": str(self.run_dir / "*.log")})
 
     def poll(self, now_ns: int) -> None:
-        if self.out is None:
+        if self.out is None or now_ns < self.read_ns:
             return
-        self.now_ns = now_ns
+        self.now_ns, self.read_ns = now_ns, now_ns + READ_NS
         if now_ns >= self.rescan_ns:
             self.rescan_ns = now_ns + RESCAN_NS
             for path in sorted(self.run_dir.glob("*.log")):
@@ -73,7 +75,7 @@ class LogChannel:
         self.out.write(self.channel, now_ns, message.encode(), stamp, self.sequence)
 
     def finish(self, now_ns: int) -> None:
-        self.rescan_ns = 0
+        self.rescan_ns = self.read_ns = 0
         self.poll(now_ns)  # the lines written since the last pass
         for handle, _ in self.files.values():
             handle.close()

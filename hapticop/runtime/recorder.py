@@ -148,7 +148,7 @@ class Recorder:
             for name, values_ in plan.metadata.items():
                 self.file.metadata(name, values_)
         self.streams = {ring.info.name: ring.info for ring in plan.rings}
-        self.channels = {name: self.out.stream_channel(info) for name, info in self.streams.items()}
+        self.channels = {ring.info.name: self._stream_channel(ring) for ring in plan.rings}
         self.batches = {ring.info.name: np.zeros(min(BATCH, ring.capacity), sample_dtype(ring.port()))
                         for ring in plan.rings}
         self.recorded = dict.fromkeys(self.streams, 0)
@@ -161,6 +161,11 @@ class Recorder:
         if self.file is not None:
             self.file.flush()  # schemas, channels, attachments: on disk before any sample
         self.flushed_ns = now
+
+    def _stream_channel(self, ring: RecordedRing) -> int:
+        if ring.kind == "latest":  # a tapped slot, read at the display rate already, and never recorded
+            return self.live.stream_channel(ring.info, thinned=False)
+        return self.out.stream_channel(ring.info)
 
     @property
     def address(self) -> str | None:

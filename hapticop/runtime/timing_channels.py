@@ -22,7 +22,7 @@ from hapticop.recording.outputs import Output
 from hapticop.runtime.region import Layout
 from hapticop.runtime.timing import BINS
 
-WINDOW_NS = 100_000_000  # ten points a second per loop
+WINDOW_NS = 250_000_000  # four points a second per loop: a window costs a pass over each histogram's used bins
 SECTIONS = ("cycles", "missed", "cpu_ns", "latency", "latency_max", "compute", "compute_max")
 _NUMBER = {"type": "number"}
 SCHEMA = {
@@ -61,16 +61,20 @@ class _Window:
 
     def __init__(self) -> None:
         self.seen = np.zeros(BINS, np.int64)
+        self.now = np.zeros(BINS, np.int64)
+        self.added = np.zeros(BINS, np.int64)
 
     def change(self, row: np.ndarray, maximum_ns: int) -> np.ndarray:
-        """The counts added since the last call (a counter cleared meanwhile starts again from zero)."""
+        """The counts added since the last call (a counter cleared meanwhile starts again from zero);
+        valid until the next call."""
         top = min(BINS, int(maximum_ns) // 1000 + 1)
-        now = row[:top].copy()  # the loop goes on counting while we read
-        added = now - self.seen[:top]
-        if (added < 0).any():  # cleared when the system started operating
+        now, seen, added = self.now[:top], self.seen[:top], self.added[:top]
+        np.copyto(now, row[:top])  # the loop goes on counting while we read
+        np.subtract(now, seen, out=added)
+        if added.min(initial=0) < 0:  # cleared when the system started operating
             self.seen[:] = 0
-            added = now
-        self.seen[:top] = now
+            np.copyto(added, now)
+        np.copyto(seen, now)
         return added
 
 
