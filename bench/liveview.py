@@ -90,25 +90,25 @@ async def _watch(port: int, counts: dict, stop: threading.Event, only: set[str] 
                         await socket_.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
                 else:
                     topic = topics[int.from_bytes(frame[1:5], "little")]
-                    stamp = int.from_bytes(frame[5:13], "little")
-                    count, first, _ = counts.get(topic, (0, stamp, stamp))
-                    counts[topic] = (count + 1, first, stamp)
+                    arrived = time.monotonic_ns()
+                    count, first, _ = counts.get(topic, (0, arrived, arrived))
+                    counts[topic] = (count + 1, first, arrived)
         except Exception:  # noqa: BLE001 - the run ended: the server closed the connection
             pass
 
 
-def run(duration: str, viewed: bool, recorded: bool = False, layout: bool = False) -> dict:
+def run(duration: str, viewed: bool, recorded: bool = False, layout: bool = False, rate: float | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="hapticop-bench-view-") as scratch:
         run_dir = Path(scratch) / "run"
         command = [sys.executable, "-m", "hapticop.cli", "compose", str(COMPOSITION), "--duration", duration,
                    "--run-dir", str(run_dir)]
         if recorded:
             command += ["--record", str(Path(scratch) / "bench.mcap")]
-        counts: dict[str, tuple[int, int, int]] = {}  # topic -> messages, first and last stamp
+        counts: dict[str, tuple[int, int, int]] = {}  # topic -> messages, first and last arrival (ns)
         stop = threading.Event()
         if viewed:
             port = _free_port()
-            command += ["--view", str(port)]
+            command += ["--view", str(port)] + (["--view-rate", f"{rate:g}"] if rate else [])
             only = layout_topics() if layout else None
             client = threading.Thread(target=lambda: asyncio.run(_watch(port, counts, stop, only)), daemon=True)
             client.start()
@@ -116,7 +116,7 @@ def run(duration: str, viewed: bool, recorded: bool = False, layout: bool = Fals
         _, errors = process.communicate()
         stop.set()
         timing = json.loads((run_dir / "timing.json").read_text())
-        row = {"viewed": viewed, "recorded": recorded, "subscribed": "layout" if layout else "all",
+        row = {"viewed": viewed, "recorded": recorded, "subscribed": "layout" if layout else "all", "rate_hz": rate,
                "duration": duration, "exit": process.returncode,
                "loops_cpu_percent": timing["cpu"]["loops_percent"], "threads": {}}
         for name in FAST_THREADS:
@@ -131,8 +131,7 @@ def run(duration: str, viewed: bool, recorded: bool = False, layout: bool = Fals
             row.update({"view_cpu_percent": float(found.group(2)) if found else None,
                         "sent": int(found.group(1)) if found else None,
                         "received": sum(n for n, _, _ in counts.values()), "channels_received": len(counts),
-                        "most_per_channel_hz": max((n - 1) / (last - first) * 1e9 for topic, (n, first, last)
-                                                   in counts.items() if last > first and topic != "/log")})
+                        "most_per_channel_hz": _busiest_hz(counts)})
         if recorded:
             from hapticop.recording.reading import contents
 
@@ -141,6 +140,13 @@ def run(duration: str, viewed: bool, recorded: bool = False, layout: bool = Fals
         if process.returncode != 0 or (viewed and not found):
             row["stderr"] = errors[-2000:]
         return row
+
+
+def _busiest_hz(counts: dict[str, tuple[int, int, int]]) -> float:
+    """The most messages a second one channel (the log aside) sent, over the time the client received."""
+    start = min(first for _, first, _ in counts.values())
+    end = max(last for _, _, last in counts.values())
+    return max(n for topic, (n, _, _) in counts.items() if topic != "/log") / ((end - start) / 1e9)
 
 
 def _spread(values: list[float]) -> str:
@@ -153,21 +159,22 @@ def _spread(values: list[float]) -> str:
 
 
 def summary(rows: list[dict]) -> str:
-    tables = []
-    for recorded in (False, True):
-        for subscribed in ("all", "layout"):
-            kept = [r for r in rows
-                    if r.get("recorded", False) is recorded and r.get("subscribed", "all") == subscribed]
-            if any(r["viewed"] for r in kept):
-                tables.append(_table(kept, recorded, subscribed))
-    return "\n\n".join(tables)
+    """A table per session kind: with or without a recording, what the client subscribed to, the view's rate."""
+    def kind(row: dict) -> tuple:
+        return row.get("recorded", False), row.get("subscribed", "all"), row.get("rate_hz")
+
+    kinds = list(dict.fromkeys(kind(r) for r in rows))
+    return "\n\n".join(_table([r for r in rows if kind(r) == k], *k) for k in kinds
+                       if any(r["viewed"] for r in rows if kind(r) == k))
 
 
-def _table(rows: list[dict], recorded: bool, subscribed: str) -> str:
+def _table(rows: list[dict], recorded: bool, subscribed: str, rate_hz: float | None) -> str:
     off, on = ([r for r in rows if r["viewed"] is flag] for flag in (False, True))
-    also = " --record" if recorded else ""
+    also = (" --record" if recorded else "") + (f" --view-rate {rate_hz:g}" if rate_hz else "")
     whom = "every channel" if subscribed == "all" else "the hallway layout's channels"
-    lines = [f"| | without --view{also} | with --view{also}, a client subscribed to {whom} |", "| --- | --- | --- |",
+    recording = " --record" if recorded else ""
+    lines = [f"| | without --view{recording} | with --view{also}, a client subscribed to {whom} |",
+             "| --- | --- | --- |",
              f"| runs | {len(off)} | {len(on)} |"]
     for name in FAST_THREADS:
         for key, label in (("p99_us", "wake-up p99 µs"), ("max_us", "wake-up max µs"), ("missed", "missed deadlines")):
@@ -190,6 +197,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=0, help="pairs of runs, without and with the live view")
     parser.add_argument("--duration", default="30s")
     parser.add_argument("--record", action="store_true", help="both conditions also record to a file")
+    parser.add_argument("--rate", type=float, default=None, help="the view's --view-rate (default: its own)")
     parser.add_argument("--layout", action="store_true",
                         help="the client subscribes to the shipped layout's channels only, as Foxglove with it open")
     parser.add_argument("--summary", action="store_true")
@@ -197,7 +205,7 @@ def main() -> None:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     for index in range(args.runs):  # alternate which goes first, so drifting load hits both alike
         for viewed in ((False, True) if index % 2 == 0 else (True, False)):
-            row = run(args.duration, viewed, args.record, args.layout)
+            row = run(args.duration, viewed, args.record, args.layout, args.rate)
             row["at"] = time.strftime("%Y-%m-%dT%H:%M:%S")
             with open(RESULTS, "a") as out:
                 out.write(json.dumps(row) + "\n")

@@ -57,7 +57,7 @@ class _Live:
 
     channel: object  # foxglove.Channel
     prefix: bytes = b""  # a stream channel's protobuf prefix (`arrays`)
-    thinned: bool = True  # log records are events, each its own: never thinned
+    thinned: bool = True  # not the log (events, each its own) nor a tapped slot (read at the display rate already)
     next_ns: int = 0  # a view's channel: the next message's earliest stamp
     period: int = -1  # a stream's channel: the last display period a sample was sent in
 
