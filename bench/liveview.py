@@ -169,13 +169,17 @@ def summary(rows: list[dict]) -> str:
 
 
 def _table(rows: list[dict], recorded: bool, subscribed: str, rate_hz: float | None) -> str:
-    off, on = ([r for r in rows if r["viewed"] is flag] for flag in (False, True))
+    failed = [r for r in rows if r["exit"] != 0]  # a run that did not finish well measures nothing
+    off, on = ([r for r in rows if r["viewed"] is flag and r["exit"] == 0] for flag in (False, True))
     also = (" --record" if recorded else "") + (f" --view-rate {rate_hz:g}" if rate_hz else "")
     whom = "every channel" if subscribed == "all" else "the hallway layout's channels"
     recording = " --record" if recorded else ""
     lines = [f"| | without --view{recording} | with --view{also}, a client subscribed to {whom} |",
              "| --- | --- | --- |",
              f"| runs | {len(off)} | {len(on)} |"]
+    if failed:
+        lines.append(f"| runs left out (exit status not 0) | {sum(not r['viewed'] for r in failed)} | "
+                     f"{sum(r['viewed'] for r in failed)} |")
     for name in FAST_THREADS:
         for key, label in (("p99_us", "wake-up p99 µs"), ("max_us", "wake-up max µs"), ("missed", "missed deadlines")):
             lines.append(f"| {name} {label} | {_spread([r['threads'][name][key] for r in off])} | "
