@@ -126,7 +126,8 @@ def test_chosen_streams_only_and_decimated(tmp_path):
     result = compose(tmp_path, counters("record: {streams: [count], decimate: {count: 10}}"), duration="1s")
     path = tmp_path / "run-c" / "c.mcap"
     found = contents(path)
-    assert [c.topic for c in found.channels] == ["/streams/count"]
+    assert [c.topic for c in found.channels if c.stream] == ["/streams/count"]
+    assert {c.topic for c in found.channels if not c.stream} == {"/timing/main", "/timing/slow", "/log"}  # the loops'
     assert found.channels[0].stream.every == 10
     sequence = [m[0] for m in _messages(path, "/streams/count")]
     written = result.recording["streams"]["count"]["written"]
@@ -243,7 +244,9 @@ def test_recovering_a_finished_file_loses_nothing(tmp_path):
     result = compose(tmp_path, counters(), duration="1s")
     n, slow = (result.recording["streams"][s]["written"] for s in ("count", "slow"))
     found = recover(tmp_path / "run-c" / "c.mcap", tmp_path / "copy.mcap")
-    assert found.complete and found.messages == {"/streams/count": n, "/streams/slow": slow}
+    original = {c.topic: c.count for c in contents(tmp_path / "run-c" / "c.mcap").channels}
+    assert original["/streams/count"] == n and original["/streams/slow"] == slow
+    assert found.complete and found.messages == original  # the streams', the loops' timing and the log's
     assert contents(tmp_path / "copy.mcap").drops() == {"count": 0, "slow": 0}
 
 

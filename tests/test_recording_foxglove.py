@@ -131,5 +131,8 @@ def test_the_shipped_layout_is_the_built_one_and_names_channels_the_recording_ha
     (scene,) = [p["config"] for p in panels if p["panelType"] == "ThreeDee"]
     assert scene["followTf"] == "base_link" and {SCAN_TOPIC, ARROW_TOPIC} <= set(scene["topics"]) <= topics
     plotted = {path["value"].split(".")[0] for p in panels if p["panelType"] == "Plot" for path in p["config"]["paths"]}
-    assert plotted == {"/streams/handle_position", "/streams/environment_force", "/streams/velocity_setpoint"}
+    assert plotted == {"/streams/handle_position", "/streams/environment_force", "/streams/velocity_setpoint",
+                       "/timing/main", "/timing/fieldbus", "/timing/watchdog"}
     assert plotted <= topics
+    (log,) = [p["config"] for p in panels if p["panelType"] == "Log"]
+    assert log["topicToRender"] in topics

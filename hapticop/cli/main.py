@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
 import threading
 from enum import Enum
@@ -166,6 +167,12 @@ def compose(
              "unless the file's 'record:' chooses"),
     host: str | None = typer.Option(
         None, help="with 'hosts:' in the file, run this host's side only (default: every host here, side by side)"),
+    view: str | None = typer.Option(
+        None, "--view", metavar="[PORT]",
+        help="show the run live in Foxglove (a Foxglove WebSocket connection to this port, default 8765): the "
+             "recorded streams, or every stream, with the scan, frames, force arrow, logs and loop timing"),
+    view_host: str = typer.Option("127.0.0.1", help="where --view listens (default: this machine only)"),
+    view_rate: float = typer.Option(30.0, help="most messages a second --view sends per channel"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -173,6 +180,7 @@ def compose(
     from hapticop.runtime.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
+    live = None if view is None else _live_options(view, view_host, view_rate)
     validated = _valid_or_exit(file, "not started")
     if validated.hosts:
         validated = _one_host(validated, file, host, clock, run_dir, group_readable, sys.argv)
@@ -181,7 +189,7 @@ def compose(
     os.umask(0o027 if group_readable else 0o077)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
-                         control=control, group_readable=group_readable, record=record)
+                         control=control, group_readable=group_readable, record=record, view=live)
     console = Console(stderr=True)
     if not console.is_terminal:
         console.width = 160  # a log or a pipe: no need to wrap the tables
@@ -237,6 +245,45 @@ def _passed_on(argv: list[str]) -> list[str]:
         elif not arg.startswith(("--run-dir=", "--host=")):
             out.append(arg)
     return out
+@app.command("view")
+def view_running(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket's path)"),
+    port: int = typer.Option(8765, help="the port Foxglove connects to (Foxglove WebSocket)"),
+    host: str = typer.Option("127.0.0.1", help="where to listen (default: this machine only)"),
+    rate: float = typer.Option(30.0, help="most messages a second per channel"),
+) -> None:
+    """Show a running system live in Foxglove, from a process of its own: every stream's newest
+    sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
+    from hapticop.runtime.viewer import Attachment, view
+
+    options = _live_options(str(port), host, rate)
+    answer = _ask(system, {"op": "attach"})
+    if not answer.get("ok"):
+        typer.echo(f"hapticop: {system}: {answer.get('error')}", err=True)
+        raise typer.Exit(1)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        summary = view(Attachment(**answer["attach"]), options, lambda line: typer.echo(f"{line}; Ctrl+C stops",
+                                                                                        err=True), stop.is_set)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    typer.echo(f"{summary['view']['sent']} messages sent", err=True)
+
+
+def _live_options(port: str, host: str, rate_hz: float):
+    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number)."""
+    from hapticop.recording.live import DEFAULT_PORT, LiveOptions, LiveViewUnavailable, require_sdk
+
+    try:
+        require_sdk()
+        return LiveOptions(host, int(port) if port else DEFAULT_PORT, rate_hz)
+    except LiveViewUnavailable as missing:
+        typer.echo(f"hapticop: {missing}", err=True)
+        raise typer.Exit(2) from None
+    except ValueError as error:
+        raise typer.BadParameter(str(error) if port.isdigit() or not port else f"not a port: {port!r}",
+                                 param_hint="--view") from None
 
 
 def _ask(system: str, message: dict) -> dict:
@@ -453,7 +500,7 @@ def main() -> None:
     from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
-        app(args=_bare_option(sys.argv[1:], "--record"))
+        app(args=_bare_option(_bare_option(sys.argv[1:], "--record"), "--view"))
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))

@@ -1,8 +1,9 @@
 """The Foxglove layout shipped for the hallway (foxglove-layouts/hallway.json), built with the SDK.
 
-The 3D panel follows the robot (base_link) with the scan and the force arrow (`scene`); beside it,
-plots of the handle's position, the environment force and the commanded twist, from the raw
-stream channels against the loops' own stamps (publish time). Regenerate the file with
+The 3D panel follows the robot (base_link) with the scan and the force arrow (`scene`), the run's
+log under it; beside them, plots of the handle's position, the environment force and the
+commanded twist, from the raw stream channels against the loops' own stamps (publish time), and
+the 1 kHz loops' worst wake-up latency per timing window (`/timing/THREAD`). Regenerate the file with
 `python -m hapticop.recording.layout > foxglove-layouts/hallway.json`.
 """
 
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import json
 
-from hapticop.recording.mcapfile import topic_of
+from hapticop.recording.mcapfile import LOG_TOPIC, TIMING_TOPIC, topic_of
 from hapticop.recording.scene import ARROW_TOPIC, BASE, SCAN_TOPIC
 
 PLOTS = (  # (title, stream, a label per element)
@@ -18,6 +19,7 @@ PLOTS = (  # (title, stream, a label per element)
     ("Environment force (N)", "environment_force", ("x", "y", "z")),
     ("Commanded velocity (m/s, rad/s)", "velocity_setpoint", ("vx", "vy", "wz")),
 )
+LOOPS = ("main", "fieldbus", "watchdog")  # the hallway's 1 kHz threads
 
 
 def hallway_layout() -> str:
@@ -35,10 +37,16 @@ def hallway_layout() -> str:
         topics={SCAN_TOPIC: fl.BaseRendererLaserScanTopicSettings(visible=True, point_size=4, color_mode="flat",
                                                                   flat_color="#2ca02c"),
                 ARROW_TOPIC: fl.BaseRendererSceneUpdateTopicSettings(visible=True)}))
+    timing = fl.PlotPanel(title="Wake-up latency, worst per timing window (us)", config=fl.PlotConfig(
+        paths=[fl.PlotSeries(value=f"{TIMING_TOPIC.format(loop)}.latency_max_us", label=loop, enabled=True,
+                             timestamp_method="publishTime") for loop in LOOPS],
+        show_legend=True, legend_display="floating", x_axis_val="timestamp", following_view_width=30))
+    log = fl.LogPanel(title="Log", config=fl.LogConfig(topic_to_render=LOG_TOPIC, show_name=True))
     layout = fl.Layout(content=fl.SplitContainer(direction="row", items=[
-        fl.SplitItem(proportion=3, content=scene),
+        fl.SplitItem(proportion=3, content=fl.SplitContainer(direction="column", items=[
+            fl.SplitItem(proportion=3, content=scene), fl.SplitItem(proportion=1, content=log)])),
         fl.SplitItem(proportion=2, content=fl.SplitContainer(direction="column", items=[
-            fl.SplitItem(content=plot(*row)) for row in PLOTS])),
+            *(fl.SplitItem(content=plot(*row)) for row in PLOTS), fl.SplitItem(content=timing)])),
     ]))
     return json.dumps(json.loads(layout.to_json()), indent=2) + "\n"
 

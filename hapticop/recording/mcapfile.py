@@ -42,6 +42,8 @@ MAGIC = b"\x89MCAP0\r\n"
 PART = ".part"
 CHUNK_BYTES = 4 << 20  # larger than a second of a busy run: chunks close at the flushes
 STREAM_TOPIC = "/streams/{}"
+TIMING_TOPIC = "/timing/{}"  # a loop's timing windows (hapticop.runtime.timing_channels)
+LOG_TOPIC = "/log"  # the run's log records (hapticop.runtime.log_channel)
 
 
 def topic_of(stream: str) -> str:

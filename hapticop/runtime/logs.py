@@ -29,6 +29,22 @@ class Level(IntEnum):
 LEVEL_NAMES = [level.name.lower() for level in Level]
 
 
+def format_line(stamp_ns: int, level: Level, text: str) -> str:
+    """One record as its line in an owner's file: seconds on the run's clock, level, text."""
+    return f"{stamp_ns / 1e9:.6f} {LEVEL_NAMES[level]:7s} {text}\n"
+
+
+def parse_line(line: str) -> tuple[int, Level, str] | None:
+    """A line `format_line` wrote, back as (stamp in ns, level, text); None for any other line
+    (the second line of a message with a line break in it)."""
+    stamp, _, rest = line.partition(" ")
+    level = rest[:7].rstrip()
+    if level not in LEVEL_NAMES or not stamp.replace(".", "", 1).isdigit():
+        return None
+    seconds, _, fraction = stamp.partition(".")
+    return int(seconds) * 1_000_000_000 + int(fraction.ljust(9, "0")[:9]), Level(LEVEL_NAMES.index(level)), rest[8:]
+
+
 class LogWriter:
     """Drains the queue of one process into per-owner files."""
 
@@ -60,8 +76,7 @@ class LogWriter:
             text = message % args if args else message
         except (TypeError, ValueError):
             text = f"{message} {args!r}"
-        line = f"{stamp_ns / 1e9:.6f} {LEVEL_NAMES[level]:7s} {text}\n"
-        self._file(owner).write(line)
+        self._file(owner).write(format_line(stamp_ns, level, text))
         if self.echo is not None and level <= self.echo_level:
             self.echo.write(f"[{owner}] {LEVEL_NAMES[level]}: {text}\n")
 

@@ -1,4 +1,4 @@
-"""The recorder: every recorded stream's own ring, drained off the real-time path into one MCAP file.
+"""The recorder: every recorded stream's own ring, drained off the real-time path into one MCAP file and the live view.
 
 Each recorded stream's writer pushes every sample into a ring of its own in the shared region
 (`region.Layout.recorded`), beside its other transports: the loop copies the sample and moves
@@ -6,7 +6,10 @@ on, never waiting and never allocating. The recorder drains the rings in batches
 sample with its number and publication stamp (`RecordingFile`), and hands the same batches to
 its views, which may derive channels of their own from them (a scan from two streams, the
 robot's frames from a pose) without the loops knowing. A ring the recorder falls a whole
-ring behind on is overwritten, and the lost samples are counted, never waited for.
+ring behind on is overwritten, and the lost samples are counted, never waited for. Beside the
+rings it follows sources of its own: each loop's timing counters (`timing_channels`) and the
+run's log files (`log_channel`). Whatever it writes goes to its outputs (`recording.outputs`):
+the file, the live view (`recording.live`, `compose --view`), or both.
 
 On the wall clock the recorder is a process of its own at normal scheduling, which leaves
 with its parent; under the virtual clock the main process drains the rings itself between
@@ -31,11 +34,16 @@ import numpy as np
 
 from hapticop.blocks.interface import Port
 from hapticop.composition.loader import Loaded
+from hapticop.recording.live import LiveOptions, LiveServer, LiveViewUnavailable
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo
+from hapticop.recording.outputs import Fanout, Output
 from hapticop.recording.plan import recorded_streams
 from hapticop.recording.scene import views_for
+from hapticop.runtime.log_channel import LogChannel
 from hapticop.runtime.region import Layout
 from hapticop.runtime.streams import SpscQueue, sample_dtype
+from hapticop.runtime.taps import LatestTap, tapped_streams
+from hapticop.runtime.timing_channels import LoopTiming, TimingPlan
 
 DRAIN_INTERVAL_NS = 50_000_000  # the recorder wakes 20 times a second (each pass costs ~30 µs a stream
 # whatever it finds): a ring holds a second or more
@@ -54,12 +62,23 @@ class View(Protocol):
 
     streams: frozenset[str]
 
-    def start(self, file: RecordingFile, streams: dict[str, StreamInfo]) -> None: ...
+    def start(self, file: Output, streams: dict[str, StreamInfo]) -> None: ...
 
     def samples(self, stream: StreamInfo, samples: np.ndarray, log_time_ns: int) -> None:
         """`samples` has `streams.sample_dtype`'s fields; `values(info, samples)` is the arrays."""
 
     def finish(self) -> None: ...
+
+
+class Source(Protocol):
+    """Channels the recorder fills from elsewhere than a ring (the loops' timing counters, the log
+    files), polled at every drain."""
+
+    def start(self, out: Output) -> None: ...
+
+    def poll(self, now_ns: int) -> None: ...
+
+    def finish(self, now_ns: int) -> None: ...
 
 
 def values(info: StreamInfo, samples: np.ndarray) -> np.ndarray:
@@ -75,6 +94,7 @@ class RecordedRing:
     offset: int
     nbytes: int
     capacity: int
+    kind: str = "ring"  # or "latest": the stream's own latest slot, tapped for the live view (`taps`)
 
     def port(self) -> Port:
         return Port(self.info.dtype, self.info.shape, self.info.unit)
@@ -84,36 +104,73 @@ class RecordedRing:
 class RecorderPlan:
     """All the recorder needs, as plain data a spawned process receives."""
 
-    path: Path
+    path: Path | None  # None: nothing written, only shown live
     rings: list[RecordedRing]
     clock: str  # the one clock of every timestamp: 'CLOCK_MONOTONIC' or 'virtual'
     attachments: list[tuple[str, str, bytes]] = field(default_factory=list)  # (name, media type, data)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     views: list = field(default_factory=list)  # `View`s, picklable
+    live: LiveOptions | None = None  # serve the channels live too
+    timing: TimingPlan | None = None  # the loops' timing counters, for `/timing/THREAD`
+    run_dir: Path | None = None  # the run's log files, for `/log`
+    name: str = "hapticop"
+
+    @property
+    def drain_ns(self) -> int:
+        """How often to drain: a tapped slot holds one sample, so as often as the view may send."""
+        if self.live is not None and any(ring.kind == "latest" for ring in self.rings):
+            return min(DRAIN_INTERVAL_NS, int(1e9 / self.live.rate_hz))
+        return DRAIN_INTERVAL_NS
 
 
 class Recorder:
-    """Drains the rings into the file and the views; one pass per `drain`."""
+    """Drains the rings into the file, the live view and the views; one pass per `drain`."""
 
-    def __init__(self, plan: RecorderPlan, rings: dict[str, SpscQueue], clock: Callable[[], int]):
+    def __init__(self, plan: RecorderPlan, rings: dict[str, SpscQueue], clock: Callable[[], int],
+                 sources: Sequence[Source] = ()):
         self.plan, self.rings, self.clock = plan, rings, clock
         self.cpu_started = time.process_time()  # in its own process: the recorder's CPU, for the benchmark
         now = self.started_ns = clock()
-        self.file = RecordingFile(plan.path, library=_library())
-        for name, media_type, data in plan.attachments:
-            self.file.attach(name, media_type, data, now)
-        for name, values_ in plan.metadata.items():
-            self.file.metadata(name, values_)
+        self.live, self.view_error = None, None
+        if plan.live is not None:  # before the file: a view that cannot listen leaves no file behind
+            try:
+                self.live = LiveServer(plan.live, plan.name)
+            except LiveViewUnavailable as error:
+                if plan.path is None:
+                    raise
+                self.view_error = str(error)  # the recording goes on without it
+        self.file = RecordingFile(plan.path, library=_library()) if plan.path is not None else None
+        outputs: list[Output] = [out for out in (self.file, self.live) if out is not None]
+        self.out: Output = outputs[0] if len(outputs) == 1 else Fanout(outputs)
+        if self.file is not None:
+            for name, media_type, data in plan.attachments:
+                self.file.attach(name, media_type, data, now)
+            for name, values_ in plan.metadata.items():
+                self.file.metadata(name, values_)
         self.streams = {ring.info.name: ring.info for ring in plan.rings}
-        self.channels = {name: self.file.stream_channel(info) for name, info in self.streams.items()}
+        self.channels = {ring.info.name: self._stream_channel(ring) for ring in plan.rings}
         self.batches = {ring.info.name: np.zeros(min(BATCH, ring.capacity), sample_dtype(ring.port()))
                         for ring in plan.rings}
         self.recorded = dict.fromkeys(self.streams, 0)
         self.views: Sequence[View] = plan.views
         for view in self.views:
-            view.start(self.file, self.streams)
-        self.file.flush()  # schemas, channels, attachments: on disk before any sample
+            view.start(self.out, self.streams)
+        self.sources = sources
+        for source in sources:
+            source.start(self.out)
+        if self.file is not None:
+            self.file.flush()  # schemas, channels, attachments: on disk before any sample
         self.flushed_ns = now
+
+    def _stream_channel(self, ring: RecordedRing) -> int:
+        if ring.kind == "latest":  # a tapped slot, read at the display rate already, and never recorded
+            return self.live.stream_channel(ring.info, thinned=False)
+        return self.out.stream_channel(ring.info)
+
+    @property
+    def address(self) -> str | None:
+        """Where the live view listens (None: no live view)."""
+        return self.live.address if self.live is not None else None
 
     def drain(self) -> int:
         """Everything the rings hold now; returns how many samples were taken."""
@@ -129,7 +186,7 @@ class Recorder:
                 samples = batch[:n]
                 if info.every > 1:
                     samples = samples[samples["count"] % np.uint64(info.every) == 0]
-                self.file.write_samples(channel, samples, log_time)
+                self.out.write_samples(channel, samples, log_time)
                 self.recorded[name] += len(samples)
                 for view in self.views:
                     if name in view.streams:
@@ -137,15 +194,20 @@ class Recorder:
                 if n < len(batch):
                     break
         now = self.clock()
-        if now - self.flushed_ns >= FLUSH_INTERVAL_NS:
+        for source in self.sources:
+            source.poll(now)
+        if self.file is not None and now - self.flushed_ns >= FLUSH_INTERVAL_NS:
             self.file.flush()
             self.flushed_ns = now
         return taken
 
     def summary(self) -> dict:
         """Per stream: samples its writer published, recorded, and lost (the ring was lapped)."""
-        return {"path": str(self.plan.path), "clock": self.plan.clock, "messages": self.file.messages,
-                "cpu_s": time.process_time() - self.cpu_started, "streams": {
+        return {"path": str(self.plan.path) if self.file is not None else None, "clock": self.plan.clock,
+                "messages": self.file.messages if self.file is not None else 0,
+                "view": {"address": self.address, "sent": self.live.sent} if self.live is not None else None,
+                "view_error": self.view_error, "cpu_s": time.process_time() - self.cpu_started,
+                "elapsed_s": (self.clock() - self.started_ns) / 1e9, "streams": {
             name: {"written": int(ring.written), "recorded": self.recorded[name], "dropped": int(ring.dropped)}
             for name, ring in self.rings.items()}}
 
@@ -154,7 +216,13 @@ class Recorder:
         self.drain()
         for view in self.views:
             view.finish()
+        for source in self.sources:
+            source.finish(self.clock())
+        if self.live is not None:
+            self.live.stop()
         summary = self.summary()
+        if self.file is None:
+            return summary
         streams = summary["streams"]
         self.file.metadata("hapticop.drops", {name: str(s["dropped"]) for name, s in streams.items()})
         self.file.metadata("hapticop.written", {name: str(s["written"]) for name, s in streams.items()})
@@ -165,9 +233,12 @@ class Recorder:
         return summary
 
 
-def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual: bool, seed: int = 0) -> RecorderPlan:
+def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, virtual: bool, seed: int = 0,
+            run_dir: Path | None = None, live: LiveOptions | None = None) -> RecorderPlan:
     """What a run records (the layout placed the rings), with the composition as it runs (`extends`
-    resolved, `--record` applied) and every activity's resolved parameters attached."""
+    resolved, `--record` applied) and every activity's resolved parameters attached; the loops'
+    timing and the log files of `run_dir` beside the streams; served live too with `live`. With no
+    file (`path` None) nothing is recorded: every stream's latest slot is tapped for the view."""
     import json
     import platform
 
@@ -175,7 +246,8 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual
 
     composition = loaded.composition
     plan = recorded_streams(composition)
-    rings = []
+    rings = [] if path is not None else [RecordedRing(info, offset, nbytes, 1, "latest")  # shown, not recorded
+                                         for info, offset, nbytes in tapped_streams(loaded, layout)]
     for name, transport in layout.recorded.items():
         spec = composition.streams[name]
         activity, port_name = spec.writer.split(".")
@@ -193,7 +265,8 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual
     return RecorderPlan(path, rings, clock,
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
-                        {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]))
+                        {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]), live,
+                        TimingPlan.of(composition, layout), run_dir, run["composition"])
 
 
 def _library() -> str:
@@ -205,9 +278,23 @@ def _library() -> str:
         return "hapticop"
 
 
-def _rings(plan: RecorderPlan, buffer) -> dict[str, SpscQueue]:
-    return {ring.info.name: SpscQueue(np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset),
-                                      ring.port(), ring.capacity, "drop_oldest") for ring in plan.rings}
+def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
+    """The loops' timing and the run's log, as the plan asks."""
+    sources: list[Source] = []
+    if plan.timing is not None:
+        sources.append(LoopTiming(plan.timing, buffer))
+    if plan.run_dir is not None:
+        sources.append(LogChannel(plan.run_dir))
+    return sources
+
+
+def rings_of(plan: RecorderPlan, buffer) -> dict[str, SpscQueue | LatestTap]:
+    rings: dict[str, SpscQueue | LatestTap] = {}
+    for ring in plan.rings:
+        view = np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset)
+        rings[ring.info.name] = (LatestTap(view, ring.port()) if ring.kind == "latest" else
+                                 SpscQueue(view, ring.port(), ring.capacity, "drop_oldest"))
+    return rings
 
 
 # -- on the wall clock: a process of its own ---------------------------------------------------
@@ -233,20 +320,25 @@ def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> 
     except OSError:
         pass  # without the right (CAP_SYS_NICE), at the ordinary weight
     memory = shared_memory.SharedMemory(name=region_name, create=False)
-    rings = _rings(plan, memory.buf)
-    recorder = None
+    rings = rings_of(plan, memory.buf)
+    recorder = sources = None
     try:
-        recorder = Recorder(plan, rings, time.monotonic_ns)
-        messages.send(("started", os.getpid()))
+        sources = sources_of(plan, memory.buf)
+        try:
+            recorder = Recorder(plan, rings, time.monotonic_ns, sources)
+        except LiveViewUnavailable as error:
+            messages.send(("failed", str(error)))
+            return
+        messages.send(("started", (recorder.address, recorder.view_error)))
         while not orphaned.is_set():
             recorder.drain()
-            if messages.poll(DRAIN_INTERVAL_NS / 1e9):
+            if messages.poll(plan.drain_ns / 1e9):
                 break  # the parent's stop: its loops are done, the rings hold their last samples
         summary = recorder.finish()
         if not orphaned.is_set():
             messages.send(("finished", summary))
     finally:
-        recorder = None
+        recorder = sources = None  # their views into the region go before it is closed
         for ring in rings.values():
             ring.close()
         rings = None
@@ -269,15 +361,20 @@ class RecorderProcess:
         theirs.close()
         self.plan = plan
         self.pid = self.process.pid
+        self.address: str | None = None  # the live view's, once started
+        self.view_error: str | None = None  # why the live view did not start (the recording goes on)
 
     def wait_started(self, timeout_s: float = 60.0) -> str | None:
         """Before the loops run: the recorder has the region mapped and the file open (None), or
         what went wrong. Starting takes a second or two (a new interpreter, numpy, mcap)."""
         try:
             if self.messages.poll(timeout_s):
-                kind, _ = self.messages.recv()
+                kind, value = self.messages.recv()
                 if kind == "started":
+                    self.address, self.view_error = value
                     return None
+                if kind == "failed":
+                    return f"{value}; the run goes on unrecorded and unseen"
         except (OSError, EOFError):
             pass
         return (f"the recorder (process {self.pid}) did not start within {timeout_s:g} s "
@@ -312,10 +409,12 @@ class InlineRecorder:
     `DRAIN_INTERVAL_NS` of simulated time has passed: deterministic, so tests count exactly."""
 
     def __init__(self, plan: RecorderPlan, buffer, clock: Callable[[], int]):
-        self.rings = _rings(plan, buffer)
-        self.recorder = Recorder(plan, self.rings, clock)
+        self.rings = rings_of(plan, buffer)
+        self.recorder = Recorder(plan, self.rings, clock, sources_of(plan, buffer))
         self.clock = clock
-        self.next_ns = clock() + DRAIN_INTERVAL_NS
+        self.drain_ns = plan.drain_ns
+        self.next_ns = clock() + self.drain_ns
+        self.address, self.view_error = self.recorder.address, self.recorder.view_error
 
     @staticmethod
     def wait_started() -> None:
@@ -325,11 +424,12 @@ class InlineRecorder:
         now = self.clock()
         if now >= self.next_ns:
             self.recorder.drain()
-            self.next_ns = now + DRAIN_INTERVAL_NS
+            self.next_ns = now + self.drain_ns
 
     def stop(self) -> tuple[dict | None, str | None]:
         try:
             return self.recorder.finish(), None
         finally:
+            self.recorder = None  # the timing source's views into the region go with it
             for ring in self.rings.values():
                 ring.close()

@@ -182,6 +182,13 @@ def print_recording(recording: dict, console: Console) -> None:
     streams = recording["streams"]
     recorded = sum(s["recorded"] for s in streams.values())
     dropped = {name: s["dropped"] for name, s in streams.items() if s["dropped"]}
+    if recording.get("view"):
+        view = recording["view"]
+        cost = "" if recording["clock"] == "virtual" or not recording.get("elapsed_s") else \
+            f"; its process used {100 * recording['cpu_s'] / recording['elapsed_s']:.1f} % of a core"
+        console.print(f"live view: {view['address']}, {view['sent']} messages sent{cost}")
+    if recording["path"] is None:
+        return  # shown only: the newest samples, nothing to lose
     console.print(f"recording: {recording['path']} ({recorded} samples of {len(streams)} streams, "
                   f"{recording['clock']} clock)")
     if dropped:

@@ -45,9 +45,10 @@ class ControlService:
 
     def __init__(self, name: str, live: LiveChanges, region: Region, clock: RealtimeClock | VirtualClock,
                  coordinator: Coordinator, composition: Callable[[], Composition], log: Logger,
-                 run_dir: Path | None = None):
+                 run_dir: Path | None = None, attach: Callable[[], dict] | None = None):
         self.name, self.live, self.region, self.clock = name, live, region, clock
         self.run_dir = run_dir  # where activities publish what `status` shows of them (a bridge's link)
+        self.attach = attach  # what `hapticop view` needs to read the region from outside (viewer.Attachment)
         self.coordinator, self.composition, self.log = coordinator, composition, log  # composition(): the running one
         self.server: ControlServer | None = None
 
@@ -68,8 +69,10 @@ class ControlService:
         op = request.get("op")
         if op == "status":
             return {"ok": True, "status": self.status()}
+        if op == "attach" and self.attach is not None:
+            return {"ok": True, "attach": self.attach()}
         if op != "patch":
-            return {"ok": False, "error": f"unknown request {op!r}; expected 'status' or 'patch'"}
+            return {"ok": False, "error": f"unknown request {op!r}; expected 'status', 'attach' or 'patch'"}
         if wrong := _wrong_field(request):
             return {"ok": False, "error": f"malformed request: {wrong}"}
         file = request.get("file", "<patch>")

@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
+import json
+import os
 import signal
 import sys
 import threading
@@ -25,6 +27,7 @@ from hapticop.composition.description import Composition, Record
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
+from hapticop.recording.live import LiveOptions
 from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of, make_runner, make_transports
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
@@ -58,6 +61,7 @@ class RunOptions:
     control: str | None = None  # control socket name or path (default: the composition's name)
     group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
     record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
+    view: LiveOptions | None = None  # serve live to Foxglove the recorded streams (the latest slots if none is)
 
 
 @dataclass
@@ -83,6 +87,7 @@ class System:
     def __init__(self, validated: Validated, options: RunOptions):
         source, loaded = validated.source, validated.graph.loaded
         tree = source.tree
+        self.records = options.record is not None or loaded.composition.record is not None  # to a file
         if options.record is not None and loaded.composition.record is None:
             tree, loaded = _recording_all(tree, loaded)
         composition = loaded.composition
@@ -132,12 +137,20 @@ class System:
                                      finish=self._finish)
         self.live = LiveChanges(self, Path(self.file).name, self.supervisor.reasons)
         self.modes = Modes(self, self.flag_index, self.region.flags)
+        flags = list(validated.flags)
+
+        def attach() -> dict:  # what `hapticop view` needs: the region as the children lay it out from the tree
+            return {"region": self.region.name, "flags": flags, "tree": json.loads(json.dumps(tree, default=str)),
+                    "run_dir": str(self.run_dir), "pid": os.getpid(), "name": self.name}
+
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
-                                      lambda: self.description.composition, self.log, self.run_dir)
+                                      lambda: self.description.composition, self.log, self.run_dir, attach)
         self.main.supervisor = self._between_cycles
-        if self.layout.recorded:
-            path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"
-            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual, options.seed)
+        if self.layout.recorded or options.view is not None:
+            path = None if not self.records else Path(options.record) if options.record else \
+                self.run_dir / f"{self.name}.mcap"
+            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual, options.seed, self.run_dir,
+                           options.view)
             self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
                              RecorderProcess(plan, self.region.name))
         if not self.virtual:
@@ -218,6 +231,12 @@ class System:
                 self.log.error(failed)
                 self.recorder.stop()
                 self.recorder = None
+            elif self.recorder.view_error:
+                self.supervisor.reasons.append(self.recorder.view_error)
+                self.log.error(self.recorder.view_error)
+            elif self.recorder.address:
+                self.log.always("live view at %s (Foxglove: open a connection, Foxglove WebSocket)",
+                                self.recorder.address)
         previous = self.supervisor.install_signals()
         if not self.virtual:
             self.service.start(self.control_path)

@@ -1,0 +1,134 @@
+"""The live view: the recorder's channels served over Foxglove's WebSocket protocol, thinned for display.
+
+A `LiveServer` is an output like the MCAP file (`recording.outputs`): the recorder hands it the
+same channels and batches, and it forwards at most `rate_hz` messages a second per channel to
+the WebSocket server of `foxglove-sdk` (the optional `[foxglove]` extra), which runs on the
+SDK's own threads in the recorder's process, never on a real-time loop. Each message goes out
+with the loop's own stamp as its time, so plots and frames line up as in a recording; a client
+that falls behind loses the oldest messages (the SDK's backlog), never the recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hapticop.recording import arrays
+from hapticop.recording.mcapfile import LOG_TOPIC, StreamInfo, topic_of
+
+DEFAULT_PORT = 8765
+DEFAULT_HOST = "127.0.0.1"  # this machine only: the protocol has no authentication
+DEFAULT_RATE_HZ = 30.0
+MISSING = "the live view needs foxglove-sdk: pip install 'hapticop[foxglove]'"
+
+
+class LiveViewUnavailable(RuntimeError):
+    """foxglove-sdk is not installed, or the server could not listen."""
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """Where the live view listens and how often each channel may send (picklable: the recorder
+    process receives it)."""
+
+    host: str = DEFAULT_HOST
+    port: int = DEFAULT_PORT  # 0: any free port (the summary says which)
+    rate_hz: float = DEFAULT_RATE_HZ
+
+    def __post_init__(self) -> None:
+        if not 0 < self.rate_hz <= 1000:
+            raise ValueError(f"the live view's rate must be above 0 and at most 1000 Hz, not {self.rate_hz:g}")
+        if not 0 <= self.port <= 65535:
+            raise ValueError(f"the live view's port must be 0 to 65535, not {self.port}")
+
+
+def require_sdk() -> None:
+    """Fail early, in one line, when the `[foxglove]` extra is missing."""
+    try:
+        import foxglove  # noqa: F401
+    except ImportError as missing:
+        raise LiveViewUnavailable(MISSING) from missing
+
+
+@dataclass
+class _Live:
+    """One channel on the server and when it may send next."""
+
+    channel: object  # foxglove.Channel
+    prefix: bytes = b""  # a stream channel's protobuf prefix (`arrays`)
+    thinned: bool = True  # not the log (events, each its own) nor a tapped slot (read at the display rate already)
+    next_ns: int = 0  # a view's channel: the next message's earliest stamp
+    period: int = -1  # a stream's channel: the last display period a sample was sent in
+
+
+class LiveServer:
+    """A Foxglove WebSocket server fed as a recorder output."""
+
+    def __init__(self, options: LiveOptions, name: str = "hapticop"):
+        require_sdk()
+        import foxglove
+
+        self.options = options
+        self.period_ns = int(1e9 / options.rate_hz)
+        self.context = foxglove.Context()  # this server's channels alone (not the SDK's global context)
+        try:
+            self.server = foxglove.start_server(name=name, host=options.host, port=options.port, context=self.context)
+        except Exception as error:  # noqa: BLE001 - the SDK raises its own error types for a port in use
+            where = f"{options.host}:{options.port}"
+            raise LiveViewUnavailable(f"the live view cannot listen on {where}: {error}") from error
+        self.address = f"ws://{options.host}:{self.server.port}"  # the port chosen when asked for any (0)
+        self._schemas: list[object] = []
+        self._channels: list[_Live] = []
+        self.sent = 0
+
+    def schema(self, name: str, encoding: str, data: bytes) -> int:
+        import foxglove
+
+        self._schemas.append(foxglove.Schema(name=name, encoding=encoding, data=data))
+        return len(self._schemas)
+
+    def channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str]) -> int:
+        import foxglove
+
+        schema = self._schemas[schema_id - 1] if schema_id else None
+        channel = foxglove.Channel(topic, schema=schema, message_encoding=message_encoding, context=self.context,
+                                   metadata=dict(metadata))
+        self._channels.append(_Live(channel, thinned=topic != LOG_TOPIC))
+        return len(self._channels)
+
+    def stream_channel(self, info: StreamInfo, thinned: bool = True) -> int:
+        """A stream's channel; `thinned=False` for samples already taken at the display rate (`runtime.taps`)."""
+        schema = self.schema(arrays.schema_name(info.dtype), arrays.SCHEMA_ENCODING, arrays.schema_data(info.dtype))
+        id_ = self.channel(topic_of(info.name), arrays.MESSAGE_ENCODING, schema, info.metadata())
+        self._channels[id_ - 1].prefix = arrays.prefix(info.nbytes)
+        self._channels[id_ - 1].thinned = thinned
+        return id_
+
+    def write(self, channel: int, log_time_ns: int, data: bytes, publish_time_ns: int, sequence: int) -> None:
+        live = self._channels[channel - 1]
+        if (live.thinned and publish_time_ns < live.next_ns) or not live.channel.has_sinks():
+            return
+        live.next_ns = publish_time_ns + self.period_ns
+        live.channel.log(data, log_time=int(publish_time_ns))
+        self.sent += 1
+
+    def write_samples(self, channel: int, samples: np.ndarray, log_time_ns: int) -> None:
+        """The first sample of each display period, with the loop's stamp as its time."""
+        live = self._channels[channel - 1]
+        if not len(samples) or not live.channel.has_sinks():
+            return
+        if not live.thinned:
+            for k in range(len(samples)):
+                live.channel.log(live.prefix + samples["payload"][k].tobytes(), log_time=int(samples["stamp_ns"][k]))
+            self.sent += len(samples)
+            return
+        periods = samples["stamp_ns"].astype(np.int64) // self.period_ns
+        chosen = np.flatnonzero(np.diff(periods, prepend=live.period) > 0)
+        for k in chosen:
+            live.channel.log(live.prefix + samples["payload"][k].tobytes(), log_time=int(samples["stamp_ns"][k]))
+        live.period = max(live.period, int(periods[-1]))
+        self.sent += len(chosen)
+
+    def stop(self) -> None:
+        self.server.stop()

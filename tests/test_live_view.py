@@ -1,0 +1,249 @@
+"""The live view (`compose --view`): a client speaking Foxglove's WebSocket protocol, on loopback,
+sees every channel advertised, subscribes, and decodes what arrives, the scan with the protobuf
+descriptor Foxglove's own SDK ships."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import struct
+import threading
+import time
+
+import pytest
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+from hapticop.recording.live import LiveOptions
+from hapticop.recording.mcapfile import LOG_TOPIC
+from hapticop.recording.scene import ARROW_TOPIC, FRAMES_TOPIC, SCAN_TOPIC
+from hapticop.runtime.system import RunOptions, run_system
+from hapticop.validation import validate_path
+
+from .conftest import ROOT
+from .runtime_helpers import PATIENCE_S
+
+messages = pytest.importorskip("foxglove.messages")
+websockets = pytest.importorskip("websockets.asyncio.client")
+
+SUBPROTOCOL = "foxglove.sdk.v1"
+MESSAGE_DATA = 0x01
+
+
+def _message_class(schema_name: str, file_descriptor_set: bytes):
+    pool = descriptor_pool.DescriptorPool()
+    for file in descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set).file:
+        pool.Add(file)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
+
+
+async def _watch(address: str, enough, seen: dict) -> None:
+    """Connect, gather the advertised channels, subscribe to all, and keep every message by topic
+    until `enough(seen)` (then tell the caller) and the server closes the connection."""
+    async with websockets.connect(address, subprotocols=[SUBPROTOCOL], max_size=None) as socket:
+        subscriptions = {}
+        async for frame in socket:
+            if isinstance(frame, str):
+                op = json.loads(frame)
+                seen.setdefault("ops", []).append(op["op"])
+                if op["op"] == "advertise":
+                    fresh = [c for c in op["channels"] if c["id"] not in seen.setdefault("channels", {})]
+                    for channel in fresh:
+                        seen["channels"][channel["id"]] = channel
+                        subscriptions[len(subscriptions) + 1] = channel["topic"]
+                    await socket.send(json.dumps({"op": "subscribe", "subscriptions": [
+                        {"id": sid, "channelId": c["id"]} for sid, c in zip(
+                            range(len(subscriptions) - len(fresh) + 1, len(subscriptions) + 1), fresh, strict=True)]}))
+                continue
+            assert frame[0] == MESSAGE_DATA
+            subscription, stamp = struct.unpack_from("<IQ", frame, 1)
+            seen.setdefault("messages", {}).setdefault(subscriptions[subscription], []).append((stamp, frame[13:]))
+            if enough(seen):
+                seen.setdefault("enough", time.monotonic())
+    seen["closed"] = True
+
+
+def _live_run(tmp_path, text: str, enough, name: str):
+    """A wall-clock run with the live view on a free loopback port, watched by `_watch` until it has
+    `enough`; then the run is shut down, and the client keeps what the last drain sends."""
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    seen: dict = {}
+
+    def client(system) -> None:
+        def watch() -> None:
+            deadline = time.monotonic() + PATIENCE_S
+            while getattr(system.recorder, "address", None) is None and time.monotonic() < deadline:
+                time.sleep(0.02)
+            stopper = threading.Thread(target=_stop_when, args=(system, seen, deadline), daemon=True)
+            stopper.start()
+            try:
+                asyncio.run(asyncio.wait_for(_watch(system.recorder.address, enough, seen), PATIENCE_S + 10))
+            except Exception as error:  # noqa: BLE001 - reported by the test
+                seen["error"] = repr(error)
+                system.request_shutdown()
+
+        threading.Thread(target=watch, daemon=True).start()
+
+    options = RunOptions(clock="realtime", duration_ns=int((PATIENCE_S + 5) * 1e9), run_dir=tmp_path / f"run-{name}",
+                         echo=False, view=LiveOptions(port=0))
+    result = run_system(validate_path(path), options, on_start=client)
+    deadline = time.monotonic() + 10
+    while "ops" in seen and "closed" not in seen and "error" not in seen and time.monotonic() < deadline:
+        time.sleep(0.05)  # the client reads the last messages
+    return result, seen
+
+
+def _stop_when(system, seen: dict, deadline: float) -> None:
+    while "enough" not in seen and "error" not in seen and time.monotonic() < deadline:
+        time.sleep(0.02)
+    system.request_shutdown()
+
+
+def _topics(seen: dict) -> dict[str, dict]:
+    return {c["topic"]: c for c in seen.get("channels", {}).values()}
+
+
+def _all_but_the_log_sent(seen: dict) -> bool:
+    advertised = set(_topics(seen)) - {LOG_TOPIC}
+    return bool(advertised) and advertised <= set(seen.get("messages", {}))
+
+
+@pytest.fixture(scope="module")
+def hallway_live(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("live")
+    text = (ROOT / "systems" / "hallway.yaml").read_text()
+    result, seen = _live_run(tmp, text, _all_but_the_log_sent, "hallway")
+    return tmp, result, seen
+
+
+def test_every_channel_is_advertised_and_sends(hallway_live):
+    tmp, result, seen = hallway_live
+    assert "error" not in seen and "enough" in seen, seen.get("error")
+    assert result.outcome.status == 0, result.outcome.reasons
+    assert seen["ops"][0] == "serverInfo"
+    composition = validate_path(tmp / "hallway.yaml").graph.loaded.composition
+    expected = ({f"/streams/{name}" for name in composition.streams} | {f"/timing/{t}" for t in composition.threads}
+                | {SCAN_TOPIC, FRAMES_TOPIC, ARROW_TOPIC, LOG_TOPIC})
+    topics = _topics(seen)
+    assert set(topics) == expected
+    assert expected - {LOG_TOPIC} <= set(seen["messages"])
+    assert result.recording["path"] is None and not list((tmp / "run-hallway").glob("*.mcap*"))  # shown, not written
+    assert result.recording["view"]["sent"] >= len(seen["messages"])
+
+
+def test_the_scan_decodes_with_foxgloves_own_schema(hallway_live):
+    _, _, seen = hallway_live
+    channel = _topics(seen)[SCAN_TOPIC]
+    assert (channel["encoding"], channel["schemaName"], channel["schemaEncoding"]) == (
+        "protobuf", "foxglove.LaserScan", "protobuf")
+    schema = messages.LaserScan.get_schema()
+    scan_class = _message_class(schema.name, schema.data)  # Foxglove's descriptor, not the advertised one
+    for stamp, data in seen["messages"][SCAN_TOPIC]:
+        scan = scan_class.FromString(data)
+        assert scan.frame_id == "laser" and len(scan.ranges) > 100 and scan.end_angle > scan.start_angle
+        assert stamp == scan.timestamp.seconds * 1_000_000_000 + scan.timestamp.nanos  # the loop's stamp
+
+
+def test_a_stream_decodes_with_its_advertised_schema_and_is_thinned_for_display(hallway_live):
+    _, _, seen = hallway_live
+    channel = _topics(seen)["/streams/handle_position"]
+    array_class = _message_class(channel["schemaName"], base64.b64decode(channel["schema"]))
+    sent = seen["messages"]["/streams/handle_position"]
+    assert all(len(array_class.FromString(data).data) == 3 for _, data in sent)
+    stamps = [stamp for stamp, _ in sent]
+    assert stamps == sorted(stamps)
+    gaps = sorted(b - a for a, b in zip(stamps[:-1], stamps[1:], strict=True))
+    assert gaps[len(gaps) // 2] >= 0.9e9 / LiveOptions().rate_hz  # a 1 kHz stream, sent at about the display rate
+
+
+def test_loop_timing_and_log_records_arrive(hallway_live):
+    _, _, seen = hallway_live
+    timing = [json.loads(data) for _, data in seen["messages"]["/timing/main"]]
+    assert all(t["cycles"] > 0 and t["latency_max_us"] >= t["latency_p99_us"] >= t["latency_p50_us"] for t in timing)
+    assert "haptic" in timing[-1]["compute_max_us"]  # the haptic controller, on the main loop
+    schema = messages.Log.get_schema()
+    log_class = _message_class(schema.name, schema.data)
+    records = [log_class.FromString(data) for _, data in seen["messages"].get(LOG_TOPIC, [])]
+    assert records and all(r.name and r.message for r in records)  # the shutdown's records, at least
+
+
+def test_recorded_and_shown_at_once(tmp_path):
+    """With a file to record to, the live view is a second output: the file keeps every sample."""
+    from hapticop.recording.reading import series
+
+    from .test_recording import counters
+
+    def some_counts(seen: dict) -> bool:
+        return len(seen.get("messages", {}).get("/streams/count", [])) >= 5
+
+    result, seen = _live_run(tmp_path, counters(), some_counts, "c")
+    assert "error" not in seen and "enough" in seen, seen.get("error")
+    recording = result.recording
+    assert recording["path"] == str(tmp_path / "run-c" / "c.mcap") and recording["streams"]["count"]["dropped"] == 0
+    assert len(series(recording["path"], "count").sequence) == recording["streams"]["count"]["written"]
+    shown = [int.from_bytes(data[-8:], "little") for _, data in seen["messages"]["/streams/count"]]  # int64 counts
+    assert shown == sorted(set(shown)) and shown[-1] <= recording["streams"]["count"]["written"]
+
+
+def test_without_the_sdk_view_says_so_in_one_line(tmp_path, monkeypatch):
+    import sys
+
+    from typer.testing import CliRunner
+
+    from hapticop.cli.main import _bare_option, app
+
+    monkeypatch.setitem(sys.modules, "foxglove", None)  # as if the [foxglove] extra were not installed
+    path = tmp_path / "c.yaml"
+    path.write_text("version: 1\n")
+    result = CliRunner().invoke(app, ["compose", str(path), "--view", ""])
+    assert result.exit_code == 2
+    assert result.output.strip() == "hapticop: the live view needs foxglove-sdk: pip install 'hapticop[foxglove]'"
+    assert _bare_option(["compose", "c.yaml", "--view"], "--view") == ["compose", "c.yaml", "--view", ""]
+    assert _bare_option(["compose", "--view", "9000", "c.yaml"], "--view")[2] == "9000"
+
+
+def test_a_running_system_is_shown_from_outside_without_being_touched(tmp_path):
+    """`hapticop view`: the control socket says where the region is; a viewer of its own reads the
+    latest slots, timing and logs, and leaves every queue ring to its reader."""
+    from hapticop.runtime.control import request
+    from hapticop.runtime.viewer import Attachment, view
+
+    from .control_helpers import while_running
+    from .test_recording import counters
+
+    seen: dict = {}
+
+    def work(socket, system) -> None:
+        answer = request(str(socket), {"op": "attach"}, timeout=10)
+        assert answer["ok"] and answer["attach"]["region"] == system.region.name
+        addresses, stop, summary = [], threading.Event(), {}
+        viewer = threading.Thread(target=lambda: summary.update(view(
+            Attachment(**answer["attach"]), LiveOptions(port=0), lambda line: addresses.append(line.split()[4]),
+            stop.is_set)), daemon=True)
+        viewer.start()
+        deadline = time.monotonic() + PATIENCE_S
+        while not addresses and time.monotonic() < deadline:
+            time.sleep(0.02)
+
+        def enough(seen: dict) -> bool:
+            got = seen.get("messages", {})
+            return len(got.get("/streams/count", [])) >= 5 and "/timing/main" in got
+
+        client = threading.Thread(target=lambda: asyncio.run(asyncio.wait_for(
+            _watch(addresses[0], enough, seen), PATIENCE_S)), daemon=True)
+        client.start()
+        while "enough" not in seen and time.monotonic() < deadline:
+            time.sleep(0.02)
+        stop.set()
+        viewer.join(timeout=10)
+        client.join(timeout=10)
+        assert summary["streams"]["count"]["written"] > 0 and "slow" not in summary["streams"]
+
+    while_running(tmp_path, work, counters(record=""), ready="counter")
+    assert "enough" in seen
+    topics = set(_topics(seen))
+    assert {"/streams/count", "/timing/main", "/timing/slow", LOG_TOPIC} <= topics
+    assert "/streams/slow" not in topics  # a queue stream's rings have their own readers
+    shown = [int.from_bytes(data[-8:], "little") for _, data in seen["messages"]["/streams/count"]]
+    assert shown == sorted(set(shown)) and shown[0] > 0
