@@ -137,9 +137,10 @@ class HapticController(Block):
         if ranges.meta[0] != self.scan_seq:  # a scan not taken yet (it may have come while configuring)
             self._take_scan()
         scan_ok = ranges.valid
+        twist = self.twist_measured()
+        scan_age_s = ranges.age_ns() / 1e9
         if scan_ok:
-            self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
-                              scan_age_s=ranges.age_ns() / 1e9)
+            self.model.render(p_in.handle_position.value, twist, out.environment_force.value, scan_age_s=scan_age_s)
         else:
             out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
         setpoint = out.velocity_setpoint.value
@@ -149,7 +150,10 @@ class HapticController(Block):
         if self.flags["robot_held"]:
             setpoint[:] = 0.0
         if self.governor is not None and scan_ok:
-            govern_cycle(setpoint, self.beams, self.stop_gap_m, setpoint, self.governor)
+            # The gap now, not at the scan: moved on by what the robot has driven since (§7.4). On the
+            # scan's gap alone the limit fell in 15 Hz steps, each a jolt the operator felt.
+            gap = self.stop_gap_m - max(float(twist[0]), 0.0) * scan_age_s
+            govern_cycle(setpoint, self.beams, gap, setpoint, self.governor)
         self._blind_policy(not scan_ok, setpoint)
         out.force.publish()
         out.environment_force.publish()
