@@ -268,13 +268,6 @@ class BrakingFieldParams:
     """Longitudinal cue at full risk and full handle ramp (≤ 8 N target, §6)."""
     z_ramp_m: Annotated[float, Gt(0)] = 0.02
     """z_g: the cue ramps over the first 2 cm of forward push (300 N/m slope, inside the L0 budget)."""
-    release_time_s: Annotated[float, Ge(0)] = 0.0
-    """How long the push's share of the cue takes to fade once the hand eases off (0: at once, the cue
-    follows the handle). A cue that vanishes the moment the operator yields invites another push (the
-    pumping of docs/hallway-experiment.md §8); held, it keeps saying "stop" through the operator's
-    reaction time. The handle's centre is never crossed: within contact_m of it the cue fades with z."""
-    contact_m: Annotated[float, Gt(0)] = 0.002
-    """Within this much of the centre the held cue ramps to zero with the handle (keeps it continuous)."""
     window_rear_m: Annotated[float, Ge(0)] = 0.5
     """Side window reaches this far behind the body."""
     window_ahead_m: Annotated[float, Ge(0)] = 1.5
@@ -344,7 +337,6 @@ class BrakingField(ForceModel):
         self._corridor_gap = math.inf
 
     def reset(self) -> None:
-        self.push_held = 0.0
         self.risk.fill(0.0)
         self.gap_m = math.inf
         self.rho_brake = self.rho_prox = 0.0
@@ -398,12 +390,7 @@ class BrakingField(ForceModel):
         r_right += _step_towards(r_right, _sat01((start - c_right) / band), step)
         risk[0], risk[1], risk[2] = r_z, r_left, r_right
         z = float(handle_pos[HANDLE_Z])
-        push = _sat01(-z / p.z_ramp_m)
-        if p.release_time_s > 0.0:  # the push's share fades no faster than release_time_s, never past the centre
-            held = max(push, self.push_held - p.period_s / p.release_time_s)
-            self.push_held = held
-            push = min(held, _sat01(-z / p.contact_m))
-        fz = BACKWARD_FORCE_Z * p.fz_max_n * r_z * push if z < 0.0 else 0.0
+        fz = BACKWARD_FORCE_Z * p.fz_max_n * r_z * _sat01(-z / p.z_ramp_m) if z < 0.0 else 0.0
         speed_scale = _sat01(abs(vx) / p.lateral_speed_ref_mps)
         # Push towards the side with less risk: the right (+x) when the left wall is nearer.
         fx = RIGHTWARD_FORCE_X * p.fx_max_n * (r_left - r_right) * speed_scale
