@@ -135,6 +135,15 @@ def print_results(run_dir: Path, console: Console) -> None:
             console.print(f"picture: {run_dir / data['picture']}")
 
 
+def missed_targets(run_dir: Path) -> list[str]:
+    """The rows of the run's results*.json whose verdict is "no", as "title: metric" (for `compose --check`)."""
+    missed = []
+    for path in sorted(run_dir.glob("results*.json")):
+        data = json.loads(path.read_text())
+        missed += [f"{data.get('title', path.stem)}: {row['metric']}" for row in data["rows"] if row["ok"] is False]
+    return missed
+
+
 def progress_line(system, console: Console, every_s: float = 0.5) -> None:
     """One updating status line while a system runs (a daemon thread: never the cycle's business)."""
     import time
