@@ -6,7 +6,8 @@ send/receive the process data, read the sensors, step the platform velocity cont
 (0.2 m/s forward). The EtherCAT watchdog runs SOEM's slave check in its own thread, as in
 systems/hallway_ethercat.yaml (exchange SCHED_FIFO 39, watchdog 40, emulator 45). Then a
 wheel is lost and powered back several times; each time it measures how long until the
-controller is held (zero velocity setpoint) and until every slave is back in OP.
+controller is held (zero velocity setpoint) and until every slave is back in OP. Losing wheel_3
+also takes wheel_4, wired behind it, off the segment until wheel_3 has power again.
 
 Measures: round-trip time of send+receive, working-counter errors, missed cycles, CPU of
 the master's process and of the emulator's. Run as root:
@@ -27,12 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
+from hapticop.blocks.ethercat import SMARTWHEEL_LAYOUT
 from hapticop.devices.ethercat.emulator.ropod_segment import EK1100, EK1122, SWMC
 from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
 from hapticop.devices.ethercat.master import ExpectedSlave, SoemMaster
 from hapticop.devices.ethercat.recovery import SlaveCheck
 from hapticop.devices.ropod import PlatformVelocityController
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, new_rx_image, new_tx_image
+from hapticop.devices.ropod.pdo import new_rx_image, new_tx_image
 from hapticop.runtime.clock import RealtimeClock
 
 PERIOD_NS = 1_000_000
@@ -87,10 +89,10 @@ class Watchdog(threading.Thread):
 
 def run(seconds: float, losses: int) -> dict:
     clock = RealtimeClock()
-    expected = [ExpectedSlave(n, p, *((RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else (0, 0)))
+    expected = [ExpectedSlave(n, p, *SMARTWHEEL_LAYOUT) if p == SWMC else ExpectedSlave(n, p)
                 for n, p in zip(NAMES, PRODUCTS)]
     with Sandbox() as box:
-        master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=2000)
+        master = SoemMaster(box.interface, expected, receive_timeout_us=2000, frame_timeout_us=2000, cycle_ns=PERIOD_NS)
         master.open()
         rx, tx = new_rx_image(4), new_tx_image(4)
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import gc
+import os
+import threading
 from typing import Literal
 
 import numpy as np
@@ -39,7 +42,7 @@ class Stuck(Block):
 
 
 class NoiseParams(Params):
-    sigma: float = 1.0
+    sigma: float = Field(1.0, ge=0)
 
 
 class Noise(Block):
@@ -102,6 +105,58 @@ class ConstantTwist(Block):
         out = self.outputs.velocity_setpoint
         out.value[:] = 0.0 if held else self.params.twist
         out.publish()
+
+
+class HeldHandleParams(Params):
+    push_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class HeldHandle(Block):
+    """Stands for the Falcon's handle: at its origin until `go`, then held at `push_m` (a hand
+    that pushes and keeps pushing), so the real haptic controller drives."""
+
+    Params = HeldHandleParams
+    outputs = {"position": Port("float64", (3,), "m"), "velocity": Port("float64", (3,), "m/s")}
+    flags_read = {"go": "the haptic loop runs: push"}
+
+    def compute(self):
+        self.outputs.position.value[:] = self.params.push_m if self.flags["go"] else 0.0
+        self.outputs.velocity.value[:] = 0.0
+        self.outputs.position.publish()
+        self.outputs.velocity.publish()
+
+
+class OpenScan(Block):
+    """Stands for the LIDAR in open space: every beam of the TiM561's 270 degrees sees nothing
+    within 20 m, a fresh scan every cycle."""
+
+    outputs = {"ranges": Port("float32", (811,), "m"), "angles": Port("float32", (811,), "rad")}
+
+    def create(self):
+        self.outputs.angles.value[:] = np.linspace(-0.75 * np.pi, 0.75 * np.pi, 811)
+        self.outputs.ranges.value[:] = 20.0
+
+    def compute(self):
+        self.outputs.angles.publish()
+        self.outputs.ranges.publish()
+
+
+class SetpointWatch(Block):
+    """Reads a velocity setpoint and keeps, in this process, every change between zero and motion."""
+
+    inputs = {"velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s")}
+    zero_changes: list[bool] = []  # True: the setpoint became zero; False: it commands motion again
+
+    def create(self):
+        self.zero = True
+
+    def compute(self):
+        port = self.inputs.velocity_setpoint
+        if port.valid:
+            zero = not port.value.any()
+            if zero != self.zero:
+                self.zero = zero
+                SetpointWatch.zero_changes.append(zero)
 
 
 class Simulator(Block):
@@ -250,3 +305,33 @@ class Gain(Block):
     def clean(self):
         (self.run_dir / f"{self.name}.gains").write_text(" ".join(f"{g:g}" for g in self.seen))
         (self.run_dir / f"{self.name}.retuned").write_text(repr(self.retuned))
+
+
+class WhatItRunsWith(Block):
+    """Writes, once it runs, where it runs and what the garbage collector's permanent generation
+    holds (gc.freeze), for a test to read from outside the process."""
+
+    def create(self):
+        self.told = False
+
+    def compute(self):
+        if not self.told:
+            self.told = True
+            told = self.run_dir / f"{self.name}.runs"
+            told.with_suffix(".part").write_text(f"{os.getpid()} {threading.get_native_id()} {gc.get_freeze_count()}")
+            told.with_suffix(".part").rename(told)  # whole, or not there
+
+
+class SameName(Block):
+    """Declares 'force' both in and out: a stream could not tell them apart."""
+
+    inputs = {"force": Port("float64", (3,), "N")}
+    outputs = {"force": Port("float64", (3,), "N")}
+
+
+class BadDeclaration(Block):
+    """Its ports cannot be worked out: an author's bug."""
+
+    @classmethod
+    def interface(cls, params):
+        raise ZeroDivisionError("division by zero")

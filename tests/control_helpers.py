@@ -97,9 +97,10 @@ def answered_or_busy(reply: dict) -> bool:
     return reply.get("ok") is True or (reply.get("ok") is False and reply.get("error", "").startswith("busy"))
 
 
-def while_running(tmp_path: Path, work) -> None:
-    """Run a real system (real-time clock, control socket) and call `work(socket, system)` once it
-    runs; the system stops when `work` returns, and whatever `work` raised is raised here."""
+def while_running(tmp_path: Path, work, text: str | None = None, ready: str = "recorder") -> None:
+    """Run a real system (real-time clock, control socket; `text`, or the pipeline) and call
+    `work(socket, system)` once its activity `ready` runs; the system stops when `work` returns,
+    and whatever `work` raised is raised here."""
     path = tmp_path / "s.sock"
     errors: list[BaseException] = []
 
@@ -107,7 +108,7 @@ def while_running(tmp_path: Path, work) -> None:
         def talk() -> None:
             try:
                 deadline = time.monotonic() + 20
-                while not (path.exists() and system.state("recorder") is State.RUNNING):
+                while not (path.exists() and system.state(ready) is State.RUNNING):
                     assert time.monotonic() < deadline, "the system did not start"
                     time.sleep(0.02)
                 work(path, system)
@@ -117,7 +118,8 @@ def while_running(tmp_path: Path, work) -> None:
                 system.request_shutdown()
         threading.Thread(target=talk, daemon=True).start()
 
-    result = compose(tmp_path, pipeline(), clock="realtime", duration="120s", on_start=operator, control=str(path))
+    result = compose(tmp_path, text or pipeline(), clock="realtime", duration="120s", on_start=operator,
+                     control=str(path))
     if errors:
         raise errors[0]
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons

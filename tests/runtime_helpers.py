@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import logging
 import textwrap
+import threading
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -23,6 +25,42 @@ def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name
                          run_dir=tmp_path / f"run-{name}", shutdown_timeout_ns=parse_duration_ns(shutdown_timeout),
                          echo=False, control=control)
     return run_system(validated, options, on_start=on_start)
+
+
+PATIENCE_S = 30.0  # what a condition may take on a loaded machine: a bound on hangs, never a speed requirement
+
+
+def run_until(tmp_path, text: str, condition, what: str, name: str = "c") -> RunResult:
+    """Run `text` on the wall clock until `condition(system)` holds, then shut it down: a test
+    waits for what it checks to happen, not for a duration it hopes is long enough. The run
+    fails the test if the condition does not hold within PATIENCE_S."""
+    missed: list[str] = []
+
+    def operator(system) -> None:
+        def watch() -> None:
+            deadline = time.monotonic() + PATIENCE_S
+            try:
+                while not condition(system):
+                    if time.monotonic() > deadline:
+                        missed.append(f"never happened within {PATIENCE_S:g} s: {what}")
+                        return
+                    time.sleep(0.01)
+            except Exception as error:  # noqa: BLE001 - the test fails on it, in its own thread
+                missed.append(f"the condition raised {error!r}")
+            finally:
+                system.request_shutdown()
+        threading.Thread(target=watch, daemon=True).start()
+
+    result = compose(tmp_path, text, clock="realtime", duration=f"{PATIENCE_S * 4:g}s", on_start=operator, name=name)
+    assert not missed, missed[0]
+    return result
+
+
+def steps(system, activity: str) -> int:
+    """How many times `activity` has been stepped so far, wherever it runs (from the shared region)."""
+    from hapticop.runtime.report import timing
+
+    return timing(system.region, system.composition)["activities"][activity]["steps"]
 
 
 def standalone(block_class, name: str, params: dict, run_dir, clock, seed: int = 0):

@@ -97,3 +97,12 @@ def test_console_script_never_shows_a_traceback(tmp_path):
     assert result.returncode == 1
     assert "Traceback" not in result.stdout + result.stderr
     assert "cannot read the file" in result.stdout
+
+
+def test_version_and_counted_nouns():
+    from hapticop import __version__
+
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0 and result.output.strip() == f"hapticop {__version__}"
+    result = runner.invoke(app, ["validate", str(BAD)])
+    assert result.exit_code == 1 and result.output.rstrip().endswith("FAILED (1 error, 0 warnings)")

@@ -186,7 +186,8 @@ def test_socket_path_rules(monkeypatch):
     (b"\x00\xff\xfe garbage\n", "not JSON"),
     (b'{"a": NaN}\n', "NaN is not a number a request may carry"),
     (b'{"a": -Infinity}\n', "-Infinity is not a number a request may carry"),
-    (b'{"a": ' + b"9" * 5000 + b"}\n", "not JSON"),
+    (b'{"a": ' + b"9" * 5000 + b"}\n", "an integer of 5000 digits is longer than a request may carry"),
+    (b'{"a": -' + b"9" * 1001 + b"}\n", "an integer of 1001 digits is longer than a request may carry"),
     (b'{"a": "\\ud800"}', None),  # a lone surrogate, and no newline: the end of the stream ends it
 ])
 def test_every_bad_request_gets_a_one_line_error_and_the_server_goes_on(sock, data, error):

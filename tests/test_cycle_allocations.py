@@ -1,9 +1,11 @@
 """The cycle path leaves nothing allocated behind: threads, LCSMs, streams, coordination."""
 
+import contextlib
 import time
 import tracemalloc
 
 import numpy as np
+import pytest
 
 from hapticop.runtime.system import RunOptions, System
 from hapticop.validation import validate_text
@@ -25,11 +27,44 @@ def _assert_nothing_stays(system, run_cycles) -> None:
     assert grown < 4096, [str(s) for s in after.compare_to(before, "lineno")[:5]]
 
 
-def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
-    text = counting()
+@contextlib.contextmanager
+def _virtual_system(tmp_path, text: str, file: str):
+    """A valid composition built on the virtual clock, its threads started, and `cycles(start, count)`
+    stepping every thread each millisecond; released, its blocks cleaned (links closed, worlds
+    withdrawn: this process runs more tests), however the test ends."""
+    validated = validate_text(text, file)
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    threads = dict(system.built.threads)
+    try:
+        system.start_threads()
+
+        def cycles(start: int, count: int) -> None:
+            for i in range(start, start + count):
+                system.clock.advance_to(i * 1_000_000)
+                for thread in threads.values():
+                    thread.cycle()
+
+        yield system, threads, cycles
+    finally:
+        for thread in threads.values():
+            for runner in thread.runners.values():
+                runner.block.clean()
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()
+
+
+@pytest.mark.parametrize("record", ["", "record: {}"])
+def test_steady_cycles_allocate_nothing_that_stays(tmp_path, record):
+    """Recorded or not: a recorded stream's writer pushes into the recorder's ring too (the
+    recorder itself, here drained by the main process between cycles, is set aside)."""
+    text = counting() + record
     validated = validate_text(text, "alloc.yaml")
     assert validated.report.ok, validated.report.diagnostics
     system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
+    recorder, system.recorder = system.recorder, None
+    assert (recorder is not None) == bool(record)
     try:
         threads = system.built.threads
         main, slow = threads["main"], threads["slow"]
@@ -45,6 +80,9 @@ def test_steady_cycles_allocate_nothing_that_stays(tmp_path):
         cycles(0, 2_000)  # everything is running and warm
         assert system.state("recorder").flag_name == "running"
         _assert_nothing_stays(system, lambda: cycles(2_000, 10_000))
+        if recorder is not None:
+            summary, _ = recorder.stop()
+            assert summary["streams"]["samples"]["written"] > 10_000
     finally:
         system.writer.stop()
         system.built = system.main = None
@@ -57,30 +95,11 @@ def test_the_simulated_falcon_operator_and_world_allocate_nothing_that_stays(tmp
 
     text = ((FIXTURES / "simulation_process.yaml").read_text()
             .replace("time_limit_s: 1.0", "time_limit_s: 60.0").replace("time_limit_s: 5.0", "time_limit_s: 60.0"))
-    validated = validate_text(text, "sim.yaml")
-    assert validated.report.ok, validated.report.diagnostics
-    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
-    try:
-        main, simulation = system.built.threads["main"], system.built.threads["simulation"]
-        operator = simulation.runners["operator"].block
-        system.start_threads()
-
-        def cycles(start, count):
-            for i in range(start, start + count):
-                system.clock.advance_to(i * 1_000_000)
-                main.cycle()
-                simulation.cycle()
-
+    with _virtual_system(tmp_path, text, "sim.yaml") as (system, threads, cycles):
+        operator = threads["simulation"].runners["operator"].block
         cycles(0, 3_000)  # homed, and the operator drives
         assert system.state("falcon").flag_name == "running" and operator.driving_since_ns is not None
         _assert_nothing_stays(system, lambda: cycles(3_000, 5_000))
-    finally:
-        for thread in (main, simulation):
-            for runner in thread.runners.values():
-                runner.block.clean()  # links closed, the world withdrawn: this process runs more tests
-        system.writer.stop()
-        system.built = system.main = None
-        system.region.close()
 
 
 SIMULATED_WHEELS = """
@@ -103,53 +122,22 @@ streams:
 
 def test_the_simulated_wheels_exchange_without_allocating(tmp_path):
     """The master and the simulated ropod talk over their datagram link every cycle."""
-    validated = validate_text(SIMULATED_WHEELS, "wheels.yaml")
-    assert validated.report.ok, validated.report.diagnostics
-    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
-    try:
-        main = system.built.threads["main"]
-
-        def cycles(start, count):
-            for i in range(start, start + count):
-                system.clock.advance_to(i * 1_000_000)
-                main.cycle()
-
+    with _virtual_system(tmp_path, SIMULATED_WHEELS, "wheels.yaml") as (system, _, cycles):
         cycles(0, 2_000)
         assert system.state("ethercat").flag_name == "running" and system.state("ropod_plant").flag_name == "running"
         assert system.flag("ethercat.operational")  # the plant answers every frame
         _assert_nothing_stays(system, lambda: cycles(2_000, 5_000))
-    finally:
-        system.writer.stop()
-        system.built = system.main = None
-        system.region.close()
 
 
 def test_the_virtual_wall_and_its_scripted_hand_allocate_nothing_that_stays(tmp_path):
     """systems/wall.yaml: the Falcon, the wall, the button, the force limit, the simulated Falcon and the hand."""
     from .conftest import SYSTEMS
 
-    validated = validate_text((SYSTEMS / "wall.yaml").read_text(), "wall.yaml")
-    assert validated.report.ok, validated.report.diagnostics
-    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
-    try:
-        main = system.built.threads["main"]
-        system.start_threads()
-
-        def cycles(start, count):
-            for i in range(start, start + count):
-                system.clock.advance_to(i * 1_000_000)
-                main.cycle()
-
+    with _virtual_system(tmp_path, (SYSTEMS / "wall.yaml").read_text(), "wall.yaml") as (system, threads, cycles):
         cycles(0, 2_000)  # homed, the grip in place, the hand about to push
         assert system.state("wall").flag_name == "running" and system.state("limit").flag_name == "running"
         _assert_nothing_stays(system, lambda: cycles(2_000, 1_500))  # pushing into the wall, and holding
-        assert main.runners["limit"].block.outputs.force.value[1] > 0
-    finally:
-        for runner in main.runners.values():
-            runner.block.clean()
-        system.writer.stop()
-        system.built = system.main = None
-        system.region.close()
+        assert threads["main"].runners["limit"].block.outputs.force.value[1] > 0
 
 
 EVERY_EFFECT = """
@@ -191,18 +179,8 @@ streams:
 
 def test_every_haptic_effect_summed_and_limited_allocates_nothing_that_stays(tmp_path):
     """The spring, the fluid, both workspace limits and the wall, added by force_sum, on the simulated Falcon."""
-    validated = validate_text(EVERY_EFFECT, "effects.yaml")
-    assert validated.report.ok, validated.report.diagnostics
-    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
-    try:
-        main = system.built.threads["main"]
-        system.start_threads()
-
-        def cycles(start, count):
-            for i in range(start, start + count):
-                system.clock.advance_to(i * 1_000_000)
-                main.cycle()
-
+    with _virtual_system(tmp_path, EVERY_EFFECT, "effects.yaml") as (system, threads, cycles):
+        main = threads["main"]
         cycles(0, 1_900)
         assert system.state("sum").flag_name == "running"
         _assert_nothing_stays(system, lambda: cycles(1_900, 1_000))  # the hand pushes down through the fields
@@ -213,9 +191,3 @@ def test_every_haptic_effect_summed_and_limited_allocates_nothing_that_stays(tmp
             for name in names:
                 felt[name] = max(felt[name], float(np.abs(main.runners[name].block.outputs.force.value).max()))
         assert all(felt.values()), felt  # each one rendered something
-    finally:
-        for runner in main.runners.values():
-            runner.block.clean()
-        system.writer.stop()
-        system.built = system.main = None
-        system.region.close()

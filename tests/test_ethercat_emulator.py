@@ -93,7 +93,9 @@ def test_the_sii_identifies_each_slave_through_the_eeprom_registers(seg):
     assert products == [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
     vendor = struct.unpack_from("<I", eeprom_read(seg, 0x1001, 0x08))[0]
     assert vendor == 2  # Beckhoff
-    assert eeprom_read(seg, 0x1003, 0x18)[:4] == bytes(4)  # no mailbox on the wheels here
+    assert eeprom_read(seg, 0x1001, 0x18)[:4] == bytes(4)  # the coupler has no mailbox
+    assert struct.unpack("<4H", eeprom_read(seg, 0x1003, 0x18)) == (0x1000, 128, 0x1080, 128)  # the wheels do
+    assert struct.unpack_from("<H", eeprom_read(seg, 0x1003, 0x1C))[0] == 0x0004  # CoE
 
 
 def _categories(eeprom: bytes) -> dict[int, bytes]:
@@ -112,9 +114,11 @@ def test_the_wheel_sii_categories_describe_the_ropod_pdo_layout(seg):
     assert strings[0] >= 1 and strings[2:2 + strings[1]] == b"SWMC"  # string 1 is the name
     assert cats[30][3] == 1  # general: name index
     assert list(cats[40][:2]) == [1, 2]  # FMMU 0 outputs, FMMU 1 inputs
-    sms = [struct.unpack_from("<HHBBBB", cats[41], 8 * i) for i in range(2)]
-    assert sms == [(0x1000, RXPDO_BYTES, 0x64, 0, 1, 3), (0x1100, TXPDO_BYTES, 0x20, 0, 1, 4)]
-    for kind, sm, nbytes, entries in ((51, 0, RXPDO_BYTES, 9), (50, 1, TXPDO_BYTES, 40)):
+    assert cats[30][5] == 0x05  # general: CoE details, SDO and PDO assignment
+    sms = [struct.unpack_from("<HHBBBB", cats[41], 8 * i) for i in range(4)]
+    assert sms == [(0x1000, 128, 0x26, 0, 1, 1), (0x1080, 128, 0x22, 0, 1, 2),  # mailbox out, in
+                   (0x1100, RXPDO_BYTES, 0x64, 0, 1, 3), (0x1180, TXPDO_BYTES, 0x20, 0, 1, 4)]
+    for kind, sm, nbytes, entries in ((51, 2, RXPDO_BYTES, 9), (50, 3, TXPDO_BYTES, 40)):
         index, count, sync = struct.unpack_from("<HBB", cats[kind])
         bits = sum(cats[kind][8 + 8 * i + 5] for i in range(count))
         assert (count, sync, bits) == (entries, sm, 8 * nbytes)
@@ -130,8 +134,16 @@ def test_the_pdo_layout_matches_the_shared_data(seg):
     assert [cats[50][8 + 8 * i + 5] for i in range(len(fields))] == [8 * f["size"] for f in fields]
 
 
+def program_mailboxes(seg):
+    """What SOEM's config_init writes to a slave with a mailbox before PRE-OP: SM0 and SM1 in one datagram."""
+    for position in (2, 3, 5, 6):
+        send(seg, (FPWR, 0x1001 + position, 0x0800, struct.pack("<HHBBBBHHBBBB", 0x1000, 128, 0x26, 0, 1, 0,
+                                                                 0x1080, 128, 0x22, 0, 1, 0)))
+
+
 def test_the_al_state_machine_refuses_illegal_requests_until_acknowledged(seg):
     address(seg)
+    program_mailboxes(seg)
     assert request(seg, 0x1003, 0x08) == (0x01 | 0x10, AL_CODE_INVALID_STATE_CHANGE)  # INIT -> OP
     assert request(seg, 0x1003, 0x02) == (0x11, AL_CODE_INVALID_STATE_CHANGE)  # ignored: not acknowledged
     assert request(seg, 0x1003, 0x12) == (0x02, 0)  # PRE-OP with ACK
@@ -139,19 +151,28 @@ def test_the_al_state_machine_refuses_illegal_requests_until_acknowledged(seg):
 
 
 def program_wheel(seg, station, logical_out, logical_in):
-    """What SOEM's config_map writes: SM0/SM1 from the SII, FMMU0 outputs, FMMU1 inputs."""
-    send(seg, (FPWR, station, 0x0800, struct.pack("<HHBBBB", 0x1000, RXPDO_BYTES, 0x64, 0, 1, 0)),
-         (FPWR, station, 0x0808, struct.pack("<HHBBBB", 0x1100, TXPDO_BYTES, 0x20, 0, 1, 0)),
-         (FPWR, station, 0x0600, struct.pack("<IHBBHBBB3x", logical_out, RXPDO_BYTES, 0, 7, 0x1000, 0, 2, 1)),
-         (FPWR, station, 0x0610, struct.pack("<IHBBHBBB3x", logical_in, TXPDO_BYTES, 0, 7, 0x1100, 0, 1, 1)))
+    """What SOEM's config_map writes: SM2/SM3 from the SII, FMMU0 outputs, FMMU1 inputs."""
+    send(seg, (FPWR, station, 0x0810, struct.pack("<HHBBBB", 0x1100, RXPDO_BYTES, 0x64, 0, 1, 0)),
+         (FPWR, station, 0x0818, struct.pack("<HHBBBB", 0x1180, TXPDO_BYTES, 0x20, 0, 1, 0)),
+         (FPWR, station, 0x0600, struct.pack("<IHBBHBBB3x", logical_out, RXPDO_BYTES, 0, 7, 0x1100, 0, 2, 1)),
+         (FPWR, station, 0x0610, struct.pack("<IHBBHBBB3x", logical_in, TXPDO_BYTES, 0, 7, 0x1180, 0, 1, 1)))
+
+
+def start_sync0(seg, station, start_ns=NS, cycle_ns=NS, now=0):
+    """What SOEM's dcsync0 writes: cyclic unit off, ECAT control, start time, cycle, then SYNC0 on."""
+    send(seg, (FPWR, station, 0x0981, bytes(1)), (FPWR, station, 0x0980, bytes(1)),
+         (FPWR, station, 0x0990, struct.pack("<Q", start_ns)), (FPWR, station, 0x09A0, struct.pack("<I", cycle_ns)),
+         (FPWR, station, 0x0981, bytes([0x03])), now=now)
 
 
 def bring_up(seg):
     address(seg)
+    program_mailboxes(seg)
     send(seg, (BWR, 0, 0x0120, u16(0x12)))  # PRE-OP with ACK, every slave
     for n, position in enumerate((2, 3, 5, 6)):
         station = 0x1001 + position
         program_wheel(seg, station, n * (RXPDO_BYTES + TXPDO_BYTES), n * (RXPDO_BYTES + TXPDO_BYTES) + RXPDO_BYTES)
+        start_sync0(seg, station)
     send(seg, (BWR, 0, 0x0120, u16(0x04)))
     send(seg, (BWR, 0, 0x0120, u16(0x08)))
 
@@ -189,16 +210,98 @@ def test_the_process_data_watchdog_drops_a_wheel_to_safe_op_with_code_0x001b(seg
     assert request(seg, 0x1004, 0x14) == (0x04, 0)  # acknowledged back to SAFE-OP
 
 
-def test_a_lost_slave_is_passed_by_and_comes_back_in_init(seg):
+def test_a_powered_off_wheel_takes_the_wheel_behind_it_off_the_line(seg):
+    """wheel_3 (position 5) feeds wheel_4 (6): without power it passes no frame on. wheel_4 keeps
+    power and its state, until its watchdog fires for want of outputs."""
     bring_up(seg)
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    send(seg, (LRW, 0, 0, bytes(size)), now=NS)
     seg.slaves[5].present = False
-    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 6
-    (_, wkc), = send(seg, (LRW, 0, 0, bytes(4 * (RXPDO_BYTES + TXPDO_BYTES))))
-    assert wkc == 9
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 5
+    (_, wkc), = send(seg, (LRW, 0, 0, bytes(size)), now=2 * NS)
+    assert wkc == 6  # wheel_1 and wheel_2 only
+    assert send(seg, (FPRD, 0x1007, 0x0130, bytes(2)))[0][1] == 0  # wheel_4 does not answer
+    wheel_4 = seg.slaves[6]
+    assert wheel_4.state == 8 and wheel_4.outputs_live  # still driving on the last outputs it had
+    seg.tick(NS + 101 * NS)  # past the default 100 ms with no outputs: it trips
+    assert (wheel_4.al_status, wheel_4.al_code) == (0x14, 0x001B) and not wheel_4.outputs_live
     seg.slaves[5].power_on()
     seg.slaves[5].present = True
     assert seg.slaves[5].state == 1 and seg.slaves[5].station == 0  # freshly powered: INIT, no address
     assert send(seg, (APRD, (-5) & 0xFFFF, 0x0010, bytes(2)))[0] == (u16(0), 1)
+    assert send(seg, (APRD, (-6) & 0xFFFF, 0x0010, bytes(2)))[0] == (u16(0x1007), 1)  # kept its address
+    data, wkc = send(seg, (FPRD, 0x1007, 0x0130, bytes(6)))[0]
+    assert (data[0], struct.unpack_from("<H", data, 4)[0], wkc) == (0x14, 0x001B, 1)
+
+
+def test_the_wiring_follows_the_ports_so_a_junction_branch_falls_alone(seg):
+    assert seg.segment.upstream == [None, 0, 1, 2, 1, 4, 5]
+    seg.slaves[2].present = False  # wheel_1: wheel_2 behind it goes too, the rear junction stays
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 5
+    assert [s.name for s, r in zip(seg.slaves, seg.segment.reached()) if r] == ["EK1100", "EK1122", "EK1122",
+                                                                               "SWMC", "SWMC"]
+    seg.slaves[2].present = True
+    seg.slaves[1].present = False  # the front junction: everything after the coupler
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 1
+    assert seg.segment.behind(1) == [2, 3, 4, 5, 6] and seg.segment.behind(5) == [6]
+
+
+def test_a_cut_cable_leaves_the_far_wheels_powered_until_they_return_in_safe_op_with_the_error(seg):
+    bring_up(seg)
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    send(seg, (LRW, 0, 0, bytes(size)), now=NS)
+    seg.segment.cut.add(5)
+    assert send(seg, (BRD, 0, 0x0000, bytes(2)))[0][1] == 5
+    assert send(seg, (LRW, 0, 0, bytes(size)), now=2 * NS)[0][1] == 6
+    far = seg.slaves[5:7]
+    assert [s.state for s in far] == [8, 8] and all(s.present for s in far)
+    seg.tick(NS + 101 * NS)
+    assert [(s.al_status, s.al_code) for s in far] == [(0x14, 0x001B)] * 2
+    seg.segment.cut.discard(5)
+    for station in (0x1006, 0x1007):  # addresses and error kept: SOEM acknowledges and asks for OP
+        data, wkc = send(seg, (FPRD, station, 0x0130, bytes(6)))[0]
+        assert (data[0], struct.unpack_from("<H", data, 4)[0], wkc) == (0x14, 0x001B, 1)
+        assert request(seg, station, 0x14) == (0x04, 0)
+    send(seg, (LRW, 0, 0, bytes(size)), now=200 * NS)
+    for station in (0x1006, 0x1007):
+        assert request(seg, station, 0x08, now=200 * NS) == (0x08, 0)
+    assert all(s.outputs_live for s in far)
+
+
+def test_the_watchdog_rearms_on_the_next_output_write_and_the_wheel_drives_again(seg):
+    bring_up(seg)
+    wheel = seg.wheels[1]
+    size = 4 * (RXPDO_BYTES + TXPDO_BYTES)
+    commands = bytearray(size)
+    for n in range(4):
+        struct.pack_into("<HH", commands, n * (RXPDO_BYTES + TXPDO_BYTES),
+                         int(Com1.ENABLE1 | Com1.ENABLE2 | Com1.MODE_VELOCITY), 0)
+    send(seg, (LRW, 0, 0, commands), now=NS)
+    assert send(seg, (FPRD, 0x1004, 0x0440, bytes(2)))[0][0] == u16(1)
+    wheel.trip_watchdog()
+    assert send(seg, (FPRD, 0x1004, 0x0440, bytes(2)))[0][0] == u16(0)
+    assert (wheel.al_status, wheel.al_code) == (0x14, 0x001B)
+    assert request(seg, 0x1004, 0x14) == (0x04, 0)  # acknowledged
+    send(seg, (LRW, 0, 0, commands), now=2 * NS)
+    assert send(seg, (FPRD, 0x1004, 0x0440, bytes(2)))[0][0] == u16(1)  # re-armed by the write
+    assert request(seg, 0x1004, 0x08) == (0x08, 0)
+    assert wheel.outputs_live
+    send(seg, (LRW, 0, 0, commands), now=3 * NS)
+    seg.step(3 * NS)
+    seg.step(4 * NS)
+    assert rxpdo_view(seg.rx)["command1"][1] == 0x000B  # its drive gets its commands again
+
+
+def test_a_request_for_init_is_honoured_from_an_error_and_clears_it(seg):
+    bring_up(seg)
+    wheel = seg.wheels[0]
+    wheel.trip_watchdog()
+    assert request(seg, 0x1003, 0x01) == (0x01, 0)  # no acknowledge needed
+    wheel = seg.wheels[2]
+    wheel.raise_error(0x0032, until_ns=50 * NS)  # even while the cause persists
+    assert request(seg, 0x1006, 0x02, now=NS) == (0x14, 0x0032)
+    assert request(seg, 0x1006, 0x01, now=NS) == (0x01, 0)
+    assert request(seg, 0x1006, 0x02, now=NS) == (0x02, 0)  # and the state machine moves on from there
 
 
 def test_a_persisting_al_error_cannot_be_acknowledged_until_its_cause_is_gone(seg):
@@ -264,9 +367,29 @@ def test_the_control_socket_answers_bad_requests_and_keeps_the_segment_running(t
         for payload in bad:
             answer = raw(payload)
             assert answer["ok"] is False and answer["error"], payload[:40]
-        assert control(tmp_path / "control.sock", {"op": "ping"})["ok"] is True
-        status = control(tmp_path / "control.sock", {"op": "status"})
-        assert all(slave["present"] for slave in status["slaves"])  # nothing changed by the bad ones
+        path = tmp_path / "control.sock"
+        nonsense = [{"op": "lose", "slave": 7}, {"op": "lose", "slave": True}, {"op": "lose", "slave": 5.0},
+                    {"op": "lose", "slave": "5"}, {"op": "cut"}, {"op": "cut", "slave": -1},
+                    {"op": "reconnect", "slave": 5}, {"op": "restore", "slave": 5}]
+        for bad_request in nonsense:
+            answer = control(path, bad_request)
+            assert answer["ok"] is False and answer["error"], bad_request
+        assert control(path, {"op": "ping"})["ok"] is True
+        status = control(path, {"op": "status"})
+        assert all(slave["present"] and slave["reached"] for slave in status["slaves"])  # nothing changed
+        assert status["cut"] == []
+        # the faults themselves, and the state they leave, through the same socket
+        assert control(path, {"op": "cut", "slave": 5})["ok"] is True
+        assert control(path, {"op": "cut", "slave": 5})["ok"] is False  # already cut
+        assert control(path, {"op": "lose", "slave": 2})["ok"] is True
+        assert control(path, {"op": "lose", "slave": 2})["ok"] is False  # already off
+        status = control(path, {"op": "status"})
+        assert [s["reached"] for s in status["slaves"]] == [True, True, False, False, True, False, False]
+        assert [s["present"] for s in status["slaves"]] == [True, True, False, True, True, True, True]
+        assert status["cut"] == [5] and [w["live"] for w in status["wheels"]] == [False, False, False, False]
+        assert control(path, {"op": "reconnect", "slave": 5})["ok"] is True
+        assert control(path, {"op": "restore", "slave": 2})["ok"] is True
+        assert all(s["reached"] for s in control(path, {"op": "status"})["slaves"])
     finally:
         stop.set()
         thread.join(5)

@@ -89,3 +89,25 @@ def test_a_segment_of_other_slaves_is_refused_clearly(tmp_path):
     finally:
         master.clean()
         plant.clean()
+
+
+def test_a_slave_fault_is_held_long_enough_for_every_loop_to_see_it():
+    """A wheel that drops out of OP for one cycle raises slave_fault for fault_hold_ms, so the ropod
+    controller on its own thread holds the robot, and a flapping wheel does not jerk it back into motion."""
+    from hapticop.testing import BlockHarness
+
+    harness = BlockHarness("ethercat_watchdog", {"fault_hold_ms": 50.0}, name="watchdog")
+    harness.configure()
+    op, blip = np.full(7, 8, np.uint8), np.array([8, 8, 8, 0x14, 8, 8, 8], np.uint8)
+
+    def cycle(states) -> bool:
+        harness.feed("slave_states", states)
+        harness.feed("working_counter", np.int32(12))
+        harness.step()
+        return bool(harness.flags["slave_fault"])
+
+    assert not any(cycle(op) for _ in range(5))
+    assert cycle(blip)  # one cycle out of OP
+    held = [cycle(op) for _ in range(60)]
+    assert held[:49] == [True] * 49 and held[-5:] == [False] * 5  # 50 ms at 1 kHz, then released
+    assert harness.flags["all_operational"]  # the segment itself was healthy again at once

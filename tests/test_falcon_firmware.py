@@ -12,10 +12,33 @@ from hapticop.devices.falcon.firmware import KNOWN_IMAGES, FirmwareError, KnownI
 IMAGE = b"\xaa\x08" + bytes((i * 13 + 1) & 0xFF for i in range(8490))  # 8492 bytes, like nvent_firmware.bin
 
 
-def test_known_images_are_the_ones_of_the_notes():
-    assert {(i.name, i.size) for i in KNOWN_IMAGES} == {
-        ("nvent_firmware.bin", 8492), ("test_firmware.bin", 7324), ("novint_T0.bin", 7914), ("novint_T2.bin", 7914)}
-    assert all(len(i.sha256) == 64 and int(i.sha256, 16) >= 0 for i in KNOWN_IMAGES)
+# The images as libnifalcon publishes them in its `firmware/` directory (github.com/libnifalcon/libnifalcon,
+# commit f7c727aa): the git blob id each file has in that commit's tree (what `git ls-tree` and GitHub show
+# for it), its size, and the SHA-256 we computed from that blob. Written here by hand from that tree, not from
+# our module, so a wrong or made-up hash in KNOWN_IMAGES fails the test below.
+PUBLISHED = {
+    "nvent_firmware.bin": ("62508b027235510880a57cab7a0dbaff6c4a263c", 8492,
+                           "1119e39c39fab1f37678ea62dfc715b23dd86ee7f13d78f88f707d9f09b896a1"),
+    "test_firmware.bin": ("389cf1adc13f41a42e08c6d5675f708b146ae5a9", 7324,
+                          "b2700d5cd5ca217e48565fb4de5a502a636c53f6e01ebd0cad193e9f84856c6a"),
+    "novint_T0.bin": ("758570c1fb0ebdba39bc15d6cd17c02d7a14b02a", 7914,
+                      "ae838730af34b5822c9c3949859b446614af0410730b832cc17a6ad627ea64a4"),
+    "novint_T2.bin": ("1700777d3cf4d0aa45ede70d21edf37a6c7ad429", 7914,
+                      "e0ae3598670fa1c8d9277bd6943c99b3152b97c400c46c1c42c60de77ff4e816"),
+}
+
+
+def test_known_images_are_the_published_ones():
+    assert {i.name: (i.size, i.sha256) for i in KNOWN_IMAGES} == {
+        name: (size, sha256) for name, (_blob, size, sha256) in PUBLISHED.items()}
+
+
+def test_the_docs_list_the_same_hashes():
+    from .conftest import ROOT
+
+    table = (ROOT / "docs" / "devices" / "falcon.md").read_text()
+    for name, (_blob, size, sha256) in PUBLISHED.items():
+        assert f"| `{name}` | {size} | `{sha256}` |" in table, name
 
 
 def test_a_missing_file_says_where_to_get_one(tmp_path):

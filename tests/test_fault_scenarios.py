@@ -19,6 +19,10 @@ from hapticop.sim.faults import fault_windows, reactions
 from .conftest import SYSTEMS
 from .runtime_helpers import compose
 
+# The shared setup runs every fault scenario of the hallway under the virtual clock (about a minute
+# on two idle cores): more than pytest's per-test bound when the machine is busy, never a hang.
+pytestmark = pytest.mark.timeout(360)
+
 
 @pytest.fixture(scope="module")
 def faults_run(tmp_path_factory):

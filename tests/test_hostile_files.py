@@ -131,6 +131,15 @@ def test_nul_byte_in_extends_is_located(tmp_path):
     assert line.startswith(f"{child}:2:") and "'base\\0.yaml', which this file extends" in line
 
 
+def test_an_integer_too_long_to_read_is_located(tmp_path):
+    file = tmp_path / "huge.yaml"
+    file.write_text(MINIMAL.format(period="1ms", dtype="int64", max_age="1s", extra="").replace(
+        "block: counter", "block: counter\n    params: {step: " + "9" * 5000 + "}"))
+    line = refused(runner.invoke(app, ["validate", str(file)]), file)
+    assert line.startswith(f"{file}:16:20: error:") and "an integer of 5000 digits" in line, line
+    assert "set_int_max_str_digits" not in line
+
+
 def test_invalid_utf8_is_refused(tmp_path):
     file = tmp_path / "latin1.yaml"
     file.write_bytes(b"version: 1\nname: caf\xe9\n")

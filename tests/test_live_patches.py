@@ -1,6 +1,7 @@
 """Live reconfiguration: scripted patches under the virtual clock, socket patches on a live system."""
 
-import threading
+import subprocess
+import sys
 import time
 
 import pytest
@@ -10,6 +11,8 @@ from hapticop.runtime.control import request
 from hapticop.runtime.system import ExitStatus
 from hapticop.validation import validate_text
 
+from .conftest import ROOT
+from .control_helpers import PATIENCE_S, while_running
 from .runtime_helpers import compose
 
 BASE = """
@@ -85,37 +88,105 @@ def test_scripted_runs_are_deterministic(tmp_path):
     assert (tmp_path / "run-a" / "probe.log").read_text() == (tmp_path / "run-b" / "probe.log").read_text()
 
 
+def hapticop_patch(path, patch: str, tmp_path, *extra: str) -> subprocess.CompletedProcess:
+    """`hapticop patch SOCKET FILE` as a user types it, in its own process."""
+    file = tmp_path / f"patch-{abs(hash(patch))}.yaml"
+    file.write_text(patch)
+    return subprocess.run([sys.executable, "-m", "hapticop.cli", "patch", str(path), str(file), *extra],
+                          cwd=ROOT, capture_output=True, text=True, timeout=PATIENCE_S * 6)
+
+
+def wait_for(condition, what: str) -> None:
+    """Until `condition()` holds; fails (instead of hanging) when it never does."""
+    deadline = time.monotonic() + PATIENCE_S
+    while not condition():
+        assert time.monotonic() < deadline, f"never happened: {what}"
+        time.sleep(0.005)
+
+
 @pytest.mark.parametrize("deploy", ["thread", "process"])
 def test_patches_on_a_live_realtime_system(tmp_path, deploy):
-    socket = tmp_path / "live.sock"
-    replies = {}
+    """A parameter change sent with `hapticop patch` reaches the running block; a refused patch,
+    even one that also carries a valid change, leaves the description and the block as they were."""
 
-    def operator(system):
-        def talk():
-            deadline = time.monotonic() + 20
-            while time.monotonic() < deadline and not (socket.exists() and system.state("relay") is State.RUNNING):
-                time.sleep(0.02)
-            replies["dry"] = request(socket, {
-                "op": "patch", "dry_run": True,
-                "text": "- {op: add, path: /activities/relay/params, value: {unit: '1'}}"})
-            replies["refused"] = request(socket, {"op": "patch", "text": "threads: {worker: {period: 3ms}}"})
-            replies["invalid"] = request(socket, {
-                "op": "patch", "text": "threads: {main: {schedules: {0: [mediator, source, ghost]}}}"})
-            replies["disable"] = request(socket, {"op": "patch", "text": "threads: {worker: {schedules: {0: []}}}"})
-            replies["status"] = request(socket, {"op": "status"})
-        threading.Thread(target=talk, daemon=True).start()
+    def work(path, system):
+        source = system.runners["source"].block
+        assert source.params.step == 1
 
-    result = compose(tmp_path, base(deploy), clock="realtime", duration="3s", on_start=operator, control=str(socket))
-    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
-    assert replies["dry"]["ok"] and replies["dry"]["applied"] is False and "+" in replies["dry"]["diff"]
-    assert not replies["refused"]["ok"]
-    assert replies["refused"]["diagnostics"][0]["rule"] == "patch-unsupported"
-    assert not replies["invalid"]["ok"] and replies["invalid"]["diagnostics"][0]["rule"] == "unknown-activity"
-    assert replies["disable"]["ok"] and replies["disable"]["applied"] is True
-    status = replies["status"]["status"]
-    assert status["threads"]["worker"]["schedule"] == 0 and status["activities"]["relay"]["state"] == "running"
-    # the relay stopped being stepped once disabled: far fewer steps than the 1500 cycles of 3 s
-    assert result.timing["activities"]["relay"]["steps"] < 1400
+        dry = request(path, {"op": "patch", "dry_run": True,
+                             "text": "- {op: add, path: /activities/relay/params, value: {unit: '1'}}"})
+        assert dry["ok"] and dry["applied"] is False and "+" in dry["diff"]
+        assert system.composition.activities["relay"].params == {}
+
+        applied = hapticop_patch(path, "activities: {source: {params: {step: 5}}}", tmp_path)
+        assert applied.returncode == 0 and applied.stdout.strip().endswith("applied"), applied.stderr
+        assert system.composition.activities["source"].params == {"step": 5}
+        assert source.params.step == 5  # the running block holds the new value...
+        wait_for(lambda: system.state("source") is State.RUNNING, "the counter runs again after reconfiguring")
+        counted = source.count
+        wait_for(lambda: source.count >= counted + 50, "the counter counts on")
+        assert (source.count - counted) % 5 == 0  # ...and counts with it
+
+        before = system.composition.model_dump()
+        for refused, rule in [
+            ("threads: {worker: {period: 3ms}}", "patch-unsupported"),
+            ("activities: {source: {params: {step: 7}}}\nthreads: {worker: {period: 3ms}}", "patch-unsupported"),
+            ("threads: {main: {schedules: {0: [mediator, source, ghost]}}}", "unknown-activity"),
+            ("activities: {source: {params: {step: seven}}}", None),
+        ]:
+            reply = hapticop_patch(path, refused, tmp_path)
+            assert reply.returncode == 1 and "the system runs on unchanged" in reply.stderr, (refused, reply.stderr)
+            assert rule is None or rule in reply.stderr, (refused, reply.stderr)
+            assert system.composition.model_dump() == before, refused
+            assert source.params.step == 5, refused
+        counted = source.count
+        wait_for(lambda: source.count >= counted + 50, "the counter counts on")
+        assert (source.count - counted) % 5 == 0
+
+        disabled = request(path, {"op": "patch", "text": "threads: {worker: {schedules: {0: []}}}"})
+        assert disabled["ok"] and disabled["applied"] is True
+        status = request(path, {"op": "status"})["status"]
+        assert status["threads"]["worker"]["schedule"] == 0 and status["activities"]["relay"]["state"] == "running"
+        # the relay is no longer stepped, though its thread goes on cycling
+        steps = status["timing"]["activities"]["relay"]["steps"]
+        cycles = status["timing"]["threads"]["worker"]["cycles"]
+        wait_for(lambda: request(path, {"op": "status"})["status"]["timing"]["threads"]["worker"]["cycles"]
+                 > cycles + 20, "the worker thread cycles on")
+        assert request(path, {"op": "status"})["status"]["timing"]["activities"]["relay"]["steps"] == steps
+
+    while_running(tmp_path, work, text=base(deploy), ready="relay")
+
+
+def test_the_haptic_controllers_gain_patched_live_reaches_the_running_controller(tmp_path):
+    """The hallway on the wall clock: `hapticop patch` changes the centring spring of the running haptic
+    controller, whose PD is rebuilt with it; gains it must refuse (NaN, negative, or beside a change it
+    cannot make live) leave the description, the block's parameters and its PD as they were."""
+    from .conftest import SYSTEMS
+
+    def work(path, system):
+        haptic = system.runners["haptic"].block
+        assert haptic.pd.params.kp_n_per_m == 55.0
+
+        applied = hapticop_patch(path, "activities: {haptic: {params: {centring: {kp_n_per_m: 30.0}}}}", tmp_path)
+        assert applied.returncode == 0 and applied.stdout.strip().endswith("applied"), applied.stderr
+        centring = system.composition.activities["haptic"].params["centring"]
+        assert centring == {"kp_n_per_m": 30.0, "kd_ns_per_m": 0.2, "force_limit_n": 10.0}  # merged, not replaced
+        assert haptic.params.centring.kp_n_per_m == 30.0
+        wait_for(lambda: haptic.built_for is haptic.params, "the controller rebuilt its laws with the new gain")
+        assert haptic.pd.params.kp_n_per_m == 30.0 and haptic.pd.params.kd_ns_per_m == 0.2
+
+        before, params, pd = system.composition.model_dump(), haptic.params, haptic.pd
+        for refused in [
+            "activities: {haptic: {params: {centring: {kp_n_per_m: .nan}}}}",
+            "- {op: replace, path: /activities/haptic/params/centring/kp_n_per_m, value: -5.0}",
+            "activities: {haptic: {params: {centring: {kp_n_per_m: 40.0}}}}\nthreads: {main: {period: 2ms}}",
+        ]:
+            reply = request(path, {"op": "patch", "text": refused}, timeout=PATIENCE_S)
+            assert reply["ok"] is False and reply["diagnostics"], (refused, reply)
+            assert system.composition.model_dump() == before, refused
+            assert haptic.params is params and haptic.pd is pd and pd.params.kp_n_per_m == 30.0, refused
+
+    while_running(tmp_path, work, text=(SYSTEMS / "hallway.yaml").read_text(), ready="haptic")
 
 
 NOT_FINITE = [
@@ -127,8 +198,6 @@ NOT_FINITE = [
 
 
 def test_a_live_patch_with_a_value_that_is_not_finite_is_refused_and_changes_nothing(tmp_path):
-    from .control_helpers import while_running
-
     def work(path, system):
         before = system.composition.model_dump()
         finite = request(path, {"op": "patch", "dry_run": True,

@@ -128,3 +128,14 @@ def test_status_says_what_a_configuring_activity_waits_for(tmp_path):
     assert stuck["state"] == "capability_configuration"
     assert stuck["waiting_for"] == "a 'capability_configuration' that never completes (a test)"
     assert replies["status"]["status"]["activities"]["mediator"]["waiting_for"] is None
+
+
+def test_a_re_configuration_after_the_start_does_not_wait_for_a_re_centred_handle():
+    harness = BlockHarness(HapticController, name="haptic")
+    harness.flags["resources_ready"] = True
+    harness.feed("handle_position", [0.0, 0.0, 0.0])
+    harness.configure(max_cycles=10)
+    harness.feed("handle_position", [0.03, 0.0, 0.0])  # the operator holds it 30 mm off centre
+    harness.inputs.handle_position.refresh()
+    assert harness.block.configure_capabilities() is True
+    assert harness.context.waiting is None

@@ -49,3 +49,23 @@ def test_new_refuses_a_bad_name_and_an_existing_file(tmp_path):
     result = runner.invoke(app, ["new", "app", "--dir", str(tmp_path)])
     assert result.exit_code == 2 and "exists; --force overwrites" in result.output
     assert (tmp_path / "app.yaml").read_text() == before
+
+
+@pytest.mark.parametrize("block, message", [
+    ("tests.blocks:SameName", "declares 'force' as both an input and an output port"),
+    ("tests.blocks:BadDeclaration", "could not declare its ports for these parameters: ZeroDivisionError"),
+])
+def test_an_authors_block_that_cannot_declare_its_ports_is_a_located_finding(block, message):
+    from hapticop.validation import validate_text
+
+    text = f"""
+version: 1
+threads:
+  main: {{period: 1ms, deploy: main, schedules: {{0: [mediator, mine]}}}}
+activities:
+  mediator: {{block: mediator}}
+  mine: {{block: "{block}"}}
+"""
+    errors = validate_text(text, "mine.yaml").report.errors
+    assert [(e.rule, e.line) for e in errors] == [("block-declaration", 7)], [e.to_text() for e in errors]
+    assert message in errors[0].message

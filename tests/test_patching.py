@@ -220,7 +220,9 @@ def test_validate_patched_returns_the_validated_composition(hallway):
         ("threads: {lidar: {period: 20Hz}}", ("threads", "lidar", "period")),
         ("threads: {fieldbus: {priority: 38}}", ("threads", "fieldbus", "priority")),
         ("- {op: add, path: /threads/lidar/cpus, value: [1]}", ("threads", "lidar", "cpus")),
-        ("coordination: {nets: {mediator: {marking: {START: 2}}}}", ("coordination", "nets", "mediator")),
+        # one cleaning stage instead of two: the written-out mediator net changes, its flag map does not
+        ("coordination: {standard: {clean: {haptic: null, devices: [haptic, falcon, lidar, ethercat, ropod, "
+         "ethercat_watchdog]}}}", ("coordination", "nets", "mediator")),
         ("streams: {scan_ranges: {policy: {kind: queue}}}", ("streams", "scan_ranges", "policy")),
     ],
 )
@@ -246,7 +248,7 @@ def test_plan_lists_unsupported_changes_without_refusing(hallway):
 def test_doc_changes_are_not_changes(hallway):
     tree, old = hallway
     new_tree = apply_patch(tree, {"threads": {"lidar": {"doc": "x"}},
-                                  "coordination": {"nets": {"mediator": {"doc": "y"}}}})
+                                  "coordination": {"standard": {"doc": "y"}}})
     assert plan_changes(old, validate_patched(new_tree).composition).empty
     assert ChangePlan().empty
 
@@ -347,3 +349,10 @@ def test_changing_max_age_is_a_live_stream_change(hallway):
     plan = plan_changes(old, validate_patched(new_tree).composition)
     assert plan.changed_streams == ["scan_ranges"] and not plan.unsupported
     assert "stream 'scan_ranges': max_age 200ms -> 300ms" in plan.describe()
+
+
+def test_what_a_run_records_cannot_change_live(hallway):
+    tree, old = hallway
+    new_tree = apply_patch(tree, {"record": {"streams": ["handle_force"]}})
+    plan = plan_changes(old, validate_patched(new_tree).composition)
+    assert [path for path, _ in plan.unsupported] == [("record",)]

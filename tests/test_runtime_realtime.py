@@ -9,6 +9,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,11 +18,13 @@ from hapticop.composition.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import ROOT
-from .runtime_helpers import IGNORES_SHUTDOWN, compose, counting, pipeline
+from .runtime_helpers import IGNORES_SHUTDOWN, compose, counting, pipeline, run_until, steps
 
 
 def test_threads_in_the_main_process(tmp_path):
-    result = compose(tmp_path, pipeline("thread"), clock="realtime", duration="600ms")
+    result = run_until(tmp_path, pipeline("thread"),
+                       lambda system: getattr(system.runners["recorder"].block, "n", 0) > 10,
+                       "the recorder recorded 10 samples")
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert all(state is State.DONE for state in result.states.values())
     samples = np.load(tmp_path / "run-c" / "recorder.npz")["samples"]
@@ -29,7 +32,9 @@ def test_threads_in_the_main_process(tmp_path):
 
 
 def test_a_thread_in_its_own_process_shares_the_same_streams(tmp_path):
-    result = compose(tmp_path, pipeline("process"), clock="realtime", duration="2s")
+    result = run_until(tmp_path, pipeline("process"),
+                       lambda system: system.state("recorder") is State.RUNNING and steps(system, "recorder") > 20,
+                       "the recorder, in its own process, stepped 20 times while running")
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert result.states["threads.slow"] is State.DONE and result.states["recorder"] is State.DONE
     data = np.load(tmp_path / "run-c" / "recorder.npz")
@@ -56,15 +61,16 @@ def test_a_killed_process_is_detected_and_reported(tmp_path):
     assert result.states["threads.main"] is State.DONE  # the rest still shut down cleanly
 
 
-def _compose_process(tmp_path, text):
+def _compose_process(tmp_path, text, ready: str | None = "noise"):
+    """`hapticop compose` in a process of its own, returned once activity `ready` runs."""
     path = tmp_path / "c.yaml"
     path.write_text(text)
     run_dir = tmp_path / "run"
     process = subprocess.Popen([sys.executable, "-m", "hapticop.cli", "compose", str(path), "--run-dir", str(run_dir)],
                                cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    log = run_dir / "noise.log"
+    log = run_dir / f"{ready}.log"
     deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and not (log.exists() and "-> running" in log.read_text()):
+    while ready and time.monotonic() < deadline and not (log.exists() and "-> running" in log.read_text()):
         time.sleep(0.02)
     return process
 
@@ -158,28 +164,45 @@ activities:
 """
 
 
-@pytest.mark.parametrize("wake, least, most", [("data", 50, None), ("deadline", 0, 12)])
-def test_a_data_woken_thread_cycles_when_its_device_sends(tmp_path, wake, least, most):
-    compose(tmp_path, DATA_WOKEN.replace("WAKE", f"wake: {wake},"), clock="realtime", duration="2s")
+def test_a_data_woken_thread_cycles_when_its_device_sends(tmp_path):
+    """Woken by its device, the 250 ms thread answers 200 round trips, which its deadlines alone
+    would take 50 s to allow (longer than the run may wait for them)."""
+    result = run_until(tmp_path, DATA_WOKEN.replace("WAKE", "wake: data,"),
+                       lambda system: getattr(system.runners["pingpong"].block, "round_trips", 0) >= 200,
+                       "200 round trips with the device")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert int((tmp_path / "run-c" / "pingpong.round_trips").read_text()) >= 200
+
+
+def test_a_deadline_woken_thread_answers_its_device_once_a_cycle(tmp_path):
+    """Woken by its deadlines only, the thread answers at most once per cycle, however eagerly
+    its device sends: the round trips are counted against the thread's own cycles."""
+    result = run_until(tmp_path, DATA_WOKEN.replace("WAKE", "wake: deadline,"),
+                       lambda system: getattr(system.runners["pingpong"].block, "round_trips", 0) >= 3,
+                       "3 round trips with the device")
     round_trips = int((tmp_path / "run-c" / "pingpong.round_trips").read_text())
-    assert round_trips >= least
-    assert most is None or round_trips <= most  # one per cycle: the reply waits for the deadline
+    device = result.timing["threads"]["device"]
+    assert 3 <= round_trips <= device["cycles"]
+    # and the thread cycled on its deadlines: no more cycles than the main loop's periods allow
+    main = result.timing["threads"]["main"]
+    assert device["cycles"] <= (main["cycles"] + main["missed_deadlines"]) // 250 + 2
 
 
 def test_the_hallway_in_real_time_scans_from_a_simulation_process_and_leaves_nothing_behind(tmp_path):
     """The simulated scanner on the simulation thread, in a process of its own outside the
     real-time loops, scans for the LIDAR thread in another; all of it gone after the run."""
     import re
-    from pathlib import Path
 
     text = (ROOT / "systems" / "hallway.yaml").read_text()
-    result = compose(tmp_path, text, clock="realtime", duration="2s", name="hallway")
-    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     run = tmp_path / "run-hallway"
+    result = run_until(tmp_path, text, lambda system: (
+        "LIDAR streaming" in _read(run / "lidar.log") and system.state("haptic") is State.RUNNING
+        and steps(system, "lidar") > 5 and steps(system, "lidar_sim") > 5),
+        "the LIDAR streams scans from the simulated scanner and the haptic controller runs", name="hallway")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert result.timing["activities"]["lidar"]["steps"] > 5
     assert result.timing["activities"]["lidar_sim"]["steps"] > 5
-    assert "LIDAR streaming" in (run / "lidar.log").read_text()
-    assert result.timing["activities"]["haptic"]["steps"] > 500
+    assert result.timing["activities"]["haptic"]["steps"] > 0
     pids = {thread: int(re.search(r"loop ended after \d+ cycles \(pid (\d+)\)",
                                   (run / f"thread-{thread}.log").read_text()).group(1))
             for thread in ("simulation", "lidar")}
@@ -215,7 +238,6 @@ def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
     """SIGKILL leaves the main process no chance to shut down: its children notice, clean their
     activities (a device block would bring its device to a safe state; here the recorder saves
     what it recorded) and end, and the shared memory goes with them."""
-    shm_before = {name for name in os.listdir("/dev/shm") if name.startswith("psm_")}
     process = _compose_process(tmp_path, pipeline("process"))
     run = tmp_path / "run"
     deadline = time.monotonic() + 30
@@ -223,6 +245,8 @@ def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
         time.sleep(0.02)
     children = [pid for pid in _children(process.pid) if "process_main" in _cmdline(pid) or _is_spawned(pid)]
     assert children, "the slow thread's process was not found"
+    shared = _shared_memory(process.pid)  # this run's own segments, not whatever else runs on the machine
+    assert shared, "the run maps no shared memory"
     process.kill()
     process.wait(timeout=10)
     deadline = time.monotonic() + 10
@@ -231,9 +255,16 @@ def test_when_the_main_process_is_killed_its_children_clean_and_leave(tmp_path):
     assert not any(_alive(pid) for pid in children), "a child outlived its parent"
     assert (run / "recorder.npz").exists()  # the recorder's clean hook ran: its activity was cleaned
     deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and {n for n in os.listdir("/dev/shm") if n.startswith("psm_")} - shm_before:
+    while time.monotonic() < deadline and any(path.exists() for path in shared):
         time.sleep(0.05)
-    assert not {n for n in os.listdir("/dev/shm") if n.startswith("psm_")} - shm_before
+    assert not [path for path in shared if path.exists()]
+
+
+def _shared_memory(pid: int) -> set[Path]:
+    """The /dev/shm files process `pid` maps."""
+    with open(f"/proc/{pid}/maps") as maps:
+        return {Path(line.split(None, 5)[5].strip()) for line in maps
+                if len(line.split(None, 5)) == 6 and line.split(None, 5)[5].startswith("/dev/shm/")}
 
 
 def _read(path) -> str:
@@ -255,3 +286,107 @@ def _is_spawned(pid: int) -> bool:
     """A multiprocessing 'spawn' child (not its resource tracker, which must outlive it)."""
     line = _cmdline(pid)
     return "multiprocessing.spawn" in line and "resource_tracker" not in line
+
+
+REALTIME = """
+version: 1
+name: realtime
+threads:
+  main: {period: 1ms, deploy: main, priority: 20, cpus: [FIRST], schedules: {0: [mediator, source, main_probe]}}
+  bus: {period: 2ms, deploy: process, priority: 21, cpus: [LAST], schedules: {0: [relay, bus_probe]}}
+  slow: {period: 10ms, deploy: thread, schedules: {0: [sink]}}
+activities:
+  mediator: {block: mediator}
+  source: {block: counter}
+  relay: {block: echo}
+  sink: {block: echo}
+  main_probe: {block: "tests.blocks:WhatItRunsWith"}
+  bus_probe: {block: "tests.blocks:WhatItRunsWith"}
+streams:
+  count: {from: source.count, to: relay.input}
+  relayed: {from: relay.output, to: sink.input}
+"""
+
+
+def _fifo_refused() -> str | None:
+    """Why this machine will not let a thread use SCHED_FIFO, or None (tried on a thread of our own)."""
+    if os.geteuid() != 0:
+        return "real-time scheduling needs root (or CAP_SYS_NICE and CAP_IPC_LOCK)"
+    refused: list[str] = []
+
+    def attempt() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError as error:
+            refused.append(f"the kernel refuses SCHED_FIFO here: {error.strerror}")
+
+    thread = threading.Thread(target=attempt)
+    thread.start()
+    thread.join()
+    return refused[0] if refused else None
+
+
+def _status(pid: int, field: str) -> int:
+    for line in open(f"/proc/{pid}/status").read().splitlines():
+        if line.startswith(f"{field}:"):
+            return int(line.split()[1])
+    raise AssertionError(f"no {field} in /proc/{pid}/status")
+
+
+def test_real_time_threads_get_their_policy_priority_cpus_locked_memory_and_frozen_gc(tmp_path):
+    """What the composition asks for is what the kernel gives each thread: SCHED_FIFO at its
+    priority on its CPUs, memory locked in every process with a real-time thread, the garbage
+    collector's furniture frozen once running; a thread without a priority keeps normal scheduling."""
+    if reason := _fifo_refused():
+        pytest.skip(reason)
+    cpus = sorted(os.sched_getaffinity(0))
+    text = REALTIME.replace("FIRST", str(cpus[0])).replace("LAST", str(cpus[-1]))
+    process = _compose_process(tmp_path, text, ready=None)
+    run = tmp_path / "run"
+    try:
+        deadline = time.monotonic() + 30
+        while not all((run / f"{p}.runs").exists() for p in ("main_probe", "bus_probe")):
+            assert process.poll() is None, process.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "the probes never ran"
+            time.sleep(0.02)
+        told = {p: [int(n) for n in (run / f"{p}.runs").read_text().split()] for p in ("main_probe", "bus_probe")}
+        (main_pid, main_tid, main_frozen), (bus_pid, bus_tid, bus_frozen) = told["main_probe"], told["bus_probe"]
+        assert main_pid == main_tid == process.pid  # deploy: main is the main process's own thread
+        assert bus_pid != process.pid and bus_pid in _children(process.pid)
+        for pid, tid, priority, cpu in ((main_pid, main_tid, 20, cpus[0]), (bus_pid, bus_tid, 21, cpus[-1])):
+            assert os.sched_getscheduler(tid) == os.SCHED_FIFO
+            assert os.sched_getparam(tid).sched_priority == priority
+            assert os.sched_getaffinity(tid) == {cpu}
+            assert _status(pid, "VmLck") > 0  # mlockall(MCL_CURRENT | MCL_FUTURE) took
+            # every other thread ('slow', the control socket's, the log writer's) runs as it asked: normally,
+            # anywhere, even those a real-time thread started (they would inherit its policy and CPUs)
+            others = [int(t) for t in os.listdir(f"/proc/{pid}/task") if int(t) != tid]
+            borrowed = {t: (os.sched_getscheduler(t), os.sched_getaffinity(t)) for t in others if _alive(t)}
+            assert all(s == (os.SCHED_OTHER, set(cpus)) for s in borrowed.values()), (pid, tid, borrowed)
+        assert main_frozen > 0 and bus_frozen > 0  # gc.freeze() ran in each process before its activities ran
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            _, err = process.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            _, err = process.communicate()
+    assert process.returncode == 130, err[-3000:]
+    said = err + "".join(log.read_text() for log in run.glob("*.log"))
+    assert "SCHED_FIFO priority 21" in said
+    assert not [w for w in ("cannot use SCHED_FIFO", "cannot lock memory", "cannot set CPU") if w in said]
+
+
+def test_a_run_in_process_gives_its_callers_thread_back_as_it_was(tmp_path):
+    """A system run in-process makes the calling thread its real-time main loop; afterwards that
+    thread schedules as before (not SCHED_FIFO pinned to one CPU for the rest of the process)."""
+    if reason := _fifo_refused():
+        pytest.skip(reason)
+    before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0)
+    cpus = sorted(before[2])
+    text = REALTIME.replace("FIRST", str(cpus[0])).replace("LAST", str(cpus[-1]))
+    result = run_until(tmp_path, text, lambda system: (tmp_path / "run-c" / "main_probe.runs").exists()
+                       and system.state("sink") is State.RUNNING, "the main loop ran its activities, and the sink runs")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0)) == before

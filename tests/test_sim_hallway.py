@@ -112,7 +112,8 @@ def test_vectorised_raycast_matches_a_beam_by_beam_solve():
         np.testing.assert_allclose(out, brute_force(world, pose, g.lidar.mount, angles), atol=1e-9)
 
 
-def test_811_beams_well_under_a_millisecond_and_without_allocating(capsys):
+def test_811_beams_cast_without_allocating(capsys):
+    """The cast allocates nothing; how long it takes is printed for the reader (bench/ measures it), not judged."""
     g = HallwayGeometry.named("H4")
     world = World.from_geometry(g)
     angles, out = g.lidar.angles(), np.empty(811, np.float32)

@@ -86,6 +86,24 @@ class Block:
         return dataclasses.replace(cls.interface(params), needs=cls.needs_of(params), provides=cls.provides)
 
     @classmethod
+    def preflight(cls, params: Params, timeout_s: float) -> str | None:
+        """What the activity needs from outside the program and cannot find (a device on USB, a
+        network interface, a sensor answering at its address), in words; None when all is there.
+
+        Asked of every activity before anything of the run is made, all at once and each on a
+        thread of its own, so a run on a machine without its hardware stops at once with one
+        message. It may block, at most `timeout_s`; it must leave the device as it found it.
+        """
+        return None
+
+    @classmethod
+    def promises(cls, params: Params) -> tuple[str, ...]:
+        """Files an activity that ran leaves in the run directory when it cleans (its results: a
+        recording, metrics, a picture). A run that ends without one of them has lost results, and
+        its exit status says so."""
+        return ()
+
+    @classmethod
     def needs_of(cls, params: Params) -> tuple[Need, ...]:
         """The activities these parameters name, from the `needs` declaration."""
         found = []

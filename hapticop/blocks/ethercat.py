@@ -21,10 +21,13 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import DeviceParams, Interface, Params, Port, RateRange
 from hapticop.devices.ethercat.link import DatagramSegment, SegmentLink
-from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
+from hapticop.devices.ropod.pdo import RXPDO_BYTES, RXPDO_ENTRY_BITS, TXPDO_BYTES, TXPDO_ENTRY_BITS
 
 SMARTWHEEL_INPUT_BYTES = TXPDO_BYTES
 SMARTWHEEL_OUTPUT_BYTES = RXPDO_BYTES
+# What the master checks a smart wheel against: its process data (bytes, and entry sizes over
+# CoE) and that it runs on SYNC0.
+SMARTWHEEL_LAYOUT = (RXPDO_BYTES, TXPDO_BYTES, RXPDO_ENTRY_BITS, TXPDO_ENTRY_BITS, True)
 
 EK1100 = 0x044C2C52
 EK1122 = 0x04622C52
@@ -90,6 +93,15 @@ class EthercatMaster(Block):
             rate=RateRange(100.0, 4000.0, "smart-wheel drives expect a steady cycle near 1 kHz"),
         )
 
+    @classmethod
+    def preflight(cls, params: EthercatMasterParams, timeout_s: float) -> str | None:
+        """The real master: its network interface, and the right to open it raw."""
+        if params.driver != "pysoem":
+            return None
+        from hapticop.devices.ethercat.probe import interface_problem
+
+        return interface_problem(params.interface)
+
     def create(self) -> None:
         self.link: SegmentLink | None = None
 
@@ -116,11 +128,11 @@ class EthercatMaster(Block):
                                    len(p.slaves))
         from hapticop.devices.ethercat.master import ExpectedSlave, SoemLink, SoemMaster
 
-        expected = [ExpectedSlave(name, spec.product, *((SMARTWHEEL_OUTPUT_BYTES, SMARTWHEEL_INPUT_BYTES)
-                                                         if spec.wheel is not None else (0, 0)))
-                    for name, spec in p.slaves.items()]
+        expected = [ExpectedSlave(name, spec.product, *SMARTWHEEL_LAYOUT) if spec.wheel is not None
+                    else ExpectedSlave(name, spec.product) for name, spec in p.slaves.items()]
         wheels = [(spec.wheel, i) for i, spec in enumerate(p.slaves.values()) if spec.wheel is not None]
-        master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s, p.frame_timeout_us)
+        master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s, p.frame_timeout_us,
+                            cycle_ns=self.context.period_ns or 1_000_000)
         return SoemLink(master, wheels, _encoders_ready, self.clock.now_ns, self.log)
 
     def compute(self) -> None:
@@ -169,6 +181,9 @@ class EthercatWatchdogParams(Params):
                                  "counter is healthy (an AL error in SAFE-OP keeps it full)")
     retry_lost_ms: float = Field(100.0, gt=0, description="how often to try to recover a lost slave (each try "
                                  "holds pysoem's GIL through its timeouts)")
+    fault_hold_ms: float = Field(200.0, ge=0, description="a raised slave_fault stays raised at least this long "
+                                 "after the segment is healthy again: every loop that must hold the robot sees it, "
+                                 "and a flapping wheel does not jerk the robot back into motion")
 
 
 class EthercatWatchdog(Block):
@@ -197,12 +212,18 @@ class EthercatWatchdog(Block):
         self.healthy = False
         self.check = None
         self.last_poll_ns = 0
+        self.fault_until_ns = 0
 
     def configure_resources(self) -> None:
         """What the cycle compares against, from the parameters (again after a live change)."""
         p = self.params
-        self.all_in_op = bytes([AL_OP]) * p.slaves
+        self.in_op = np.zeros(p.slaves, dtype=bool)  # scratch: which slaves are in OP this cycle
         self.expected_wkc, self.lost_after = p.expected_working_counter, p.lost_after_cycles
+
+    def _all_in_op(self, states: np.ndarray) -> bool:
+        """Every slave in OP, compared in place (a bytes copy per cycle would allocate)."""
+        np.equal(states, AL_OP, out=self.in_op)
+        return bool(self.in_op.all())
 
     def _recover(self) -> bool:
         """SOEM's check on the master of this process: True while every slave is in OP."""
@@ -234,7 +255,7 @@ class EthercatWatchdog(Block):
         short = self.short_cycles = self.short_cycles + 1 if int(counter.value) != self.expected_wkc else 0
         seen = states.seq > 0
         healthy = (in_op and seen and stale < lost_after and short < lost_after
-                   and states.value.tobytes() == self.all_in_op)
+                   and self._all_in_op(states.value))
         if healthy != self.healthy:
             if healthy:
                 self.log.info("all %d slaves operational", self.params.slaves)
@@ -245,4 +266,7 @@ class EthercatWatchdog(Block):
             self.healthy = healthy
         flags = self.flags
         flags["all_operational"] = healthy
-        flags["slave_fault"] = not healthy and seen
+        now, fault = self.clock.now_ns(), not healthy and seen
+        if fault:
+            self.fault_until_ns = now + int(self.params.fault_hold_ms * 1e6)
+        flags["slave_fault"] = fault or now < self.fault_until_ns

@@ -63,6 +63,30 @@ class Falcon(Block):
     rate = RateRange(900.0, 1100.0, "the Falcon firmware exchanges frames at about 1 kHz and holds a force only 100 ms")
     needs = {"simulator": "falcon_device"}
 
+    @classmethod
+    def preflight(cls, params: FalconParams, timeout_s: float) -> str | None:
+        """A real Falcon: its firmware image readable, and the Falcon on USB."""
+        if params.driver != "usb" or params.usb_backend != "libusb":
+            return None
+        from hapticop.devices.falcon.firmware import FirmwareError, read_firmware
+        from hapticop.devices.falcon.usb_driver import find_falcons, system_backend
+        from hapticop.devices.falcon.usb_errors import FalconUsbError
+
+        problems = []
+        try:
+            read_firmware(params.firmware, params.firmware_sha256)
+        except FirmwareError as error:
+            problems.append(str(error))
+        try:
+            found = len(find_falcons(system_backend()))
+        except FalconUsbError as error:
+            problems.append(f"cannot look for a Falcon on USB: {error}")
+        else:
+            if found <= params.device_index:
+                problems.append("no Falcon on USB (no device 0403:CB48)" if found == 0 else
+                                f"Falcon {params.device_index} asked for, but {found} on USB")
+        return "; ".join(problems) or None
+
     # -- life cycle -------------------------------------------------------------------------
     def create(self) -> None:
         self.codec, self.status, self.command = FrameCodec(), Status(), new_frame()

@@ -89,11 +89,14 @@ class HapticController(Block):
         return self.flags["resources_ready"]
 
     def configure_capabilities(self) -> bool:
-        """Build the control laws, then hold the handle at its origin before commanding motion."""
+        """Build the control laws, then, the first time only, hold the handle at its origin before
+        commanding motion (a later re-configuration finds the handle in the operator's hand)."""
         if getattr(self, "built_for", None) is not self.params:  # first time, or re-configured
             self._build()
             self.built_for = self.params
         self._centre_only()
+        if getattr(self, "centred_once", False):  # a re-configuration while the operator holds the handle:
+            return True  # waiting for a re-centred handle could hold the application for ever
         handle = self.inputs.handle_position
         if not handle.valid:
             self.context.waiting_for("the handle's position (no Falcon frames yet)")
@@ -104,6 +107,7 @@ class HapticController(Block):
                                      f"centre before commanding motion (it is {off_centre * 1e3:.0f} mm off)")
             return False
         self.context.waiting_for(None)
+        self.centred_once = True
         return True
 
     def retune(self, changed: frozenset[str]) -> None:

@@ -57,6 +57,19 @@ class Lidar(Block):
             rate=RateRange(params.scan_rate_hz, 1000.0, "the thread must poll at least as fast as the scanner scans"),
         )
 
+    @classmethod
+    def preflight(cls, params: LidarParams, timeout_s: float) -> str | None:
+        """A real scanner: something answers CoLa A at host:port within the bound."""
+        if params.driver != "tcp":
+            return None
+        from hapticop.devices.sick.probe import ProbeError, probe_lidar
+
+        try:
+            probe_lidar(params.host, params.port, timeout_s)
+        except ProbeError as error:
+            return f"no LIDAR answering: {error}"
+        return None
+
     # -- life cycle -------------------------------------------------------------------------
     def create(self) -> None:
         self.client = None

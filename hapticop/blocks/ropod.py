@@ -64,6 +64,7 @@ class RopodController(Block):
     def configure_resources(self) -> None:
         self.controller = PlatformVelocityController(self._controller_params())
         self.zero = np.zeros(3)
+        self.stopped = False  # what the stop flag last said, so each change is logged once
 
     def configure_capabilities(self) -> None:
         """A (re)start: no stale integrator."""
@@ -81,7 +82,13 @@ class RopodController(Block):
         sensors, setpoint = self.inputs.wheel_sensors, self.inputs.velocity_setpoint
         if sensors.seq == 0:
             return  # no process data yet: nothing to control
-        stop = self.flags["stop"] or not setpoint.valid  # a stale setpoint is no setpoint
+        if self.flags["stop"] != self.stopped:
+            self.stopped = self.flags["stop"]
+            if self.stopped:
+                self.log.info("stop raised: holding the platform at zero velocity")
+            else:
+                self.log.info("stop lowered: following the setpoint again")
+        stop = self.stopped or not setpoint.valid  # a stale setpoint is no setpoint
         commands, velocity = self.outputs.wheel_commands, self.outputs.platform_velocity
         self.controller.step(self.zero if stop else setpoint.value, sensors.value, commands.value, velocity.value,
                              stop=stop)

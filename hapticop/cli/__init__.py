@@ -1,5 +1,26 @@
 """The `hapticop` command line: compose, validate, patch, graph, devices, bench."""
 
-from hapticop.cli.main import app, main
+import signal
+import sys
+
+
+def _interrupted_while_loading(_signum, _frame):
+    """Ctrl+C while the command's modules load: leave quietly with the interrupted status."""
+    print("hapticop: interrupted", file=sys.stderr)
+    raise SystemExit(130)
+
+
+# Loading the command takes a noticeable moment (numpy, pydantic, networkx); a Ctrl+C in it is
+# an answer, not a traceback. Only the main thread may set handlers (an import from elsewhere
+# skips this), and the one before is put back: `main` handles Ctrl+C from there on.
+try:
+    _previous = signal.signal(signal.SIGINT, _interrupted_while_loading)
+except ValueError:
+    _previous = None
+try:
+    from hapticop.cli.main import app, main
+finally:
+    if _previous is not None:
+        signal.signal(signal.SIGINT, _previous)
 
 __all__ = ["app", "main"]

@@ -73,7 +73,8 @@ def emulate(
 
 @ethercat.command("fault")
 def fault(
-    op: str = typer.Argument(..., help="lose, restore, al_error, trip_watchdog, late, status"),
+    op: str = typer.Argument(..., help="lose, restore (power), cut, reconnect (the cable into --slave), al_error, "
+                                       "trip_watchdog, late, physics, status"),
     slave: int | None = typer.Option(None, help="bus position, 0-based (0 EK1100, 2/3/5/6 the wheels)"),
     code: str | None = typer.Option(None, help="AL status code for al_error, e.g. 0x001B"),
     delay_us: int | None = typer.Option(None, help="late: how late each reply is"),

@@ -24,12 +24,29 @@ app = typer.Typer(
 
 SYSTEMS_DIR = Path("systems")
 
+
+def _version(asked: bool) -> None:
+    if asked:
+        from hapticop import __version__
+
+        typer.echo(f"hapticop {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                          help="print hapticop's version and exit")) -> None:
+    """Declarative real-time dataflow for haptic teleoperation."""
+
 from hapticop.cli.catalogue import blocks as _blocks  # noqa: E402
 from hapticop.cli.devices import devices as _devices  # noqa: E402
 from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
 from hapticop.cli.new import new as _new  # noqa: E402
+from hapticop.cli.recordings import info as _info  # noqa: E402
+from hapticop.cli.recordings import plot as _plot  # noqa: E402
+from hapticop.cli.recordings import recover as _recover  # noqa: E402
 
 app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
@@ -37,6 +54,9 @@ app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
 app.command("blocks")(_blocks)
 app.command("new")(_new)
+app.command("info")(_info)
+app.command("recover")(_recover)
+app.command("plot")(_plot)
 
 
 class OutputFormat(str, Enum):
@@ -80,9 +100,14 @@ def validate(
             for diagnostic in report.sorted():
                 typer.echo(diagnostic.to_text())
             status = "ok" if report.ok else "FAILED"
-            typer.echo(f"{report.file}: {status} ({len(report.errors)} errors, {len(report.warnings)} warnings)")
+            typer.echo(f"{report.file}: {status} ({_count(len(report.errors), 'error')}, "
+                       f"{_count(len(report.warnings), 'warning')})")
     failed = any(not r.ok or (strict and r.warnings) for r in reports)
     raise typer.Exit(1 if failed else 0)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 class ClockKind(str, Enum):
@@ -125,18 +150,27 @@ def compose(
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
     check: bool = typer.Option(False, "--check", help="exit 1 when the run's results miss a target (for CI)"),
+    group_readable: bool = typer.Option(
+        False, "--group-readable", envvar="HAPTICOP_GROUP_READABLE",
+        help="let your group read the run's logs and results (directories 0750, files 0640; default: yours alone)"),
+    record: str | None = typer.Option(
+        None, "--record", metavar="[FILE]",
+        help="record the streams to an MCAP file (default: NAME.mcap in the run directory); every stream "
+             "unless the file's 'record:' chooses"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_results, print_timing
+    from hapticop.runtime.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     validated = _valid_or_exit(file, "not started")
-    os.umask(0o077)  # what the run writes (logs, results, recordings) is its owner's alone, children included
+    # What the run writes (logs, results, recordings) is its owner's alone, or also their group's
+    # to read; its child processes inherit the mask.
+    os.umask(0o027 if group_readable else 0o077)
     options = RunOptions(clock=clock.value, duration_ns=_duration(duration, "--duration"), seed=seed,
                          run_dir=run_dir, shutdown_timeout_ns=_duration(shutdown_timeout, "--shutdown-timeout"),
-                         control=control)
+                         control=control, group_readable=group_readable, record=record)
     console = Console(stderr=True)
     if not console.is_terminal:
         console.width = 160  # a log or a pipe: no need to wrap the tables
@@ -152,6 +186,8 @@ def compose(
     result = run_system(validated, options, on_start=announce)
     print_timing(result.timing, console, result.virtual)
     print_results(result.outcome.run_dir, console)
+    if result.recording is not None:
+        print_recording(result.recording, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
     status = int(result.outcome.status)
@@ -237,6 +273,22 @@ def status(
     if state.get("modes") is not None:
         typer.echo(f"  modes holding: {', '.join(state['modes']) or 'none'}")
     typer.echo(f"  flags set: {', '.join(state['flags'])}")
+
+
+@app.command()
+def expand(file: Path = typer.Argument(..., help="composition file")) -> None:
+    """Print a composition as YAML with its standard coordination written out as nets and flag maps;
+    exit 1 if the file has errors."""
+    from hapticop.composition.documents import dump
+    from hapticop.composition.standard import expanded_tree
+
+    validated = validate_path(file)
+    for diagnostic in validated.report.sorted():
+        typer.echo(diagnostic.to_text(), err=True)
+    if not validated.report.ok:
+        typer.echo(f"{file}: not expanded: {len(validated.report.errors)} errors", err=True)
+        raise typer.Exit(1)
+    typer.echo(dump(expanded_tree(validated.source.tree, validated.graph.loaded.expansion)), nl=False)
 
 
 @app.command()
@@ -326,21 +378,40 @@ def schema(
         typer.echo(text, nl=False)
 
 
+def _bare_option(argv: list[str], option: str) -> list[str]:
+    """`--record` with no value (last, before another option, or before the composition file)
+    gets the empty value that means "the default file": the command-line parser has no optional values."""
+    out = []
+    for index, arg in enumerate(argv):
+        out.append(arg)
+        following = argv[index + 1] if index + 1 < len(argv) else None
+        if arg == option and (following is None or following.startswith("-")
+                              or following.endswith((".yaml", ".yml"))):
+            out.append("")
+    return out
+
+
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
+    from hapticop.runtime.control import ControlError
+    from hapticop.runtime.preflight import DevicesMissing
     from hapticop.runtime.rundirs import RunDirectoryError
-    from hapticop.runtime.supervisor import ForcedExit
+    from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
-        app()
+        app(args=_bare_option(sys.argv[1:], "--record"))
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # before the run's own handler (validating, starting): nothing was left running
+        print("hapticop: interrupted", file=sys.stderr)
         sys.exit(130)
-    except RunDirectoryError as error:  # a run directory that is not safely ours: said, not traced
+    except (RunDirectoryError, ControlError) as error:  # a directory not safely ours, a socket name that is none
         print(f"hapticop: {error}", file=sys.stderr)
         sys.exit(2)
+    except DevicesMissing as error:  # the hardware is not there: nothing was started
+        print(f"hapticop: {error}", file=sys.stderr)
+        sys.exit(int(ExitStatus.UNAVAILABLE))
     except Exception as error:  # noqa: BLE001 - the last line of defence for the user interface
         if os.environ.get("HAPTICOP_DEBUG"):
             raise

@@ -247,8 +247,51 @@ class FlagMap(Strict):
     doc: str = ""
 
 
+class StandardCoordination(Strict):
+    """The coordination most applications share, declared once and written out as ordinary nets and flag
+    maps before validation (`hapticop/composition/standard.py`, docs/coordination.md section 8).
+
+    It starts the threads that wait for a request, selects their schedules, waits until the named
+    activities run (then the application operates), and on Ctrl+C or an end event cleans the named
+    activities stage by stage, then the threads, then sets `system.exit`."""
+
+    threads: list[Name] | None = Field(
+        None, description="threads to start on request and clean at the end; default: every 'start: on_request' thread"
+    )
+    select: dict[Name, Annotated[int, Field(ge=0, le=255)]] = Field(
+        default_factory=dict, description="the schedule each thread changes to once its thread runs; default: "
+        "schedule 1 of every thread that has one. 0 keeps a thread on schedule 0 on purpose",
+    )
+    wait_for: list[Name] = Field(
+        default_factory=list, description="activities whose 'lcsm.running' must all hold before the application "
+        "operates (place OPERATING)",
+    )
+    ends: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="events that end the operating application as Ctrl+C does "
+        "('system.shutdown_requested', place SHUTDOWN, always does), each with its place",
+    )
+    clean: dict[Name, list[Name]] = Field(
+        default_factory=dict, description="cleaning stages in order, each a name and its activities; a stage "
+        "starts when the one before is done. Activities left out are cleaned by the runtime after 'system.exit'",
+    )
+    sources: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="level flags the mediator net mirrors in places of its own (tracking "
+        "sources): 'ethercat_watchdog.slave_fault: WHEEL_FAULT'",
+    )
+    sinks: dict[FlagName, PlaceName] = Field(
+        default_factory=dict, description="flags that mirror a place of the mediator net (tracking sinks): "
+        "'haptic.resources_ready: OPERATING'",
+    )
+    doc: str = ""
+
+
 class Coordination(Strict):
     """Petri nets and the flag maps through which the mediator drives every LCSM."""
+
+    standard: StandardCoordination | None = Field(
+        None, description="the standard start, schedule selection and ordered cleaning, written out as the nets "
+        "'mediator', 'thread_lcsm' and 'thread_scheduler' (`hapticop expand` prints them)",
+    )
 
     flags: dict[Name, str | None] = Field(
         default_factory=dict, description="coupling flags between nets, referenced as 'flags.NAME'"
@@ -292,6 +335,20 @@ class Latency(Strict):
     doc: str = ""
 
 
+class Record(Strict):
+    """Every sample of the chosen streams kept in one MCAP file per run, by a recorder process
+    outside the real-time loops (`hapticop compose --record` turns it on for any file)."""
+
+    streams: Literal["all"] | list[Name] = Field("all", description="the streams to record, or 'all'")
+    decimate: dict[Name, Annotated[int, Field(ge=1, le=1_000_000)]] = Field(
+        default_factory=dict, description="record only every Nth sample of these streams, e.g. {scan_ranges: 2}")
+    depth: Duration = Field(
+        3_000_000_000, description="how long the recorder may be descheduled before samples are lost: each "
+        "recorded stream gets a ring of this many seconds of its samples, written by the loop, read by the recorder",
+        json_schema_extra={"default": "3s"})
+    doc: str = ""
+
+
 class Composition(Strict):
     """A whole hapticop system: what runs, where, how it is wired and coordinated."""
 
@@ -313,6 +370,7 @@ class Composition(Strict):
         description="end-to-end latencies to measure and report, e.g. handle displacement to wheel command",
     )
     duration: Duration | None = Field(None, description="the system stops by itself after this long, e.g. '60s'")
+    record: Record | None = Field(None, description="record streams to an MCAP file while running")
     cpu_dma_latency: int | None = Field(
         0, ge=0, le=1_000_000, description="while real-time threads run, hold /dev/cpu_dma_latency at this many "
         "microseconds so deep CPU idle states do not delay wake-ups; null leaves power management alone",

@@ -1,5 +1,8 @@
 """From a YAML tree to a typed composition with every block resolved.
 
+The standard coordination a file declares is written out here, as nets and flag maps beside
+the hand-written ones (`standard`), so the checks and the runtime see only ordinary nets.
+
 Schema errors do not stop the checking: a broken entry (one thread, one activity...) is
 set aside and the rest is validated, so the user sees all mistakes at once. References to
 set-aside entries are not reported again as "unknown".
@@ -18,6 +21,7 @@ from hapticop.blocks.registry import UnknownBlock, resolve
 from hapticop.composition.description import COLLECTIONS, VERSION, Activity, Composition
 from hapticop.composition.diagnostics import Diagnostic, Path, Severity
 from hapticop.composition.model_errors import diagnostics_from
+from hapticop.composition.standard import Expansion, clashes, expand
 
 
 @dataclass
@@ -37,6 +41,7 @@ class Loaded:
     activities: dict[str, ResolvedActivity] = field(default_factory=dict)
     broken: set[tuple[str, str]] = field(default_factory=set)  # (collection, name) set aside
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    expansion: Expansion = field(default_factory=Expansion)  # what coordination.standard was written out as
 
     def is_broken(self, collection: str, name: str) -> bool:
         return (collection, name) in self.broken
@@ -63,8 +68,22 @@ def load_tree(tree: dict) -> Loaded:
                 break
     loaded = Loaded(composition=composition, broken=broken, diagnostics=diagnostics)
     if composition is not None:
+        _expand_standard(loaded)
         _resolve_activities(loaded)
     return loaded
+
+
+def _expand_standard(loaded: Loaded) -> None:
+    """Merge what `coordination.standard` stands for; with a clash, merge nothing and check the rest."""
+    coordination = loaded.composition.coordination
+    expansion = expand(loaded.composition)
+    refused = expansion.diagnostics + clashes(expansion, coordination)
+    loaded.diagnostics.extend(refused)
+    if refused:  # the coordination is incomplete: its checks would only report follow-on findings
+        loaded.broken.add(("coordination.standard", "standard"))
+        return
+    loaded.expansion = expansion
+    loaded.composition.coordination = expansion.merged_into(coordination)
 
 
 def _set_aside(work: dict, found: list[Diagnostic], broken: set[tuple[str, str]]) -> bool:
@@ -124,4 +143,22 @@ def _resolve_activities(loaded: Loaded) -> None:
             loaded.diagnostics.extend(diagnostics_from(error, block.Params, prefix=path + ("params",)))
             loaded.broken.add(("activities", name))
             continue
-        loaded.activities[name] = ResolvedActivity(name, spec, block, params, block.declare(params))
+        try:
+            interface = block.declare(params)
+        except Exception as error:  # noqa: BLE001 - an author's block: its failure is a finding, not a crash
+            loaded.diagnostics.append(Diagnostic(
+                rule="block-declaration", path=path + ("block",),
+                message=f"block '{spec.block}' could not declare its ports for these parameters: "
+                        f"{type(error).__name__}: {error}"))
+            loaded.broken.add(("activities", name))
+            continue
+        both = sorted(set(interface.inputs) & set(interface.outputs))
+        if both:  # a stream names a port by activity and name alone: it would not know which one
+            loaded.diagnostics.append(Diagnostic(
+                rule="block-declaration", path=path + ("block",),
+                message=f"block '{spec.block}' declares {', '.join(repr(p) for p in both)} as both an input and "
+                        "an output port", hint="a block's port names must differ: rename one (e.g. 'demand' in, "
+                        "'force' out)"))
+            loaded.broken.add(("activities", name))
+            continue
+        loaded.activities[name] = ResolvedActivity(name, spec, block, params, interface)

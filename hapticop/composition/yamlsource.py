@@ -9,6 +9,7 @@ position a user should look at.
 from __future__ import annotations
 
 import os
+import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path as FilePath
@@ -24,6 +25,7 @@ from hapticop.composition.diagnostics import Diagnostic, Path
 # Composition files are written by people; anything this large is a mistake (or a
 # generated file that should be split), and parsing it would stall an editor.
 MAX_FILE_BYTES = 1 << 20
+_HUGE_INTEGER = re.compile(r"(?<![\w.])[-+]?(\d{4301,})(?![\w.])")  # past Python's int(str) limit
 
 
 class SourceError(Exception):
@@ -91,6 +93,12 @@ def parse_text(text: str, file: str = "<string>") -> Source:
                           error.problem_mark or error.context_mark) from None
     except (YAMLError, RecursionError, ValueError, TypeError) as error:
         # ValueError/TypeError: ruamel rejects some scalars (odd timestamps, huge ints) late.
+        if huge := _HUGE_INTEGER.search(text):
+            line = text.count("\n", 0, huge.start()) + 1
+            column = huge.start() - text.rfind("\n", 0, huge.start())
+            raise SourceError(Diagnostic(rule="yaml-syntax", file=file, line=line, column=column,
+                                         message=f"an integer of {len(huge.group(1))} digits: no value is that long")
+                              ) from None
         raise SourceError(Diagnostic(rule="yaml-syntax", message=f"malformed YAML: {error}", file=file)) from None
     if tree is None:
         raise SourceError(

@@ -19,8 +19,8 @@ from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
-from hapticop.runtime.region import Layout, Region
-from hapticop.runtime.streams import LatestSlot, SpscQueue, latest_nbytes, queue_nbytes
+from hapticop.runtime.region import Layout, Region, Transport
+from hapticop.runtime.streams import QUEUE_HEADER, LatestSlot, RecorderRing, SpscQueue, latest_nbytes, queue_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 
 
@@ -78,10 +78,11 @@ def _transports(loaded: Loaded, region: Region, owner: dict[str, str]) -> dict[s
 
 
 def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str], allocate: bool = False) -> list:
-    """The transports of one stream: a latest slot, or one queue ring per reader.
+    """The transports of one stream: a latest slot, or one queue ring per reader; then, if the
+    stream is recorded, the recorder's ring (which only the writer sees: readers take theirs by index).
 
-    `allocate` takes the buffers from the arena (a stream added to a running system)
-    instead of the layout computed at start.
+    `allocate` takes the buffers from the arena (a stream added to a running system, never
+    recorded) instead of the layout computed at start.
     """
     spec = loaded.composition.streams[stream]
     writer_activity, writer_port = spec.writer.split(".")
@@ -92,13 +93,25 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
         nbytes = latest_nbytes(port)
         offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][0].offset
         synchronised = spec.policy.sync == "lock_free" and not same_thread
-        return [LatestSlot(region.buffer_at(offset, nbytes), port, synchronised=synchronised)]
-    rings = []
-    for index in range(len(spec.readers)):
-        nbytes = queue_nbytes(port, spec.policy.capacity)
-        offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][index].offset
-        rings.append(SpscQueue(region.buffer_at(offset, nbytes), port, spec.policy.capacity, spec.policy.overflow))
-    return rings
+        objects: list = [LatestSlot(region.buffer_at(offset, nbytes), port, synchronised=synchronised)]
+    else:
+        objects = []
+        for index in range(len(spec.readers)):
+            nbytes = queue_nbytes(port, spec.policy.capacity)
+            offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][index].offset
+            objects.append(SpscQueue(region.buffer_at(offset, nbytes), port, spec.policy.capacity,
+                                     spec.policy.overflow))
+    recorded = None if allocate else region.layout.recorded.get(stream)
+    if recorded is not None:
+        objects.append(recorder_ring(region, recorded, port))
+    return objects
+
+
+def recorder_ring(region: Region, transport: Transport, port) -> RecorderRing:
+    """The recorder's ring of a stream: the loop never waits for it, and overwrites the oldest
+    samples when the recorder falls a whole ring behind (the recorder counts them)."""
+    capacity = (transport.nbytes - QUEUE_HEADER.itemsize) // latest_nbytes(port)
+    return RecorderRing(region.buffer_at(transport.offset, transport.nbytes), port, capacity)
 
 
 def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
@@ -135,8 +148,10 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
+    thread = thread_of(composition).get(name)
+    period_ns = composition.threads[thread].period if thread else 0
     context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination,
+                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination, period_ns,
                               region.waiting[region.layout.activity_index[name]])
     block = resolved.block(context)
     return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)

@@ -2,10 +2,11 @@
 
 The child rebuilds the composition from the plain tree it is handed, attaches to the parent's
 shared region by name, builds only its own threads (one, or those sharing a named process),
-and runs their loops. Ctrl+C is the parent's to handle: the child ignores SIGINT and leaves
-when its threads are done or the region says terminate. If the parent dies without saying so
-(SIGKILL, the OOM killer), the kernel tells the child (PR_SET_PDEATHSIG): it cleans its
-activities, which brings their devices to a safe state, and ends within `ORPHAN_BOUND_S`.
+and runs their loops. Ctrl+C is the parent's to handle: the child starts with SIGINT blocked,
+ignores it from its first line, and leaves when its threads are done or the region says
+terminate. If the parent dies without saying so (SIGKILL, the OOM killer), the kernel tells the
+child (PR_SET_PDEATHSIG): it cleans its activities, which brings their devices to a safe state,
+and ends within `ORPHAN_BOUND_S`.
 """
 
 from __future__ import annotations
@@ -38,9 +39,13 @@ def process_main(tree: dict, flags: list[str], region_name: str, threads: list[s
     first thread runs on this process's main thread; others it shares the process with get
     threads of their own."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent while it started us
     parent = os.getppid()
     loaded = load_tree(tree)
-    region = Region.attach(layout_of(loaded, flags), region_name)
+    try:
+        region = Region.attach(layout_of(loaded, flags), region_name)
+    except FileNotFoundError:
+        return  # the run ended (an interrupted start-up) before this process got going: nothing to do
     _leave_with_parent(parent, region, threads)
     clock = RealtimeClock()
     writer = LogWriter(Path(run_dir), echo=sys.stderr).start()
@@ -78,8 +83,10 @@ def _leave_with_parent(parent: int, region: Region, threads: list[str]) -> None:
     def orphaned(_signum=None, _frame=None) -> None:
         for thread in threads:
             region.set_flag(f"threads.{thread}.lcsm.request_cleaning")
-        threading.Timer(0.8 * ORPHAN_BOUND_S, _terminate, args=(region,)).start()
-        threading.Timer(ORPHAN_BOUND_S, os._exit, args=(1,)).start()
+        for delay, action, args in ((0.8 * ORPHAN_BOUND_S, _terminate, (region,)), (ORPHAN_BOUND_S, os._exit, (1,))):
+            timer = threading.Timer(delay, action, args=args)
+            timer.daemon = True  # a process that finished cleaning in time does not wait for it
+            timer.start()
 
     signal.signal(signal.SIGTERM, orphaned)
     libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
@@ -89,7 +96,9 @@ def _leave_with_parent(parent: int, region: Region, threads: list[str]) -> None:
 
 
 def _terminate(region: Region) -> None:
-    region.system[Region.TERMINATE] = 1  # every loop of this process leaves at once
+    system = getattr(region, "system", None)  # None: the process has already let the region go
+    if system is not None:
+        system[Region.TERMINATE] = 1  # every loop of this process leaves at once
 
 
 class _LiveChanges:

@@ -172,6 +172,7 @@ class ActivityContext:
     run_dir: Path  # where the activity may leave results (logs live there too)
     simulation: SimulationTimer = field(default_factory=SimulationTimer)
     coordination: Any = None  # the mediator's handle in the main process: start_threads(), step()
+    period_ns: int = 0  # the period of the thread that cycles it (0: not scheduled on a thread)
     waiting_slot: np.ndarray | None = None  # the region's text `status` shows (None: a harness, no region)
     waiting: str | None = None  # what the activity's configuration waits for now
 

@@ -49,7 +49,7 @@ def socket_path(system: str) -> Path:
     name: `$XDG_RUNTIME_DIR/hapticop/NAME.sock`, or `/run/hapticop/NAME.sock` for root
     without XDG_RUNTIME_DIR, or `/tmp/hapticop-UID/NAME.sock`.
     """
-    if "/" in system or system.endswith(".sock"):
+    if not is_system_name(system):
         return Path(system)
     if not system or system in (".", ".."):
         raise ControlError(f"{system!r} is not a system name")
@@ -60,6 +60,11 @@ def socket_path(system: str) -> Path:
     if uid == 0:
         return Path("/run/hapticop") / f"{system}.sock"
     return Path(f"/tmp/hapticop-{uid}") / f"{system}.sock"
+
+
+def is_system_name(system: str) -> bool:
+    """A system's name, whose socket goes in the default directory (else: the socket's own path)."""
+    return not ("/" in system or system.endswith(".sock"))
 
 
 def peer_uid(connection: socket.socket) -> int | None:
@@ -337,7 +342,7 @@ class ControlServer:
         if depth > MAX_DEPTH:
             return {"ok": False, "error": f"malformed request: nested deeper than {MAX_DEPTH} levels"}
         try:
-            message = json.loads(line, parse_constant=_refuse_constant)
+            message = json.loads(line, parse_constant=_refuse_constant, parse_int=_bounded_int)
         except Exception as error:  # noqa: BLE001 - whatever a parse raises is the client's mistake
             return {"ok": False, "error": f"malformed request: not JSON ({error})"}
         if not isinstance(message, dict):
@@ -385,6 +390,16 @@ def _nesting_depth(line: bytes, limit: int) -> int:
 
 def _refuse_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number a request may carry")
+
+
+MAX_DIGITS = 1000  # an integer a request carries is an id, a count or a parameter, never a bignum
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_DIGITS:
+        raise ValueError(f"an integer of {digits} digits is longer than a request may carry")
+    return int(text)
 
 
 def _encode(reply: dict) -> bytes:

@@ -48,8 +48,10 @@ class Hooks:
 
 class Lifecycle:
     def __init__(self, flags: np.ndarray, states: np.ndarray, failed: np.ndarray, owner_index: int,
-                 flag_index: dict[str, int], prefix: str, hooks: Hooks, start_on_request: bool, log: Logger):
+                 flag_index: dict[str, int], prefix: str, hooks: Hooks, start_on_request: bool, log: Logger,
+                 reached: np.ndarray | None = None):
         self.flags, self.states, self.failed, self.index = flags, states, failed, owner_index
+        self.reached = reached  # every state entered, as bits: did it ever run? (the run's exit status)
         self.hooks, self.on_request, self.log, self.prefix = hooks, start_on_request, log, prefix
         base = f"{prefix}.lcsm."
         self.state_flag = [flag_index[base + s.flag_name] for s in State]
@@ -69,6 +71,8 @@ class Lifecycle:
         self.flags[self.state_flag[old]] = 0
         self.flags[self.state_flag[new]] = 1
         self.states[self.index] = new
+        if self.reached is not None:
+            self.reached[self.index] |= 1 << int(new)
         if new is State.CAPABILITY_CONFIGURATION:
             self.capabilities_ready = False
         elif new is State.RUNNING:
@@ -121,6 +125,8 @@ class Lifecycle:
 
     # -- deploying ------------------------------------------------------------------------
     def _create(self) -> None:
+        if self.reached is not None:
+            self.reached[self.index] |= 1 << State.CREATION  # stepped: its thread has started it
         if self.failed[self.index] == CREATION_FAILED:
             if not (self._requested("request_creation") or self._requested("request_resource_configuration")):
                 return  # failed: wait for the mediator to ask for another attempt

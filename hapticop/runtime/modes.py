@@ -21,33 +21,35 @@ class Modes:
         self.target, self.flag_index, self.flags = target, flag_index, flags
         self.description: Description | None = None
         self.watched: list[tuple[str, int]] = []  # (mode, flag index) in declaration order
+        self.mask = 0  # bit k: the k-th watched mode holds
         self.holding: tuple[str, ...] = ()
         self.given: dict[str, object] = {}  # activity -> the parameters it was last given
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self.holding
-
     def apply_due(self) -> None:
+        """Between two main cycles: a few flag reads, and work only when the modes that hold change."""
         description = self.target.description
-        if description is not self.description:  # started, or a live patch replaced it
+        fresh = description is not self.description  # started, or a live patch replaced it
+        if fresh:
             self.description = description
             self.watched = [(name, self.flag_index[mode.when]) for name, mode in description.composition.modes.items()
                             if mode.when in self.flag_index]
             self.given = {}
-            self.holding = ()
-            changed_description = True
-        else:
-            changed_description = False
-        flags = self.flags
-        holding = tuple(name for name, index in self.watched if flags[index])
-        if holding == self.holding and not changed_description:
+        if not self.watched and not fresh:
+            return  # no modes: nothing to read, nothing made
+        mask, flags = 0, self.flags
+        for bit, (_, index) in enumerate(self.watched):
+            if flags[index]:
+                mask |= 1 << bit
+        if mask == self.mask and not fresh:
             return
-        if holding != self.holding:
-            left, entered = set(self.holding) - set(holding), set(holding) - set(self.holding)
-            self.target.log.always("modes: %s%s%s", "entered " + ", ".join(sorted(entered)) if entered else "",
-                                   "; " if entered and left else "", "left " + ", ".join(sorted(left)) if left else "")
-        self.holding = holding
+        holding = tuple(name for bit, (name, _) in enumerate(self.watched) if mask >> bit & 1)
+        entered = [n for n in holding if n not in self.holding]
+        left = [n for n in self.holding if n not in holding]
+        if entered or left:
+            self.target.log.always("modes: %s", "; ".join(
+                part for part in ("entered " + ", ".join(entered) if entered else "",
+                                  "left " + ", ".join(left) if left else "") if part))
+        self.mask, self.holding = mask, holding
         self._give(description, holding)
 
     def _give(self, description: Description, holding: tuple[str, ...]) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 from hapticop.composition import lcsm
 from hapticop.composition.description import ARENA_BYTES, SPARE_ACTIVITIES, SPARE_FLAGS, Composition
 from hapticop.composition.loader import ResolvedActivity
+from hapticop.recording.plan import recorded_streams
 from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
 
@@ -49,6 +50,7 @@ class Layout:
     flags: list[str]
     sections: dict[str, tuple[int, tuple[int, ...], str]] = field(default_factory=dict)
     transports: dict[str, list[Transport]] = field(default_factory=dict)
+    recorded: dict[str, Transport] = field(default_factory=dict)  # the recorder's own ring per recorded stream
     size: int = 0
 
     def __post_init__(self) -> None:
@@ -116,6 +118,7 @@ class Layout:
         section("flags", (len(layout.flags) + SPARE_FLAGS,), "uint8")
         section("state", (owners,), "uint8")
         section("failed", (owners,), "uint8")
+        section("reached", (owners,), "uint8")  # a bit per LCSM state the owner has entered (1 << state)
         section("selected", (threads,), "int64")
         section("cycles", (threads,), "int64")
         section("missed", (threads,), "int64")
@@ -148,6 +151,12 @@ class Layout:
                     rings.append(Transport(name, "queue", offset, nbytes, reader))
                     offset = _align(offset + nbytes)
                 layout.transports[name] = rings
+        for name, recorded in recorded_streams(composition).items():
+            writer_activity, writer_port = composition.streams[name].writer.split(".")
+            port = activities[writer_activity].interface.outputs[writer_port]
+            nbytes = st.queue_nbytes(port, recorded.capacity)
+            layout.recorded[name] = Transport(name, "queue", offset, nbytes, "recorder")
+            offset = _align(offset + nbytes)
         layout.size = max(offset, ALIGN)
         return layout
 
@@ -211,12 +220,12 @@ class Region:
         for name in self.layout.sections:
             if hasattr(self, name):
                 delattr(self, name)
-        try:
-            self.memory.close()
-        except BufferError:
-            return  # a view is still referenced somewhere; the OS frees it at exit
-        if self.owner:
+        if self.owner:  # the name goes first: it must go even if a view below keeps the mapping
             try:
                 self.memory.unlink()
             except FileNotFoundError:
                 pass
+        try:
+            self.memory.close()
+        except BufferError:
+            pass  # a view is still referenced somewhere (an exception's frames): the mapping goes at exit

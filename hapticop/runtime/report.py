@@ -144,6 +144,20 @@ def missed_targets(run_dir: Path) -> list[str]:
     return missed
 
 
+def print_recording(recording: dict, console: Console) -> None:
+    """What the recorder wrote, and every sample it lost (none is the goal)."""
+    streams = recording["streams"]
+    recorded = sum(s["recorded"] for s in streams.values())
+    dropped = {name: s["dropped"] for name, s in streams.items() if s["dropped"]}
+    console.print(f"recording: {recording['path']} ({recorded} samples of {len(streams)} streams, "
+                  f"{recording['clock']} clock)")
+    if dropped:
+        lost = ", ".join(f"{name} {n}" for name, n in dropped.items())
+        console.print(f"[red]recorder dropped {sum(dropped.values())} samples[/]: {lost}")
+    else:
+        console.print("recorder dropped no samples")
+
+
 def progress_line(system, console: Console, every_s: float = 0.5) -> None:
     """One updating status line while a system runs (a daemon thread: never the cycle's business)."""
     import time

@@ -9,8 +9,10 @@ first, ties in file order, so one composition and seed always give the same run.
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import multiprocessing
+import signal
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +40,31 @@ class ChildProcess:
 
 def _never() -> bool:
     return False
+
+
+@contextlib.contextmanager
+def _sigint_held():
+    """Ctrl+C held back while a child process is started, then answered.
+
+    Ctrl+C reaches the whole foreground process group: a child still loading would die of it
+    with a traceback, so it starts with SIGINT blocked (the mask is inherited) and ignores it
+    before unblocking. The parent's own handler, which may run on any thread's signal, only
+    notes it meanwhile: raised halfway through `start`, it would leave a child reading half a
+    handover.
+    """
+    noted: list[int] = []
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: noted.append(signum)) if main else None
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        if main:  # None: a handler not set from Python; Python's own is the nearest
+            previous = signal.default_int_handler if previous is None else previous
+            signal.signal(signal.SIGINT, previous)
+            if noted and callable(previous):
+                previous(signal.SIGINT, None)
 
 
 class Scheduler:
@@ -76,7 +103,8 @@ class Scheduler:
                       seed, receiving),
                 name=f"hapticop-{process_name}", daemon=True,
             )
-            process.start()
+            with _sigint_held():
+                process.start()
             receiving.close()
             child = ChildProcess(process_name, process, sending, threads)
             for thread in threads:
@@ -118,12 +146,14 @@ class Scheduler:
     def run_realtime(self, main: CyclicThread) -> None:
         """The main thread's loop, on this (the process's main) thread, until it is done."""
         hold = None
+        borrowed = realtime.Saved()  # the caller's thread: given back as it was when the run ends
         wanted = self.composition.cpu_dma_latency
         if wanted is not None and any(spec.priority is not None for spec in self.composition.threads.values()):
             hold = realtime.hold_cpu_dma_latency(wanted, self.log)
         try:
             main.run_realtime(self.first_deadline(self.main_name), _never)
         finally:
+            borrowed.restore()
             if hold is not None:
                 hold.close()
 

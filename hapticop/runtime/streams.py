@@ -79,6 +79,18 @@ def queue_nbytes(port: Port, capacity: int) -> int:
     return QUEUE_HEADER.itemsize + capacity * latest_nbytes(port)
 
 
+def sample_dtype(port: Port) -> np.dtype:
+    """One queued sample as it lies in a ring: its header words and its payload's bytes.
+
+    `SpscQueue.drain_into` fills arrays of it; `payload` viewed as the port's dtype is the value."""
+    return np.dtype({
+        "names": ["seq", "count", "stamp_ns", "payload"],
+        "formats": ["<u8", "<u8", "<i8", ("u1", (port.nbytes,))],
+        "offsets": [0, 8, 16, SLOT_HEADER.itemsize],
+        "itemsize": latest_nbytes(port),
+    })
+
+
 def _raw(buffer: Buffer, nbytes: int) -> np.ndarray:
     """The first `nbytes` of `buffer` as writable uint8, checked once so cycles need not."""
     view = memoryview(buffer)
@@ -257,11 +269,17 @@ class SpscQueue:
             _Slot(raw[start + k * stride : start + (k + 1) * stride], port) for k in range(capacity)
         ]
         self._scratch, self._scratch_bytes, self._scratch_origins = _scratch(port)
+        self._samples = raw[start:].view(sample_dtype(port))  # the slots as one array, for `drain_into`
 
     @property
     def dropped(self) -> int:
         """Samples lost so far: refused by the producer or skipped by the consumer."""
         return self._head[_DROP_NEW] + self._head[_DROP_OLD]
+
+    @property
+    def written(self) -> int:
+        """Samples the producer has pushed so far."""
+        return self._head[_W]
 
     def pending(self) -> int:
         """Samples the consumer could still pop."""
@@ -332,8 +350,42 @@ class SpscQueue:
         head[_R] = r
         return False
 
+    def drain_into(self, out: np.ndarray) -> int:
+        """Take up to `len(out)` of the oldest samples held, in order, into `out` (an array of
+        `sample_dtype(port)`); returns how many (consumer only).
+
+        For a consumer off the real-time path that reads many samples at a time (the recorder):
+        the slots are copied in one go, between two reads of their sequence words, and a
+        sample whose word changed, was odd, or whose number is not the one expected was
+        overwritten meanwhile and is counted lost, as `pop_into` counts it. Allocates.
+        """
+        head = self._head
+        capacity = self.capacity
+        r, w = head[_R], head[_W]
+        if w - r > capacity:  # lapped: the oldest samples were overwritten
+            head[_DROP_OLD] = head[_DROP_OLD] + (w - capacity - r)
+            r = w - capacity
+        n = min(w - r, len(out))
+        if n <= 0:
+            head[_R] = r
+            return 0
+        first = r % capacity
+        where = (slice(first, first + n) if first + n <= capacity  # one run of slots: copied as a block
+                 else np.arange(first, first + n) % capacity)
+        before = self._samples["seq"][where].copy()
+        taken = self._samples[where].copy()
+        after = self._samples["seq"][where]
+        numbers = np.arange(r + 1, r + n + 1, dtype=np.uint64)
+        good = (before == after) & (before % 2 == 0) & (taken["count"] == numbers)
+        kept = int(np.count_nonzero(good))
+        out[:kept] = taken[good]
+        head[_DROP_OLD] = head[_DROP_OLD] + (n - kept)
+        head[_R] = r + n
+        return kept
+
     def close(self) -> None:
         """Let go of the buffer, so the shared memory can be closed."""
+        self._samples = None
         self._head.release()
         for slot in self._slots:
             slot.release()
@@ -344,3 +396,15 @@ class SpscQueue:
             f"SpscQueue({self.port.describe()}, capacity={self.capacity}, {self.overflow}, "
             f"write_index={head[_W]}, read_index={head[_R]}, dropped={self.dropped})"
         )
+
+
+class RecorderRing(SpscQueue):
+    """The recorder's own ring of a stream: never refuses a sample (the oldest are overwritten and
+    counted by the recorder), and leaves the origin stamps out, which are the loops' business
+    (measured latencies), not the record's: a push costs the writing loop less."""
+
+    def __init__(self, buffer: Buffer, port: Port, capacity: int) -> None:
+        super().__init__(buffer, port, capacity, "drop_oldest")
+
+    def push(self, value: np.ndarray, stamp_ns: int, origins: np.ndarray | None = None) -> bool:
+        return SpscQueue.push(self, value, stamp_ns)

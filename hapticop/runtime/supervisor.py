@@ -12,6 +12,7 @@ import signal
 import threading
 from collections.abc import Callable
 from enum import IntEnum
+from pathlib import Path
 
 from hapticop.composition.description import Composition
 from hapticop.composition.lcsm import State
@@ -23,6 +24,7 @@ from hapticop.runtime.region import Region
 from hapticop.runtime.scheduler import Scheduler
 
 SECOND = 1_000_000_000
+STARTUP_BOUND_NS = 60 * SECOND  # a thread's process gets this long to load before the run goes on without it
 WATCH_PROCESSES_NS = 10_000_000  # a lost process is noticed within 10 ms (the streams' ages tell sooner)
 
 
@@ -33,6 +35,7 @@ class ForcedExit(BaseException):
 class ExitStatus(IntEnum):
     SUCCESS = 0
     FAILURE = 1
+    UNAVAILABLE = 69  # devices the composition needs are not there: not started (sysexits' EX_UNAVAILABLE)
     INTERRUPTED = 130
     TERMINATED = 143
 
@@ -64,6 +67,7 @@ class Supervisor:
         self.exit_by_flag = _written_by_flag_map(composition, "system.exit")
         self.reasons: list[str] = []  # why the run failed, if it did
         self.interrupted: ExitStatus | None = None
+        self.left_at_once = False  # a second Ctrl+C or SIGTERM: the run is being left at once
         self.shutdown_at: int | None = None
         self.forced = False
         self.operating_ns: int | None = None
@@ -88,6 +92,8 @@ class Supervisor:
             self.log.info("duration %s reached", format_duration(self.duration_ns))
             self.request_shutdown()
         self._watch_processes()
+        if self.shutdown_at is not None and self._processes_loading(now, started):
+            self.shutdown_at = now  # the shutdown's time runs from when every thread can take part in it
         if self.shutdown_at is None and self.region.flag("system.stop"):
             self.log.info("the coordination asked to stop")
             self.request_shutdown()
@@ -122,7 +128,7 @@ class Supervisor:
         counts from this moment. A thread that never starts does not hold this up past a minute.
         """
         region = self.region
-        if not (region.cycles > 0).all() and now - started < 60 * SECOND:
+        if not (region.cycles > 0).all() and now - started < STARTUP_BOUND_NS:
             return
         self.operating_ns = now
         for name in ("latency", "latency_max", "compute", "compute_max", "missed", "e2e", "e2e_max", "sim_ns"):
@@ -131,6 +137,16 @@ class Supervisor:
         region.cpu_base[:] = region.cpu_ns
         region.system[Region.OPERATING_NS] = now
         self.log.info("every thread runs, %.1f s after start: timing is counted from here", (now - started) / SECOND)
+
+    def _processes_loading(self, now: int, started: int) -> bool:
+        """Threads started in processes of their own that have not run a cycle yet: still loading
+        (seconds on a busy machine). A shutdown asked meanwhile (Ctrl+C during start-up) waits
+        for them, within the start-up bound, rather than forcing them."""
+        if now - started >= STARTUP_BOUND_NS:
+            return False
+        region, index = self.region, self.region.layout.thread_index
+        return any(region.go[index[thread]] and not region.cycles[index[thread]] and child.process.is_alive()
+                   for thread, child in self.scheduler.processes.items())  # a dead one is lost, not loading
 
     def request_shutdown(self) -> None:
         if self.shutdown_at is not None:
@@ -145,10 +161,13 @@ class Supervisor:
         composition, owner_thread = description.composition, description.owner_thread
         others = [n for n in description.activities if owner_thread.get(n) and
                   composition.activities[n].block != "mediator"]
-        for name in others:
-            if region.state_of(name) is not State.DONE and not lost(owner_thread[name]):
-                region.set_flag(f"{name}.lcsm.request_cleaning")
-        if any(region.state_of(n) is not State.DONE and not lost(owner_thread[n]) for n in others):
+        # Still to clean: not done, on a thread that lives, and created (an activity whose thread
+        # never ran it, as after a Ctrl+C during start-up, holds nothing to give back).
+        pending = [n for n in others if region.state_of(n) not in (State.DONE, State.CREATION)
+                   and not lost(owner_thread[n])]
+        for name in pending:
+            region.set_flag(f"{name}.lcsm.request_cleaning")
+        if pending:
             return
         threads = [t for t in composition.threads if t != self.scheduler.main_name]
         for name in threads:
@@ -192,6 +211,9 @@ class Supervisor:
         def handler(signum, _frame):
             if self.interrupted is not None:  # the second one: leave now
                 self.region.system[Region.TERMINATE] = 1
+                for other in (signal.SIGINT, signal.SIGTERM):  # a third would cut the cleaning short
+                    signal.signal(other, signal.SIG_IGN)
+                self.left_at_once = True
                 raise ForcedExit(self.interrupted)
             self.interrupted = ExitStatus.INTERRUPTED if signum == signal.SIGINT else ExitStatus.TERMINATED
             self.log.always("%s: shutting down (again to force)", signal.Signals(signum).name)
@@ -199,19 +221,49 @@ class Supervisor:
 
         return {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
 
-    @staticmethod
-    def restore_signals(previous) -> None:
+    def restore_signals(self, previous) -> None:
+        if self.left_at_once:
+            return  # signals stay ignored until the process has released everything and exits
         for signum, handler in (previous or {}).items():
             signal.signal(signum, handler)
 
-    def exit_status(self) -> ExitStatus:
-        """After the run: failure with its reasons, an interruption, or success."""
-        layout = self.region.layout
-        failed = [owner for owner, index in layout.owner_index.items() if self.region.failed[index] != OK]
+    def exit_status(self, description: Description, run_dir: Path) -> ExitStatus:
+        """After the run: failure with its reasons, an interruption, or success.
+
+        A run is a failure when an owner failed, a thread was lost or the shutdown was forced,
+        and also when it is incomplete: an activity that started never reached running, or one
+        that ran did not leave the results it promises. An interrupted run is incomplete by
+        the user's choice: it says what is missing and keeps the interrupted status.
+        """
+        layout, region = self.region.layout, self.region
+        failed = [owner for owner, index in layout.owner_index.items() if region.failed[index] != OK]
         for owner in failed:
-            self.reasons.append(f"'{owner}' failed ({failure(self.region, owner)})")
-        if self.reasons:  # forced shutdown, lost thread, refused scripted patch, failed owner...
-            return ExitStatus.FAILURE
+            self.reasons.append(f"'{owner}' failed ({failure(region, owner)})")
+        missing = self._incomplete(description, run_dir, set(failed))
+        self.reasons.extend(missing)
+        if self.reasons and not (self.interrupted is not None and len(self.reasons) == len(missing)):
+            return ExitStatus.FAILURE  # forced shutdown, lost thread, refused scripted patch, failed owner...
         if self.interrupted is not None:
             return self.interrupted
         return ExitStatus.SUCCESS
+
+    def _incomplete(self, description: Description, run_dir: Path, failed: set[str]) -> list[str]:
+        """Activities that started but never ran, and results promised but not left."""
+        region, reasons = self.region, []
+        for name, resolved in description.activities.items():
+            index = region.layout.owner_index.get(name)
+            thread = description.owner_thread.get(name)
+            if index is None or name in failed or (thread and self.scheduler.lost(thread)):
+                continue  # said already
+            reached = int(region.reached[index])
+            if not reached & (1 << State.RUNNING):
+                if reached & (1 << State.CREATION):  # its thread started it
+                    furthest = max(s for s in (State.CREATION, State.RESOURCE_CONFIGURATION,
+                                               State.CAPABILITY_CONFIGURATION, State.PAUSING) if reached & (1 << s))
+                    reasons.append(f"'{name}' never reached running (it got as far as "
+                                   f"{furthest.flag_name.replace('_', ' ')})")
+                continue
+            lost = [f for f in resolved.block.promises(resolved.params) if not (run_dir / f).exists()]
+            if lost:
+                reasons.append(f"'{name}' ran but left no {', '.join(lost)} in {run_dir}: results lost")
+        return reasons

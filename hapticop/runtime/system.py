@@ -10,14 +10,18 @@ own thread (`service.py`).
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import dataclasses
+import signal
 import sys
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from hapticop.composition import flags as flagdefs
-from hapticop.composition.description import Composition
+from hapticop.composition.description import Composition, Record
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
@@ -28,11 +32,13 @@ from hapticop.runtime.described import Description
 from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.modes import Modes
+from hapticop.runtime.preflight import DevicesMissing, missing_devices
+from hapticop.runtime.recorder import InlineRecorder, RecorderProcess, plan_of
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
-from hapticop.runtime.rundirs import new_run_directory
+from hapticop.runtime.rundirs import directory_mode, new_run_directory
 from hapticop.runtime.scheduler import Scheduler
-from hapticop.runtime.service import ControlService
+from hapticop.runtime.service import ControlService, control_path
 from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 from hapticop.validation import Validated
@@ -50,6 +56,8 @@ class RunOptions:
     shutdown_timeout_ns: int = 5 * SECOND
     echo: bool = True  # errors and warnings to the console
     control: str | None = None  # control socket name or path (default: the composition's name)
+    group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
+    record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
 
 
 @dataclass
@@ -74,19 +82,43 @@ class System:
 
     def __init__(self, validated: Validated, options: RunOptions):
         source, loaded = validated.source, validated.graph.loaded
+        tree = source.tree
+        if options.record is not None and loaded.composition.record is None:
+            tree, loaded = _recording_all(tree, loaded)
         composition = loaded.composition
         if options.duration_ns is None and composition.duration is not None:
             options = dataclasses.replace(options, duration_ns=composition.duration)
         self.file, self.options = source.file, options
         self.name = composition.name or Path(self.file).stem
         self.virtual = options.clock == "virtual"
+        missing = missing_devices(loaded)
+        if missing:  # before anything is made: nothing is left behind
+            raise DevicesMissing(self.name, missing)
+        self.control_path = None if self.virtual else control_path(options.control, self.name)
         self.clock = VirtualClock() if self.virtual else RealtimeClock()
-        self.run_dir = options.run_dir or new_run_directory(self.name)
+        if options.run_dir is None:
+            self.run_dir = new_run_directory(self.name, group=options.group_readable)
+        else:
+            self.run_dir = options.run_dir
+            self.run_dir.mkdir(mode=directory_mode(options.group_readable), parents=True, exist_ok=True)
         self.writer = LogWriter(self.run_dir, echo=sys.stderr if options.echo else None).start()
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
-        self.description = Description.of(source.tree, loaded)
+        self.region = self.scheduler = self.built = None
+        self.finished = False
+        self.recorder: RecorderProcess | InlineRecorder | None = None
+        self.recording: dict | None = None  # what the recorder recorded and lost, once it finished
+        try:
+            self._build(validated, tree, loaded, composition, options)
+        except BaseException:  # Ctrl+C while processes start, a block that cannot be built: nothing stays
+            self.close()
+            raise
+
+    def _build(self, validated: Validated, tree, loaded: Loaded, composition: Composition,
+               options: RunOptions) -> None:
+        self.description = Description.of(tree, loaded)
         self.layout = layout_of(loaded, validated.flags)
         self.region = Region.create(self.layout)
+        self.log.info("shared memory %s, %d bytes", self.region.name, self.layout.size)
         self.flag_index = self.layout.flag_index
         self.coordinator = Coordinator(composition.coordination, self.region.flags, self.flag_index)
         self.scheduler = Scheduler(composition, self.region, self.clock, self.log)
@@ -103,9 +135,14 @@ class System:
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
                                       lambda: self.description.composition, self.log)
         self.main.supervisor = self._between_cycles
-        self.finished = False
+        if self.layout.recorded:
+            path = Path(options.record) if options.record else self.run_dir / f"{self.name}.mcap"
+            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual)
+            self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
+                             RecorderProcess(plan, self.region.name))
         if not self.virtual:
-            self.scheduler.spawn_processes(source.tree, self.run_dir, options.seed)
+            realtime.warn_missing(list(composition.threads.values()), composition.cpu_dma_latency, self.log)
+            self.scheduler.spawn_processes(tree, self.run_dir, options.seed)
             realtime.prepare_process([composition.threads[t] for t in local], self.log)
             if self.live.scripted:
                 self.live.prepare_scripted()
@@ -172,9 +209,16 @@ class System:
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:
+        if self.recorder is not None:
+            failed = self.recorder.wait_started()
+            if failed:
+                self.supervisor.reasons.append(failed)
+                self.log.error(failed)
+                self.recorder.stop()
+                self.recorder = None
         previous = self.supervisor.install_signals()
         if not self.virtual:
-            self.service.start(self.options.control)
+            self.service.start(self.control_path)
         try:
             if not self.virtual:
                 self.scheduler.run_realtime(self.main)
@@ -185,13 +229,47 @@ class System:
             self.supervisor.restore_signals(previous)
             self.service.stop()
             self.scheduler.stop()
-        return Outcome(self.supervisor.exit_status(), self.run_dir, self.supervisor.reasons)
+            self._stop_recorder()
+        return Outcome(self.supervisor.exit_status(self.description, self.run_dir), self.run_dir,
+                       self.supervisor.reasons)
+
+    def _stop_recorder(self) -> None:
+        """The loops are done: the recorder takes the last samples and finishes the file."""
+        if self.recorder is None:
+            return
+        self.recording, lost = self.recorder.stop()
+        self.recorder = None
+        if lost:
+            self.supervisor.reasons.append(lost)
+            self.log.error(lost)
 
     def close(self) -> None:
-        self.writer.stop()
-        self.built = None  # drop the views into the region before it is released
-        self.main = None
-        self.region.close()
+        """Release everything, whether the system ran, was interrupted, or was half built. Another
+        Ctrl+C meanwhile is ignored: it would leave the shared memory and the children behind."""
+        with _uninterrupted():
+            if self.scheduler is not None and not self.finished:
+                self.finished = True
+                self.scheduler.stop()  # processes started but never run leave before the region goes
+            self._stop_recorder()  # a run that never ran still leaves a finished file
+            self.writer.stop()
+            self.built = None  # drop the views into the region before it is released
+            self.main = None
+            if self.region is not None:
+                self.region.close()
+
+
+@contextlib.contextmanager
+def _uninterrupted():
+    """SIGINT and SIGTERM ignored for a bounded piece of cleaning (on the main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 @dataclass
@@ -204,6 +282,14 @@ class RunResult:
     flags: set[str]
     markings: dict[str, dict[str, int]]
     virtual: bool
+    recording: dict | None = None  # the recorder's summary: the file, and per stream written, recorded, dropped
+
+
+def _recording_all(tree, loaded: Loaded):
+    """`--record` on a file that records nothing: every stream, as if it said `record: {}`."""
+    tree = copy.copy(tree)
+    tree["record"] = {"streams": "all"}
+    return tree, dataclasses.replace(loaded, composition=loaded.composition.model_copy(update={"record": Record()}))
 
 
 def run_system(validated: Validated, options: RunOptions,
@@ -222,6 +308,7 @@ def run_system(validated: Validated, options: RunOptions,
         write_timing(data, system.run_dir)
         states = {owner: system.state(owner) for owner in system.layout.owner_index}
         flags = {name for name, i in system.flag_index.items() if system.region.flags[i]}
-        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual)
+        return RunResult(outcome, data, states, flags, system.coordinator.markings(), system.virtual,
+                         system.recording)
     finally:
         system.close()

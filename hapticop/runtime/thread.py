@@ -45,7 +45,7 @@ class ActivityRunner:
             region.flags, region.state, region.failed, layout.owner_index[name], layout.flag_index, name,
             Hooks(block.create, block.configure_resources, block.configure_capabilities, block.compute,
                   block.pausing, block.clean),
-            start_on_request, log,
+            start_on_request, log, region.reached,
         )
 
     @property
@@ -126,7 +126,7 @@ class CyclicThread:
             region.flags, region.state, region.failed, layout.owner_index[prefix], layout.flag_index, prefix,
             Hooks(self._create, self._configure_resources, self._configure_capabilities, self._run_schedule,
                   self._pause, self._clean),
-            spec.start == "on_request", log,
+            spec.start == "on_request", log, region.reached,
         )
         self.selected = -1
         self._select(0)
@@ -211,6 +211,8 @@ class CyclicThread:
         clock = self.clock
         spin = self.spec.busy_wait
         on_data = self.spec.wake == "data"
+        if self.apply_realtime:
+            realtime.plain()  # until its resource configuration, not its creator's real time
         while not region.system[Region.TERMINATE] and not should_stop():
             if on_data and self._wait_for_data(deadline):
                 self.cycle()  # data woke us before the deadline: an extra cycle, off the grid

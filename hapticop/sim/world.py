@@ -56,6 +56,10 @@ class HallwayWorld(Block):
                                        "y to the left, theta counter-clockwise)")}
     flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
 
+    @classmethod
+    def promises(cls, params: HallwayWorldParams) -> tuple[str, ...]:
+        return ("trajectory.npz", "metrics.json", "results.json") + (("run.png",) if params.plot else ())
+
     def create(self) -> None:
         from hapticop.sim.hallway import HallwayGeometry, World
         from hapticop.sim.recording import TrajectoryRecorder

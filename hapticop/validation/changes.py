@@ -86,6 +86,9 @@ def plan_changes(old: Composition, new: Composition) -> ChangePlan:
 
     if old.name != new.name:
         plan.unsupported.append((("name",), "the system's name fixes its control socket"))
+    if old.record != new.record:
+        plan.unsupported.append((("record",), "what a run records is fixed when it starts (its rings are in the "
+                                 "shared region)"))
 
     for name in _added(old.threads, new.threads):
         plan.unsupported.append((("threads", name), "threads cannot be added to a running system"))

@@ -1,7 +1,8 @@
 """Checks of coordination: nets, places, flag maps and the flags they bind.
 
 Every flag must have exactly one writer and at least one reader; a flag map source reads
-a flag, a sink writes one. Each net is then explored for unbounded places, dead markings
+a flag, a sink writes one. A schedule nobody selects is a warning, a thread the nets start
+but never clean an error. Each net is then explored for unbounded places, dead markings
 and livelocks (see `reachability`).
 """
 
@@ -147,6 +148,55 @@ def start_on_request(cg: G.CompositionGraph) -> Check:
                              hint=f"add a sink for '{name}', or use 'start: auto'")
 
 
+def _written_by_sink(cg: G.CompositionGraph, name: str) -> list[dict]:
+    node = G.flag(name)
+    return [d for _, _, d in cg.g.in_edges(node, data=True) if d["kind"] == "sink"] if node in cg.g else []
+
+
+def schedules_selected(cg: G.CompositionGraph) -> Check:
+    """A schedule other than 0 that no flag map selects: its activities never run.
+
+    A warning, not a refusal: the file is sound otherwise, and a variant may keep a thread
+    parked on purpose (a desk keeps the robot's), which `coordination.standard` says with
+    `select: {thread: 0}`; the warning is there because the same file is usually a mistake."""
+    comp = cg.loaded.composition
+    if any(c.startswith("coordination") for c, _ in cg.loaded.broken):
+        return
+    parked = {t for t, sid in comp.coordination.standard.select.items() if sid == 0} \
+        if comp.coordination.standard else set()
+    for node, data in cg.nodes_of("thread"):
+        name = node[1]
+        for sid in sorted(data["spec"].schedules):
+            if sid == 0 or name in parked or _written_by_sink(cg, f"threads.{name}.select_schedule.{sid}"):
+                continue
+            yield Diagnostic("schedule-never-selected", f"schedule {sid} of thread '{name}' is never selected: no flag "
+                             f"map writes 'threads.{name}.select_schedule.{sid}', so its activities never run",
+                             data["path"] + ("schedules", sid), severity=Severity.WARNING,
+                             hint=f"select it from a net (coordination.standard selects schedule 1 of every thread), "
+                             f"or say 'select: {{{name}: 0}}' under coordination.standard to keep it parked")
+
+
+def threads_cleaned(cg: G.CompositionGraph) -> Check:
+    """A thread the nets start (a sink writes its 'request_running') but never clean.
+
+    Refused: by starting it the nets took its life cycle over, so its end is theirs too. A
+    shutdown that never asks it to clean either waits for it for ever (the run is then stopped
+    by force) or leaves it to the runtime once the nets are done, outside the order they were
+    written to keep; such a run can end without the results its activities write as they clean
+    (the metrics, the picture)."""
+    if any(c.startswith("coordination") for c, _ in cg.loaded.broken):
+        return
+    for node, _ in cg.nodes_of("thread"):
+        prefix = f"threads.{node[1]}.lcsm"
+        starts = _written_by_sink(cg, f"{prefix}.request_running")
+        if starts and not _written_by_sink(cg, f"{prefix}.request_cleaning"):
+            yield Diagnostic("thread-never-cleaned", f"the nets start thread '{node[1]}' but never clean it: no flag "
+                             f"map writes '{prefix}.request_cleaning', so the nets' shutdown never ends it",
+                             starts[0]["path"],
+                             hint=f"add a converting sink for '{prefix}.request_cleaning' to the net that cleans the "
+                             "threads (coordination.standard does it for the threads it starts)")
+
+
 def _flag_name_help(name: str) -> str:
     return ("flags are '<activity>.lcsm.<state|progress|request>', '<activity>.<declared flag>', "
             "'threads.<thread>.lcsm.*', 'threads.<thread>.schedule.<id>', "
@@ -216,4 +266,4 @@ def _environment(cg: G.CompositionGraph, net_name: str) -> Environment:
     return Environment(frozenset(tracking), frozenset(converting - tracking), frozenset(emits), labels)
 
 
-CHECKS = (nets_and_places, flags, start_on_request, reachability)
+CHECKS = (nets_and_places, flags, start_on_request, schedules_selected, threads_cleaned, reachability)

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from hapticop.composition.description import Composition
-from hapticop.composition.diagnostics import Report
+from hapticop.composition.diagnostics import Diagnostic, Report
 from hapticop.composition.graph import CompositionGraph
 from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.yamlsource import Source
@@ -43,5 +43,16 @@ def check_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> Vali
     if loaded.composition is not None:
         for check in structure.CHECKS + coordination.CHECKS + modes.CHECKS:
             found = check(cg, state_limit) if check is coordination.reachability else check(cg)
-            report.extend(source.place(d) for d in found)
+            report.extend(placed(source, loaded, d) for d in found)
     return Validated(report, source, cg)
+
+
+def placed(source: Source, loaded: Loaded, diagnostic: Diagnostic) -> Diagnostic:
+    """Located in the file; a finding about an expanded entry at the part of `coordination.standard`
+    that asked for it, its path still naming the entry as `hapticop expand` prints it."""
+    origin = loaded.expansion.origin_of(diagnostic.path)
+    if origin is None:
+        return source.place(diagnostic)
+    at = source.place(replace(diagnostic, path=origin))
+    note = f"written out from {'.'.join(map(str, origin))}: `hapticop expand FILE` prints it"
+    return replace(at, path=diagnostic.path, hint=f"{diagnostic.hint} ({note})" if diagnostic.hint else note)

@@ -340,10 +340,10 @@ def prepare(
                                          "validate it before patching", file=file)])
     plan = plan_changes(old, new)
     if plan.unsupported:
-        source = validated.source
+        source, expansion = validated.source, validated.graph.loaded.expansion
         found = []
-        for path, reason in plan.unsupported:
-            line, column = source.locate(path, key=True)
+        for path, reason in plan.unsupported:  # a written-out net is located at the declaration that wrote it
+            line, column = source.locate(expansion.origin_of(path) or path, key=True)
             found.append(Diagnostic(rule="patch-unsupported", message=f"{reason}; {RESTART}", path=path,
                                     hint="a running system changes only activity parameters, schedules, "
                                     "activities, streams and stream max_age live",

@@ -323,5 +323,20 @@ def busy_waits(cg: G.CompositionGraph) -> Check:
                              hint="a process of its own, or busy_wait: 0")
 
 
+def recording(cg: G.CompositionGraph) -> Check:
+    """The streams `record:` names exist."""
+    composition = cg.loaded.composition
+    record = composition.record
+    if record is None:
+        return
+    named = [(("record", "streams", i), name) for i, name in enumerate(record.streams)] if isinstance(
+        record.streams, list) else []
+    named += [(("record", "decimate", name), name) for name in record.decimate]
+    for path, name in named:
+        if name not in composition.streams:
+            yield Diagnostic("unknown-stream", f"'record' names stream '{name}', which is not declared", path,
+                             hint=_suggest(name, composition.streams) or "record one of the streams under 'streams'")
+
+
 CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus,
-          latencies, busy_waits)
+          latencies, busy_waits, recording)

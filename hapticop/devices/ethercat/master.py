@@ -3,7 +3,12 @@
 Bring-up is SOEM's: open the interface, `config_init` (find and name the slaves from
 their SII), check them against the expected list by product code and order, `config_map`
 (build the IOmap, program SMs and FMMUs), SAFE-OP, then OP while exchanging process data
-so the outputs are valid before any drive is enabled. The exchange moves raw images:
+so the outputs are valid before any drive is enabled. A slave whose SII offers CoE has its
+PDO assignment (0x1C12/0x1C13 and the mapping objects they name) read over SDO in PRE-OP
+and checked against the layout the driver expects. When slaves offer distributed clocks,
+`config_dc` measures them before the mapping, and each slave that runs on SYNC0 (the smart
+wheels, like ropod's own bring-up) gets SYNC0 at the fieldbus cycle from the PRE-OP ->
+SAFE-OP hook, which SOEM runs again when it reconfigures a slave after a fault. The exchange moves raw images:
 outputs are length-checked before they are written (pysoem's setter copies without
 checking, and would run into the next slave's outputs). `always_release_gil` is set so
 the other threads of the process run while SOEM waits on the wire; `config_map`,
@@ -43,6 +48,13 @@ class ExpectedSlave:
     product: int
     output_bytes: int = 0
     input_bytes: int = 0
+    output_bits: tuple[int, ...] = ()  # bit length of each mapped output entry, in order (checked over CoE)
+    input_bits: tuple[int, ...] = ()
+    sync0: bool = False  # runs on SYNC0: configured at the master's cycle when the segment has DC
+
+
+MBX_PROTOCOLS_WORD, MBX_COE = 0x1C, 0x0004  # SII word of the mailbox protocols; the CoE bit
+SM_OUTPUTS, SM_INPUTS = 3, 4  # 0x1C00 sync-manager communication types
 
 
 _masters: dict[str, SoemMaster] = {}
@@ -56,7 +68,7 @@ def find_master(interface: str) -> SoemMaster | None:
 
 class SoemMaster:
     def __init__(self, interface: str, expected: Sequence[ExpectedSlave], receive_timeout_us: int = 2000,
-                 state_timeout_s: float = 2.0, frame_timeout_us: int | None = None):
+                 state_timeout_s: float = 2.0, frame_timeout_us: int | None = None, cycle_ns: int = 1_000_000):
         import pysoem
 
         self.pysoem = pysoem
@@ -67,6 +79,10 @@ class SoemMaster:
         self.expected = list(expected)
         self.receive_timeout_us = receive_timeout_us
         self.state_timeout_s = state_timeout_s
+        self.cycle_ns = cycle_ns  # SYNC0 cycle: the cycle the process data is exchanged at
+        self.distributed_clocks = False
+        self.coe_checked: list[str] = []  # the slaves whose PDO assignment was read over CoE
+        self.sync0: list[str] = []  # the slaves given SYNC0
         self.master = pysoem.Master()
         self.slaves: list = []
         self.expected_wkc = 0
@@ -97,7 +113,15 @@ class SoemMaster:
             raise BringUpError(f"no EtherCAT slave answers on '{self.interface}'")
         self.slaves = list(self.master.slaves)
         self._check_slaves()
-        self.master.config_map()
+        if self.master.state_check(AL_PREOP, 50_000) != AL_PREOP:  # the mailboxes answer from PRE-OP on
+            self.master.read_state()
+            raise BringUpError("not every slave reached PRE-OP: " + self.describe_states())
+        self._check_coe_layouts()
+        self._configure_clocks()
+        try:
+            self.master.config_map()
+        except self.pysoem.ConfigMapError as error:
+            raise BringUpError(f"mapping the process data failed: {error}") from None
         self.expected_wkc = self.master.expected_wkc
         for slave, spec in zip(self.slaves, self.expected):
             if len(slave.output) != spec.output_bytes or len(slave.input) != spec.input_bytes:
@@ -121,6 +145,75 @@ class SoemMaster:
                 return
         self.master.read_state()
         raise BringUpError("not every slave reached OP: " + self.describe_states())
+
+    # --- CoE: the PDO assignment the slave reports ----------------------------------------
+    def _check_coe_layouts(self) -> None:
+        """Each slave offering CoE: its PDO assignment, read as SOEM's config_map reads it, must
+        give the byte counts (and entry sizes, if known) the driver expects."""
+        self.coe_checked = []
+        for slave, spec in zip(self.slaves, self.expected):
+            if not self._offers_coe(slave):
+                continue
+            self.coe_checked.append(spec.name)
+            try:
+                layout = self._read_pdo_layout(slave)
+            except (self.pysoem.SdoError, self.pysoem.MailboxError, self.pysoem.WkcError,
+                    self.pysoem.PacketError) as error:
+                raise BringUpError(f"slave {spec.name} ({slave.name}) offers CoE but its PDO assignment cannot be "
+                                   f"read: {error}") from None
+            found = {kind: (sum(bits) // 8, tuple(bits), ", ".join(f"0x{i:04X}" for i in pdos) or "none")
+                     for kind, (pdos, bits) in layout.items()}
+            want = {SM_OUTPUTS: (spec.output_bytes, spec.output_bits), SM_INPUTS: (spec.input_bytes, spec.input_bits)}
+            if any(found[k][0] != want[k][0] or (want[k][1] and found[k][1] != want[k][1]) for k in want):
+                def say(kind: int, what: str) -> str:
+                    nbytes, bits, pdos = found[kind]
+                    return f"{what} {pdos} ({len(bits)} entries, {nbytes} bytes)"
+                raise BringUpError(
+                    f"slave {spec.name} ({slave.name}) assigns over CoE {say(SM_OUTPUTS, 'outputs')} and "
+                    f"{say(SM_INPUTS, 'inputs')}; the driver expects {spec.output_bytes} output bytes"
+                    + (f" in {len(spec.output_bits)} entries" if spec.output_bits else "")
+                    + f" and {spec.input_bytes} input bytes"
+                    + (f" in {len(spec.input_bits)} entries" if spec.input_bits else ""))
+
+    @staticmethod
+    def _offers_coe(slave) -> bool:
+        """As SOEM decides: a mailbox whose protocols (SII word 0x1C) include CoE."""
+        protocols = int.from_bytes(slave.eeprom_read(MBX_PROTOCOLS_WORD)[:2], "little")
+        return bool(protocols & MBX_COE)
+
+    @staticmethod
+    def _read_pdo_layout(slave) -> dict[int, tuple[list[int], list[int]]]:
+        """{SM type: (assigned PDO indices, bit length of each mapped entry)} for outputs and inputs,
+        from 0x1C00 (SM types), 0x1C1n (assignment of SM n) and the mapping objects."""
+        def read(index: int, sub: int) -> int:
+            return int.from_bytes(slave.sdo_read(index, sub), "little")
+
+        layout: dict[int, tuple[list[int], list[int]]] = {SM_OUTPUTS: ([], []), SM_INPUTS: ([], [])}
+        for sm in range(2, read(0x1C00, 0)):
+            kind = read(0x1C00, sm + 1)
+            if kind not in layout:
+                continue
+            for n in range(1, read(0x1C10 + sm, 0) + 1):
+                pdo = read(0x1C10 + sm, n)
+                layout[kind][0].append(pdo)
+                layout[kind][1].extend(read(pdo, sub) & 0xFF for sub in range(1, read(pdo, 0) + 1))
+        return layout
+
+    # --- distributed clocks --------------------------------------------------------------
+    def _configure_clocks(self) -> None:
+        """Measure the clocks (before the mapping, so SYNC0 start times are in system time)
+        and give each SYNC0 slave its pulse in the PRE-OP -> SAFE-OP hook."""
+        self.distributed_clocks = bool(self.master.config_dc())
+        self.sync0 = []
+        if not self.distributed_clocks:
+            return
+        for slave, spec in zip(self.slaves, self.expected):
+            if spec.sync0:
+                slave.setup_func = self._start_sync0
+                self.sync0.append(spec.name)
+
+    def _start_sync0(self, slave) -> None:
+        slave.dc_sync(True, self.cycle_ns)
 
     def _check_slaves(self) -> None:
         found = [(s.name, s.id) for s in self.slaves]
@@ -223,6 +316,10 @@ class SoemLink:
                 raise
             self.log.info("EtherCAT segment on %s in OP: %s; IOmap working counter %d", m.interface,
                           ", ".join(s.name for s in m.slaves), m.expected_wkc)
+            if m.coe_checked:
+                self.log.info("PDO assignment read over CoE as expected: %s", ", ".join(m.coe_checked))
+            if m.sync0:
+                self.log.info("distributed clocks: SYNC0 every %d us on %s", m.cycle_ns // 1000, ", ".join(m.sync0))
         self.receive(inputs, self.states)
         self.send(outputs)  # in flight: the first cycle receives it
         if self.ready(inputs):

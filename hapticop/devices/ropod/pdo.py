@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
-    "TXPDO_BYTES", "RXPDO_BYTES", "TXPDO_DTYPE", "RXPDO_DTYPE", "Stat1", "Com1",
+    "TXPDO_BYTES", "RXPDO_BYTES", "TXPDO_DTYPE", "RXPDO_DTYPE", "TXPDO_ENTRY_BITS", "RXPDO_ENTRY_BITS", "Stat1", "Com1",
     "txpdo_view", "rxpdo_view", "pdo_image", "new_tx_image", "new_rx_image", "record_struct",
 ]
 
@@ -61,6 +61,11 @@ RXPDO_DTYPE = _packed(
     + [("timestamp", "<u8")],
     RXPDO_BYTES,
 )
+
+
+# The bit length of each field in wire order: the PDO mapping a smart wheel reports over CoE.
+TXPDO_ENTRY_BITS = tuple(TXPDO_DTYPE.fields[name][0].itemsize * 8 for name in TXPDO_DTYPE.names)
+RXPDO_ENTRY_BITS = tuple(RXPDO_DTYPE.fields[name][0].itemsize * 8 for name in RXPDO_DTYPE.names)
 
 
 class Stat1(enum.IntFlag):

@@ -6,6 +6,8 @@ the AL control/status/status-code registers with the state machine (error flag a
 acknowledge), the EEPROM interface over the SII image, sync managers and FMMUs as the
 master programs them, and the process-data (sync-manager) watchdog. The slave's
 application (its firmware) reads the output buffer only in OP and fills the input buffer.
+A slave whose SII announces a mailbox gets one (hapticop.devices.ethercat.emulator.mailbox,
+CoE in .coe), one with distributed clocks its DC registers (.clocks); the hooks here call them.
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
+from hapticop.devices.ethercat.emulator.clocks import DistributedClock
+from hapticop.devices.ethercat.emulator.coe import object_dictionary
+from hapticop.devices.ethercat.emulator.mailbox import Mailbox
 from hapticop.devices.ethercat.emulator.sii import SM_INPUTS, SM_OUTPUTS, SlaveIdentity, build_sii
 
 __all__ = ["Esc", "AlState", "AL_INIT", "AL_PREOP", "AL_BOOT", "AL_SAFEOP", "AL_OP", "AL_ERROR",
@@ -60,7 +65,7 @@ class Esc:
         self.esc_type = esc_type
         self.eeprom = build_sii(identity)
         self.mem = bytearray(MEMORY)
-        self.present = True  # False: powered off or cut off; the frame passes it by
+        self.present = True  # False: powered off (the segment also cuts off whatever is wired behind it)
         self.fmmus: list[Fmmu] = []
         self.outputs_sm: tuple[int, int] | None = None  # (start, length) of the programmed output buffer
         self.last_output_ns = 0
@@ -90,6 +95,10 @@ class Esc:
         self.fmmus = []
         self.outputs_sm = None
         self.watchdog_expired = False
+        identity = self.identity
+        self.mailbox = (Mailbox(mem, identity.mailbox, object_dictionary(identity), lambda: self.state)
+                        if identity.mailbox else None)
+        self.clock = DistributedClock(mem, identity.requires_sync0) if identity.distributed_clocks else None
 
     def _dl_status(self) -> int:
         status = 0x0003  # PDI operational (EEPROM loaded), PDI watchdog not expired
@@ -135,6 +144,11 @@ class Esc:
     def _al_control(self, now_ns: int) -> None:
         value = struct.unpack_from("<H", self.mem, REG_AL_CONTROL)[0]
         requested, ack = value & 0x0F, bool(value & AL_ERROR)
+        if requested == AL_INIT:  # INIT is always honoured and clears the error, acknowledged or not
+            struct.pack_into("<H", self.mem, REG_AL_CODE, 0)
+            self.error_held_until_ns = 0
+            self._set_state(AL_INIT)
+            return
         error = bool(self.al_status & AL_ERROR)
         if error and (not ack or now_ns < self.error_held_until_ns):
             return  # an error must be acknowledged (and its cause gone) before the state machine moves again
@@ -144,8 +158,13 @@ class Esc:
         if requested not in _UP.get(current, ()):
             self._set_state(current, error=True, code=AL_CODE_INVALID_STATE_CHANGE)
             return
+        if requested != AL_INIT and current == AL_INIT and self.mailbox is not None:
+            code = self.mailbox.check_config()
+            if code:
+                self._set_state(current, error=True, code=code)
+                return
         if requested in (AL_SAFEOP, AL_OP) and current < AL_SAFEOP:
-            code = self._check_process_data()
+            code = self._check_process_data() or (self.clock.check_sync() if self.clock else 0)
             if code:
                 self._set_state(current, error=True, code=code)
                 return
@@ -157,7 +176,8 @@ class Esc:
         self.outputs_sm = None
         for n, spec in enumerate(self.identity.sync_managers):
             start, length, control, _, enable = struct.unpack_from("<HHBBB", self.mem, REG_SM + 8 * n)
-            ok = start == spec.start and length == spec.length and enable & 1
+            expected = spec.length if self.mailbox is None else self.mailbox.assigned_bytes(n)
+            ok = start == spec.start and length == expected and enable & 1
             if spec.kind == SM_OUTPUTS:
                 if not ok:
                     return AL_CODE_INVALID_OUTPUT_CONFIG
@@ -225,26 +245,37 @@ class Esc:
                 return
 
     # --- register access by the master -------------------------------------------------
-    def read(self, ado: int, out: memoryview, combine: bool = False) -> None:
-        """Copy registers [ado, ado+len) into `out` (OR them in for broadcast reads)."""
+    def read(self, ado: int, out: memoryview, combine: bool = False) -> bool:
+        """Copy registers [ado, ado+len) into `out` (OR them in for broadcast reads); False if
+        the ESC refuses the read (an empty send mailbox): no data, no working counter."""
         n = len(out)
         end = min(ado + n, MEMORY)
         if ado >= MEMORY:
             if not combine:
                 out[:] = bytes(n)
-            return
+            return True
+        if self.clock is not None:
+            self.clock.before_read(ado, end)
+        if self.mailbox is not None and not self.mailbox.may_read(ado, end):
+            return False
         chunk = self.mem[ado:end] + bytes(n - (end - ado))
         if combine:
             out[:] = bytes(a | b for a, b in zip(out, chunk))
         else:
             out[:] = chunk
+        if self.mailbox is not None:
+            self.mailbox.read_done(ado, end)
+        return True
 
-    def write(self, ado: int, data: memoryview, now_ns: int) -> None:
-        """Write registers with their side effects (AL control, EEPROM command, output buffer)."""
+    def write(self, ado: int, data: memoryview, now_ns: int) -> bool:
+        """Write registers with their side effects (AL control, EEPROM command, output buffer);
+        False if the ESC refuses the write (a full receive mailbox): nothing written, no count."""
         n = len(data)
         end = min(ado + n, MEMORY)
         if ado >= MEMORY:
-            return
+            return True
+        if self.mailbox is not None and not self.mailbox.may_write(ado, end):
+            return False
         saved = [(a, b, bytes(self.mem[a:b])) for a, b in _READ_ONLY if a < end and b > ado]
         self.mem[ado:end] = data[:end - ado]
         for a, b, old in saved:
@@ -256,13 +287,18 @@ class Esc:
         if ado < REG_FMMU + 16 * 8 and end > REG_FMMU:
             self.fmmus = self._read_fmmus()  # SOEM may program FMMUs after SAFE-OP (reconfig does)
         self._note_output_write(ado, end, now_ns)
+        if self.mailbox is not None:
+            self.mailbox.written(ado, end)
+        if self.clock is not None:
+            self.clock.after_write(ado, end, data)
+        return True
 
     def _note_output_write(self, start: int, end: int, now_ns: int) -> None:
         sm = self.outputs_sm
         if sm is not None and start < sm[0] + sm[1] <= end:  # the buffer's last byte completes it
-            self.last_output_ns = now_ns
-            if not self.watchdog_expired:
-                struct.pack_into("<H", self.mem, REG_WD_STATUS, 1)
+            self.last_output_ns = now_ns  # a complete write re-arms the watchdog, after a trip too
+            self.watchdog_expired = False
+            struct.pack_into("<H", self.mem, REG_WD_STATUS, 1)
 
     def _eeprom_command(self) -> None:
         control = struct.unpack_from("<H", self.mem, REG_EEP_CONTROL)[0]

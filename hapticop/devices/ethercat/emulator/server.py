@@ -7,12 +7,15 @@ about every millisecond, and publish where the robot is. It must not share a pro
 pysoem, which holds the GIL inside several of its calls.
 
 Faults arrive over a Unix socket as JSON lines and run between two frames:
-`{"op": "lose", "slave": 5}` (power off / cable cut), `restore` (back, freshly powered),
+`{"op": "lose", "slave": 5}` (power off: it and every slave wired behind it fall off the
+segment), `restore` (power back: freshly powered, in INIT), `cut` (the cable into that slave:
+it and those behind keep power and state but no frame reaches them), `reconnect`,
 `al_error` with a `code` (and `hold_ms`: the cause persists that long), `trip_watchdog`,
 `late` (`delay_us` for the next `frames` frames), `physics` (`run`: false freezes the robot,
-so its sensors stay put), `status` (states, codes, the wheels' process-data buffers in hex,
-the robot's pose), `ping`, `stop`.
-Slaves are named by bus position, 0-based.
+so its sensors stay put), `status` (states, codes, which slaves a frame reaches, the wheels'
+process-data buffers in hex and each wheel's drive as it truly is, the robot's pose), `ping`,
+`stop`. Slaves are named by bus position, 0-based; a request that makes no sense (no such
+slave, power back on a slave that has it, a cable that is not cut) is answered with an error.
 """
 
 from __future__ import annotations
@@ -26,9 +29,11 @@ import threading
 import time
 from pathlib import Path
 
+from hapticop.devices.ethercat.emulator.esc import REG_WD_STATUS
 from hapticop.devices.ethercat.emulator.ropod_segment import RopodSegment
 from hapticop.devices.ethercat.emulator.segment import ETHERTYPE
 from hapticop.devices.ethercat.emulator.truth import TruthWriter
+from hapticop.devices.ropod.pdo import Stat1, txpdo_view
 
 __all__ = ["FrameServer", "control"]
 
@@ -102,11 +107,23 @@ class FrameServer:
             reply.put(self._handle(request))
 
     # --- faults and status -------------------------------------------------------------
+    def _position(self, request: dict) -> int:
+        position = request.get("slave")
+        count = len(self.model.slaves)
+        if type(position) is not int or not 0 <= position < count:
+            raise ValueError(f"'slave' must be a bus position, an integer 0-{count - 1}; got {repr(position)[:40]}")
+        return position
+
     def _slave(self, request: dict):
-        position = int(request["slave"])
-        if not 0 <= position < len(self.model.slaves):
-            raise ValueError(f"no slave at position {position} (0-{len(self.model.slaves) - 1})")
-        return self.model.slaves[position]
+        return self.model.slaves[self._position(request)]
+
+    def _wheels(self) -> list[dict]:
+        """Each wheel's drive as it truly is: applies its outputs, both motors enabled, their currents."""
+        status1 = txpdo_view(self.model.tx)["status1"]
+        return [{"live": w.outputs_live, "watchdog": w.mem[REG_WD_STATUS] & 1,
+                 "enabled": bool(status1[i] & Stat1.ENABLED1 and status1[i] & Stat1.ENABLED2),
+                 "current_a": self.model.plant.currents_hw[2 * i:2 * i + 2].tolist()}
+                for i, w in enumerate(self.model.wheels)]
 
     def _handle(self, request: dict) -> dict:
         try:
@@ -114,19 +131,37 @@ class FrameServer:
             if op == "ping":
                 return {"ok": True, "frames": self.model.segment.frames}
             if op == "status":
-                return {"ok": True, "frames": self.model.segment.frames, "slaves": [
-                    {"name": s.name, "present": s.present, "state": s.state, "al_status": s.al_status,
-                     "al_code": s.al_code, "station": s.station, "watchdog_ns": s.watchdog_ns()}
-                    for s in self.model.slaves],
+                segment = self.model.segment
+                return {"ok": True, "frames": segment.frames, "slaves": [
+                    {"name": s.name, "present": s.present, "reached": reached, "state": s.state,
+                     "al_status": s.al_status, "al_code": s.al_code, "station": s.station,
+                     "watchdog_ns": s.watchdog_ns()}
+                    for s, reached in zip(self.model.slaves, segment.reached())],
+                    "cut": sorted(segment.cut), "wheels": self._wheels(),
                     "outputs": [bytes(w.output_buffer() or b"").hex() for w in self.model.wheels],
                     "inputs": [bytes(w.input_buffer() or b"").hex() for w in self.model.wheels],
                     "pose": self.model.plant.pose.tolist(), "twist": self.model.plant.twist.tolist()}
             if op == "lose":
-                self._slave(request).present = False
+                slave = self._slave(request)
+                if not slave.present:
+                    raise ValueError(f"slave {request['slave']} is already powered off")
+                slave.present = False
             elif op == "restore":
                 slave = self._slave(request)
+                if slave.present:
+                    raise ValueError(f"slave {request['slave']} has power ('lose' it first)")
                 slave.power_on()
                 slave.present = True
+            elif op == "cut":
+                position = self._position(request)
+                if position in self.model.segment.cut:
+                    raise ValueError(f"the cable into slave {position} is already cut")
+                self.model.segment.cut.add(position)
+            elif op == "reconnect":
+                position = self._position(request)
+                if position not in self.model.segment.cut:
+                    raise ValueError(f"the cable into slave {position} is not cut")
+                self.model.segment.cut.discard(position)
             elif op == "al_error":
                 hold_ns = int(float(request.get("hold_ms", 0)) * 1e6)
                 self._slave(request).raise_error(int(request["code"]), until_ns=time.monotonic_ns() + hold_ns)

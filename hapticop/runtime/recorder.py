@@ -1,0 +1,335 @@
+"""The recorder: every recorded stream's own ring, drained off the real-time path into one MCAP file.
+
+Each recorded stream's writer pushes every sample into a ring of its own in the shared region
+(`region.Layout.recorded`), beside its other transports: the loop copies the sample and moves
+on, never waiting and never allocating. The recorder drains the rings in batches, writes each
+sample with its number and publication stamp (`RecordingFile`), and hands the same batches to
+its views, which may derive channels of their own from them (a scan from two streams, the
+robot's frames from a pose) without the loops knowing. A ring the recorder falls a whole
+ring behind on is overwritten, and the lost samples are counted, never waited for.
+
+On the wall clock the recorder is a process of its own at normal scheduling, which leaves
+with its parent; under the virtual clock the main process drains the rings itself between
+two main-thread cycles, so a test's recording is the same every run.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from multiprocessing import shared_memory
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from hapticop.blocks.interface import Port
+from hapticop.composition.loader import Loaded
+from hapticop.recording.mcapfile import RecordingFile, StreamInfo
+from hapticop.recording.plan import recorded_streams
+from hapticop.recording.scene import views_for
+from hapticop.runtime.region import Layout
+from hapticop.runtime.streams import SpscQueue, sample_dtype
+
+DRAIN_INTERVAL_NS = 50_000_000  # the recorder wakes 20 times a second (each pass costs ~30 µs a stream
+# whatever it finds): a ring holds a second or more
+FLUSH_INTERVAL_NS = 1_000_000_000  # a kill loses at most this much, plus one drain
+BATCH = 4096  # samples taken from one ring at a time
+PR_SET_PDEATHSIG = 1
+RECORDER_NICE = -5
+"""Normal scheduling (SCHED_OTHER), weighted above ordinary processes so that a busy machine
+does not starve it for longer than its rings hold; the real-time loops preempt it all the same."""
+
+
+class View(Protocol):
+    """Channels derived from recorded streams (the Foxglove helper's LaserScan, frames...):
+    registered when the file is opened, fed the batches of the streams they name as they
+    are drained, in the recorder process. Never on a real-time loop."""
+
+    streams: frozenset[str]
+
+    def start(self, file: RecordingFile, streams: dict[str, StreamInfo]) -> None: ...
+
+    def samples(self, stream: StreamInfo, samples: np.ndarray, log_time_ns: int) -> None:
+        """`samples` has `streams.sample_dtype`'s fields; `values(info, samples)` is the arrays."""
+
+    def finish(self) -> None: ...
+
+
+def values(info: StreamInfo, samples: np.ndarray) -> np.ndarray:
+    """A drained batch's payloads as the stream's arrays, one per sample."""
+    return samples["payload"].view(np.dtype(info.dtype)).reshape((len(samples), *info.shape))
+
+
+@dataclass(frozen=True)
+class RecordedRing:
+    """Where a recorded stream's ring lies in the shared region, and what its samples are."""
+
+    info: StreamInfo
+    offset: int
+    nbytes: int
+    capacity: int
+
+    def port(self) -> Port:
+        return Port(self.info.dtype, self.info.shape, self.info.unit)
+
+
+@dataclass
+class RecorderPlan:
+    """All the recorder needs, as plain data a spawned process receives."""
+
+    path: Path
+    rings: list[RecordedRing]
+    clock: str  # the one clock of every timestamp: 'CLOCK_MONOTONIC' or 'virtual'
+    attachments: list[tuple[str, str, bytes]] = field(default_factory=list)  # (name, media type, data)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    views: list = field(default_factory=list)  # `View`s, picklable
+
+
+class Recorder:
+    """Drains the rings into the file and the views; one pass per `drain`."""
+
+    def __init__(self, plan: RecorderPlan, rings: dict[str, SpscQueue], clock: Callable[[], int]):
+        self.plan, self.rings, self.clock = plan, rings, clock
+        self.cpu_started = time.process_time()  # in its own process: the recorder's CPU, for the benchmark
+        now = self.started_ns = clock()
+        self.file = RecordingFile(plan.path, library=_library())
+        for name, media_type, data in plan.attachments:
+            self.file.attach(name, media_type, data, now)
+        for name, values_ in plan.metadata.items():
+            self.file.metadata(name, values_)
+        self.streams = {ring.info.name: ring.info for ring in plan.rings}
+        self.channels = {name: self.file.stream_channel(info) for name, info in self.streams.items()}
+        self.batches = {ring.info.name: np.zeros(min(BATCH, ring.capacity), sample_dtype(ring.port()))
+                        for ring in plan.rings}
+        self.recorded = dict.fromkeys(self.streams, 0)
+        self.views: Sequence[View] = plan.views
+        for view in self.views:
+            view.start(self.file, self.streams)
+        self.file.flush()  # schemas, channels, attachments: on disk before any sample
+        self.flushed_ns = now
+
+    def drain(self) -> int:
+        """Everything the rings hold now; returns how many samples were taken."""
+        taken = 0
+        for name, ring in self.rings.items():
+            batch, info, channel = self.batches[name], self.streams[name], self.channels[name]
+            while True:
+                n = ring.drain_into(batch)
+                if not n:
+                    break
+                taken += n
+                log_time = self.clock()
+                samples = batch[:n]
+                if info.every > 1:
+                    samples = samples[samples["count"] % np.uint64(info.every) == 0]
+                self.file.write_samples(channel, samples, log_time)
+                self.recorded[name] += len(samples)
+                for view in self.views:
+                    if name in view.streams:
+                        view.samples(info, samples, log_time)
+                if n < len(batch):
+                    break
+        now = self.clock()
+        if now - self.flushed_ns >= FLUSH_INTERVAL_NS:
+            self.file.flush()
+            self.flushed_ns = now
+        return taken
+
+    def summary(self) -> dict:
+        """Per stream: samples its writer published, recorded, and lost (the ring was lapped)."""
+        return {"path": str(self.plan.path), "clock": self.plan.clock, "messages": self.file.messages,
+                "cpu_s": time.process_time() - self.cpu_started, "streams": {
+            name: {"written": int(ring.written), "recorded": self.recorded[name], "dropped": int(ring.dropped)}
+            for name, ring in self.rings.items()}}
+
+    def finish(self) -> dict:
+        """The last samples, the drop counts stored in the file, the file finished and renamed."""
+        self.drain()
+        for view in self.views:
+            view.finish()
+        summary = self.summary()
+        streams = summary["streams"]
+        self.file.metadata("hapticop.drops", {name: str(s["dropped"]) for name, s in streams.items()})
+        self.file.metadata("hapticop.written", {name: str(s["written"]) for name, s in streams.items()})
+        self.file.metadata("hapticop.recorder", {
+            "cpu_s": f"{summary['cpu_s']:.3f}", "messages": str(self.file.messages),
+            "elapsed_s": f"{(self.clock() - self.started_ns) / 1e9:.3f}"})
+        summary["path"] = str(self.file.finish())
+        return summary
+
+
+def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path, virtual: bool) -> RecorderPlan:
+    """What a run records (the layout placed the rings), with the composition as it runs (`extends`
+    resolved, `--record` applied) and every activity's resolved parameters attached."""
+    import json
+    import platform
+
+    from hapticop.composition.documents import dump
+
+    composition = loaded.composition
+    plan = recorded_streams(composition)
+    rings = []
+    for name, transport in layout.recorded.items():
+        spec = composition.streams[name]
+        activity, port_name = spec.writer.split(".")
+        port = loaded.activities[activity].interface.outputs[port_name]
+        info = StreamInfo(name, np.dtype(port.dtype).name, tuple(port.shape), port.unit, plan[name].rate_hz,
+                          plan[name].every, spec.writer, tuple(spec.readers), spec.doc or port.doc)
+        rings.append(RecordedRing(info, transport.offset, transport.nbytes, plan[name].capacity))
+    params = {name: resolved.params.model_dump(mode="json") for name, resolved in loaded.activities.items()}
+    clock = "virtual" if virtual else "CLOCK_MONOTONIC"
+    run = {"composition": composition.name or Path(file).stem, "file": str(file), "clock": clock,
+           "realtime_minus_clock_ns": str(time.time_ns() - time.monotonic_ns()) if not virtual else "",
+           "host": platform.node(), "kernel": platform.release(), "python": platform.python_version(),
+           "times": "publish_time: the writing loop's stamp at publication; log_time: when the recorder took the "
+                    "sample; sequence: the sample's number (from 1), modulo 2^32"}
+    return RecorderPlan(path, rings, clock,
+                        [("composition.yaml", "application/yaml", dump(tree).encode()),
+                         ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
+                        {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]))
+
+
+def _library() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"hapticop {version('hapticop')}, mcap {version('mcap')}"
+    except PackageNotFoundError:
+        return "hapticop"
+
+
+def _rings(plan: RecorderPlan, buffer) -> dict[str, SpscQueue]:
+    return {ring.info.name: SpscQueue(np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset),
+                                      ring.port(), ring.capacity, "drop_oldest") for ring in plan.rings}
+
+
+# -- on the wall clock: a process of its own ---------------------------------------------------
+
+def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> None:
+    """The recorder process: drain every `DRAIN_INTERVAL_NS` until the parent says stop (or
+    dies: the file is finished all the same), then send the parent the summary."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C is the parent's: it stops us when the loops are done
+    orphaned = threading.Event()
+
+    def terminated(_signum=None, _frame=None) -> None:
+        if os.getppid() != parent:  # the parent died (PR_SET_PDEATHSIG): finish what we have
+            orphaned.set()  # a SIGTERM to the whole group while the parent lives: it stops us in order
+
+    signal.signal(signal.SIGTERM, terminated)
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != parent:
+        orphaned.set()
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # never real time, whatever it inherited
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, RECORDER_NICE)
+    except OSError:
+        pass  # without the right (CAP_SYS_NICE), at the ordinary weight
+    memory = shared_memory.SharedMemory(name=region_name, create=False)
+    rings = _rings(plan, memory.buf)
+    recorder = None
+    try:
+        recorder = Recorder(plan, rings, time.monotonic_ns)
+        messages.send(("started", os.getpid()))
+        while not orphaned.is_set():
+            recorder.drain()
+            if messages.poll(DRAIN_INTERVAL_NS / 1e9):
+                break  # the parent's stop: its loops are done, the rings hold their last samples
+        summary = recorder.finish()
+        if not orphaned.is_set():
+            messages.send(("finished", summary))
+    finally:
+        recorder = None
+        for ring in rings.values():
+            ring.close()
+        rings = None
+        memory.close()
+
+
+class RecorderProcess:
+    """The parent's handle on the recorder process."""
+
+    STOP_TIMEOUT_S = 60.0  # the last drain and the summary of a long run take a while
+
+    def __init__(self, plan: RecorderPlan, region_name: str):
+        import multiprocessing
+
+        context = multiprocessing.get_context("spawn")
+        self.messages, theirs = context.Pipe(duplex=True)
+        self.process = context.Process(target=record_main, args=(plan, region_name, os.getpid(), theirs),
+                                       name="hapticop-recorder", daemon=True)
+        self.process.start()
+        theirs.close()
+        self.plan = plan
+        self.pid = self.process.pid
+
+    def wait_started(self, timeout_s: float = 60.0) -> str | None:
+        """Before the loops run: the recorder has the region mapped and the file open (None), or
+        what went wrong. Starting takes a second or two (a new interpreter, numpy, mcap)."""
+        try:
+            if self.messages.poll(timeout_s):
+                kind, _ = self.messages.recv()
+                if kind == "started":
+                    return None
+        except (OSError, EOFError):
+            pass
+        return (f"the recorder (process {self.pid}) did not start within {timeout_s:g} s "
+                f"(exit code {self.process.exitcode}); the run goes on unrecorded")
+
+    def stop(self) -> tuple[dict | None, str | None]:
+        """Ask for the last drain and the finished file: (summary, None), or (None, what went wrong)."""
+        try:
+            self.messages.send("stop")
+            deadline = time.monotonic() + self.STOP_TIMEOUT_S
+            while time.monotonic() < deadline and self.messages.poll(max(0.0, deadline - time.monotonic())):
+                kind, value = self.messages.recv()
+                if kind == "finished":
+                    return value, None
+        except (OSError, EOFError):
+            pass
+        finally:
+            self.process.join(timeout=5)
+            if self.process.is_alive():
+                self.process.kill()
+                self.process.join(timeout=5)
+        code = self.process.exitcode
+        return None, (f"the recorder (process {self.pid}) ended with exit code {code} before finishing the "
+                      f"recording; what it flushed is in {self.plan.path}.part: `hapticop recover` makes it a "
+                      "valid file")
+
+
+# -- under the virtual clock: drained by the main process -----------------------------------
+
+class InlineRecorder:
+    """The recorder in the main process, drained between two main-thread cycles whenever
+    `DRAIN_INTERVAL_NS` of simulated time has passed: deterministic, so tests count exactly."""
+
+    def __init__(self, plan: RecorderPlan, buffer, clock: Callable[[], int]):
+        self.rings = _rings(plan, buffer)
+        self.recorder = Recorder(plan, self.rings, clock)
+        self.clock = clock
+        self.next_ns = clock() + DRAIN_INTERVAL_NS
+
+    @staticmethod
+    def wait_started() -> None:
+        return None
+
+    def between_cycles(self) -> None:
+        now = self.clock()
+        if now >= self.next_ns:
+            self.recorder.drain()
+            self.next_ns = now + DRAIN_INTERVAL_NS
+
+    def stop(self) -> tuple[dict | None, str | None]:
+        try:
+            return self.recorder.finish(), None
+        finally:
+            for ring in self.rings.values():
+                ring.close()
