@@ -38,7 +38,8 @@ def test_the_stop_is_calm_and_the_robot_holds_still(hallway_run):
     drift back, and the completion time is judged against the autonomous reference."""
     _, run = hallway_run
     metrics = json.loads((run / "metrics.json").read_text())
-    assert not metrics["sustained_oscillation"] and metrics["oscillation_s"] < 1.0  # was 1.8 s
+    # §5: the 2 s index above 2 cm/s for more than 2 s is sustained; here only the first push lifts it
+    assert not metrics["sustained_oscillation"] and metrics["oscillation_s"] < 1.0
     assert not metrics["divergence"]
     assert metrics["hold_speed_mps"] <= 0.005  # was 0.014 m/s, up to 0.028 m/s backwards
     trajectory = np.load(run / "trajectory.npz")
@@ -46,7 +47,8 @@ def test_the_stop_is_calm_and_the_robot_holds_still(hallway_run):
     assert metrics["t_ref_s"] > 0 and metrics["t_norm"] <= 1.2
     rows = json.loads((run / "results.json").read_text())["rows"]
     named = {row["metric"].split(" (")[0]: row for row in rows}
-    for metric in ("oscillation index", "divergence", "rms force rate", "completion time / T_ref", "drift while stopped"):
+    for metric in ("oscillation index", "divergence", "rms force rate", "completion time / T_ref",
+                   "drift while stopped"):
         assert metric in named  # every metric the run computes is in the table
 
 

@@ -51,7 +51,8 @@ class Targets:
     def delay_pass(cls) -> Targets:
         """§7.7's pass criterion for the delay sweep: no crash, no sustained oscillation, |e_stop| <= 0.10 m."""
         none = {f: None for f in ("side_below_dist1_m", "frac_below_dist1_max", "recover_dist1_max_s",
-                                  "t_norm_max", "hold_speed_max_mps", "force_peak_max_n", "saturation_max", "force_rate_rms_max_nps",
+                                  "t_norm_max", "hold_speed_max_mps", "force_peak_max_n", "saturation_max",
+                                  "force_rate_rms_max_nps",
                                   "hf_ratio_max", "scan_step_max_n", "dithering_max", "e_pc_ratio_max",
                                   "risk_corr_min", "risk_lag_max_s")}
         return replace(cls(), completed=False, e_stop_m=(-0.10, 0.10), **none)
@@ -170,8 +171,9 @@ def judged_rows(m: RunMetrics, geometry: HallwayGeometry, variant: str) -> list[
         row("effort", m.effort_ns, "N s"),
         row("rms handle speed", m.handle_speed_rms_mps, "m/s"),
         row("oscillation index (largest 2 s rms, 1-10 Hz)", m.oscillation_index_mps, "m/s"),
-        row(f"oscillation above {OSCILLATION_LIMIT_MPS} m/s, longest", m.oscillation_s, "s",
-            f"< {SUSTAINED_S:g}" if t.no_oscillation else "", not m.sustained_oscillation if t.no_oscillation else None),
+        row(f"oscillation index above {OSCILLATION_LIMIT_MPS} m/s, longest", m.oscillation_s, "s",
+            f"<= {SUSTAINED_S:g}" if t.no_oscillation else "",
+            not m.sustained_oscillation if t.no_oscillation else None),
         row("divergence (handle at its limit or force saturated > 0.5 s)", m.divergence, "", "no",
             not m.divergence if t.no_oscillation else None),
     ]
