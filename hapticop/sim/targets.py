@@ -168,6 +168,7 @@ def judged_rows(m: RunMetrics, geometry: HallwayGeometry, variant: str) -> list[
         row("force behind true risk, lag", m.risk_lag_s, "s", bound(t.risk_lag_max_s), checks.get("risk_lag")),
         row("safety layer's authority, speed", m.authority_v, ""),
         row("safety layer's authority, turn", m.authority_w, ""),
+        row("share of time the safety layer changes the command by over 10 %", m.frac_modified, ""),
         row("effort", m.effort_ns, "N s"),
         row("rms handle speed", m.handle_speed_rms_mps, "m/s"),
         row("oscillation index (largest 2 s rms, 1-10 Hz)", m.oscillation_index_mps, "m/s"),

@@ -44,6 +44,8 @@ class HallwayWorld(Block):
         "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
         "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),
         "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
+        "executed_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the twist a safety layer let through of "
+                                  "the command (shared control): its authority is measured", required=False),
         "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
         "device_force": Port("float64", (3,), "N", "the whole force the Falcon renders", required=False),
         "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip", required=False),
@@ -77,6 +79,7 @@ class HallwayWorld(Block):
         self.still_since: float | None = None
         self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
         self.command = np.zeros(2)
+        self.executed = np.zeros(2)
         self.nothing = np.zeros(3)
         self.variant = "unknown"  # the operator's, once it has said (clean)
 
@@ -98,8 +101,12 @@ class HallwayWorld(Block):
         self.velocity[0], self.velocity[1] = vx, wz
         setpoint = inputs.velocity_setpoint.value
         self.command[0], self.command[1] = setpoint[0], setpoint[2]
+        executed = inputs.executed_setpoint
+        if executed.seq:
+            self.executed[0], self.executed[1] = executed.value[0], executed.value[2]
         force = inputs.environment_force
         self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
+                             cmd_exec=self.executed if executed.seq else None,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
                              force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
                              force_device=inputs.device_force.value, clearance=clearance)
