@@ -37,14 +37,16 @@ at 36 s); an operator who never lets go of the handle would otherwise hold the r
 def run_one(model: str, profile: str, variation: int, hallway: str, braking_field: dict | None = None) -> dict:
     """One seeded run. ``braking_field+governor`` is the hallway's own tuning; ``braking_field`` alone
     drops that tuning (a precursor for the governor) and runs M1 with docs/hallway-experiment.md's parameters."""
+    from hapticop.composition.layers import resolve
     from hapticop.composition.yamlsource import Source, read_file
     from hapticop.runtime.system import RunOptions, run_system
     from hapticop.sim.operator import BlindOperator
     from hapticop.validation import validate_source
     from hapticop.validation.patches import apply_patch
 
-    source = read_file(ROOT / "systems" / "hallway.yaml")
     force_model, _, robot_side = model.partition("+")
+    robot_side, _, shared = robot_side.partition("+")  # "+shared": the robot's safety filter on top (S2)
+    source = resolve(read_file(ROOT / "systems" / ("hallway_shared.yaml" if shared == "shared" else "hallway.yaml")))
     governor = robot_side == "governor"
     tuned = force_model == "braking_field" and (governor or braking_field is not None)
     tree = source.tree
@@ -167,7 +169,7 @@ def main() -> None:
     parser.add_argument("--hallways", nargs="+", help="several hallways (H1-H6); overrides --hallway")
     parser.add_argument("--sweep", action="store_true",
                         help="the full experiment: M1 + S1 over --hallways x --profiles (default: all five "
-                        "variants but hands_off, each seed a varied operator), every metric per run, a table per hallway")
+                        "variants, each seed a varied operator), every metric per run, a table per hallway")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--summary", action="store_true", help="only summarise what --out holds")
@@ -177,7 +179,7 @@ def main() -> None:
         if args.models == parser.get_default("models"):
             args.models = ["braking_field+governor"]
         if args.profiles == parser.get_default("profiles"):
-            args.profiles = ["cautious", "nominal", "aggressive", "tremor"]
+            args.profiles = ["cautious", "nominal", "aggressive", "tremor", "hands_off"]
     if not args.summary:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         done = set()
