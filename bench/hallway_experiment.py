@@ -117,47 +117,118 @@ def summarise(path: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+MODEL_NAMES = {"braking_field+governor": "operator alone", "braking_field+governor+shared": "shared control"}
+
+
+def _runs(path: Path) -> list[dict]:
+    return [r for r in map(json.loads, path.read_text().splitlines()) if r and "metrics" in r]
+
+
 def summarise_sweep(path: Path) -> str:
-    """One table per hallway, a row per operator profile: how many runs met each target (every metric is in
-    the records; this is the part the README shows)."""
-    runs = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    runs = [r for r in runs if "metrics" in r]
+    """One table per hallway, a row per operator profile and model: how many runs met each target and the
+    spread of the metrics the targets judge (every metric of every run is in the records)."""
+    runs = _runs(path)
     out = []
     for hallway in sorted({r["hallway"] for r in runs}):
         out += [f"### {hallway}", "",
-                "| operator | runs | all targets met | crashes | runs with collisions | stop error in target | "
-                "stop error min / median / max (cm) | least side clearance (m) | T/T_ref median / max | "
-                "sustained oscillation | longest oscillation (s) | drift while stopped, max (cm/s) | "
-                "force rate rms, max (N/s) | targets missed (runs) |",
-                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-        for profile in sorted({r["profile"] for r in runs if r["hallway"] == hallway}):
-            group = [r for r in runs if r["hallway"] == hallway and r["profile"] == profile]
-            ms = [r["metrics"] for r in group]
-
-            def values(key, ms=ms):
-                return [m[key] for m in ms if m.get(key) is not None]
-
-            stops = values("e_stop_m")
-            stop_ok = sum(1 for r in group if "stop error" not in " ".join(r["missed"]) and r["e_stop_m"] is not None)
-            missed = defaultdict(int)
-            for r in group:
-                for name in r["missed"]:
-                    missed[name.split(" (")[0]] += 1
-            t_norm, osc_s, hold, rate = values("t_norm"), values("oscillation_s"), values("hold_speed_mps"), \
-                values("force_rate_rms_nps")
-            side = values("side_clearance_min_m")
-            out.append(
-                f"| {profile} | {len(group)} | {sum(1 for r in group if not r['missed'])} | "
-                f"{sum(m['crash'] for m in ms)} | {sum(1 for m in ms if m['n_collisions'])} | {stop_ok} | "
-                + (f"{100 * min(stops):.1f} / {_median(stops, 100)} / {100 * max(stops):.1f}" if stops else "-")
-                + f" | {min(side):.2f} | " if side else " | - | ")
-            out[-1] += (f"{_median(t_norm, digits=2)} / {max(t_norm):.2f}" if t_norm else "-") + \
-                f" | {sum(1 for m in ms if m['sustained_oscillation'])} | " + \
-                (f"{max(osc_s):.2f}" if osc_s else "-") + " | " + (f"{100 * max(hold):.2f}" if hold else "-") + \
-                " | " + (f"{max(rate):.1f}" if rate else "-") + " | " + \
-                (", ".join(f"{k} ({v})" for k, v in sorted(missed.items())) or "none") + " |"
+                "| operator | control | runs | all targets met | runs with collisions | stop error in target | "
+                "stop error min / median / max (cm) | least side clearance min / median (m) | "
+                "T/T_ref median / max | oscillation index max (m/s) | longest above 2 cm/s, max (s) | "
+                "sustained oscillation (runs) | drift while stopped, max (cm/s) | force rate rms, max (N/s) | "
+                "command changed > 10 %, median share | targets missed (runs) |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        here = [r for r in runs if r["hallway"] == hallway]
+        for profile in PROFILES:
+            for model in MODEL_NAMES:
+                group = [r for r in here if r["profile"] == profile and r["model"] == model]
+                if group:
+                    out.append(_row(profile, MODEL_NAMES[model], group))
         out.append("")
     return "\n".join(out)
+
+
+def _row(profile: str, control: str, group: list[dict]) -> str:
+    ms = [r["metrics"] for r in group]
+
+    def values(key: str) -> list[float]:
+        return [m[key] for m in ms if m.get(key) is not None]
+
+    def spread(key: str, scale: float = 1.0, digits: int = 1, maximum: bool = True) -> str:
+        v = values(key)
+        if not v:
+            return "-"
+        return (f"{scale * min(v):.{digits}f} / {_median(v, scale, digits)}"
+                + (f" / {scale * max(v):.{digits}f}" if maximum else ""))
+
+    def largest(key: str, scale: float = 1.0, digits: int = 2) -> str:
+        v = values(key)
+        return f"{scale * max(v):.{digits}f}" if v else "-"
+
+    missed: dict[str, int] = defaultdict(int)
+    for r in group:
+        for name in r["missed"]:
+            missed[name.split(" (")[0]] += 1
+    stop_ok = sum(1 for r in group if r["e_stop_m"] is not None and not any("stop error" in m for m in r["missed"]))
+    t_norm = values("t_norm")
+    modified = values("frac_modified")
+    cells = [profile, control, len(group), sum(1 for r in group if not r["missed"]),
+             sum(1 for m in ms if m["n_collisions"]), stop_ok, spread("e_stop_m", 100),
+             spread("side_clearance_min_m", digits=2, maximum=False),
+             f"{_median(t_norm, digits=2)} / {max(t_norm):.2f}" if t_norm else "-",
+             largest("oscillation_index_mps", digits=3), largest("oscillation_s"),
+             sum(1 for m in ms if m["sustained_oscillation"]), largest("hold_speed_mps", 100),
+             largest("force_rate_rms_nps", digits=1), _median(modified, digits=3) if modified else "-",
+             ", ".join(f"{k} ({v})" for k, v in sorted(missed.items())) or "none"]
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+PROFILES = ("cautious", "nominal", "aggressive", "tremor", "hands_off")
+FIGURE_METRICS = (  # (key, label, scale, target band or line)
+    ("e_stop_m", "stop error (cm, + early)", 100.0, (-5.0, 10.0)),
+    ("side_clearance_min_m", "least side clearance (m)", 1.0, (0.30, None)),
+    ("oscillation_s", "oscillation index above 2 cm/s, longest (s)", 1.0, (None, 2.0)),
+    ("t_norm", "completion time / T_ref", 1.0, (None, 1.2)),
+)
+
+
+def plot_sweep(path: Path, folder: Path) -> list[Path]:
+    """A picture per hallway: each judged metric per run, by operator profile, the operator alone beside shared
+    control, with the target drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = _runs(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for hallway in sorted({r["hallway"] for r in runs}):
+        here = [r for r in runs if r["hallway"] == hallway]
+        fig, axes = plt.subplots(1, len(FIGURE_METRICS), figsize=(4.2 * len(FIGURE_METRICS), 3.6))
+        for ax, (key, label, scale, (low, high)) in zip(axes, FIGURE_METRICS):
+            for offset, (model, name), colour in zip((-0.15, 0.15), MODEL_NAMES.items(), ("tab:blue", "tab:orange")):
+                xs, ys = [], []
+                for i, profile in enumerate(PROFILES):
+                    for r in here:
+                        value = r["metrics"].get(key)
+                        if r["profile"] == profile and r["model"] == model and value is not None:
+                            xs.append(i + offset)
+                            ys.append(scale * value)
+                ax.scatter(xs, ys, s=14, alpha=0.7, color=colour, label=name)
+            for bound in (low, high):
+                if bound is not None:
+                    ax.axhline(bound, color="tab:red", linewidth=0.8, linestyle="--")
+            ax.set_xticks(range(len(PROFILES)), PROFILES, rotation=30, fontsize=8)
+            ax.set_title(label, fontsize=9)
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=8)
+        fig.suptitle(f"hallway {hallway}: every run (dashed: the target)", fontsize=10)
+        fig.tight_layout()
+        target = folder / f"hallway-sweep-{hallway}.png"
+        fig.savefig(target, dpi=90)
+        plt.close(fig)
+        written.append(target)
+    return written
 
 
 def main() -> None:
@@ -173,6 +244,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--summary", action="store_true", help="only summarise what --out holds")
+    parser.add_argument("--figures", type=Path, help="with --sweep: draw a picture per hallway into this folder")
     args = parser.parse_args()
     hallways = args.hallways or [args.hallway]
     if args.sweep:
@@ -195,6 +267,9 @@ def main() -> None:
                 print(record["hallway"], record["model"], record["profile"], record["variation"], record["ended_by"],
                       record["e_stop_m"], record["wall_s"], record["missed"], flush=True)
     print(summarise_sweep(args.out) if args.sweep else summarise(args.out))
+    if args.sweep and args.figures:
+        for picture in plot_sweep(args.out, args.figures):
+            print(f"picture: {picture}")
 
 
 if __name__ == "__main__":
