@@ -24,7 +24,7 @@ import json
 import tempfile
 import time
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -261,7 +261,9 @@ def main() -> None:
         jobs = [(m, p, v, h) for v in range(args.variations) for h in hallways for m in args.models
                 for p in args.profiles if (m, p, v, h) not in done]
         with ProcessPoolExecutor(args.workers) as pool, args.out.open("a") as out:
-            for record in pool.map(run_one, *zip(*jobs)) if jobs else []:
+            # Written as each run ends, not in order: an interrupted sweep keeps every run it finished.
+            for future in as_completed([pool.submit(run_one, *job) for job in jobs]):
+                record = future.result()
                 out.write(json.dumps(record) + "\n")
                 out.flush()
                 print(record["hallway"], record["model"], record["profile"], record["variation"], record["ended_by"],
