@@ -258,7 +258,9 @@ def main() -> None:
         if args.out.exists():
             done = {(r["model"], r["profile"], r["variation"], r["hallway"])
                     for r in map(json.loads, args.out.read_text().splitlines()) if r}
-        jobs = [(m, p, v, h) for v in range(args.variations) for h in hallways for m in args.models
+        # Seed by seed, each model over every cell before the next: stopped early, the sweep has as many
+        # seeds as fitted, uniformly over the cells, the first model's first.
+        jobs = [(m, p, v, h) for v in range(args.variations) for m in args.models for h in hallways
                 for p in args.profiles if (m, p, v, h) not in done]
         with ProcessPoolExecutor(args.workers) as pool, args.out.open("a") as out:
             # Written as each run ends, not in order: an interrupted sweep keeps every run it finished.
