@@ -52,6 +52,7 @@ def test_the_stop_is_calm_and_the_robot_holds_still(hallway_run):
         assert metric in named  # every metric the run computes is in the table
 
 
+@pytest.mark.timeout(360)  # a whole hallway run: a bound on hangs on a busy machine, not a speed
 def test_check_fails_a_run_that_misses_a_target(tmp_path):
     """`compose --check` turns a missed target into exit status 1: without the ropod's standstill hold the
     stopped robot drifts back (the run itself succeeds, exit 0 without --check)."""

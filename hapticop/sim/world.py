@@ -60,6 +60,8 @@ class HallwayWorld(Block):
 
     @classmethod
     def promises(cls, params: HallwayWorldParams) -> tuple[str, ...]:
+        if not params.judge:  # not a hallway run: the trajectory alone
+            return ("trajectory.npz",)
         return ("trajectory.npz", "metrics.json", "results.json") + (("run.png",) if params.plot else ())
 
     def create(self) -> None:
