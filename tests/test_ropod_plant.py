@@ -250,3 +250,30 @@ def test_a_step_is_one_runge_kutta_step_of_the_level1_equations():
         k3 = _level1_derivative(y + 0.5 * h * k2, tau, params)
         k4 = _level1_derivative(y + h * k3, tau, params)
         np.testing.assert_allclose(plant.state, y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), rtol=1e-12, atol=1e-14)
+
+
+def test_standstill_hold_keeps_a_stopped_robot_from_drifting_back():
+    """Braking along a ramp winds the platform integrators up against the motion; the plain PI then drives
+    the stopped robot backwards (the hallway run's drift after its stop). With the standstill hold the
+    integrators stay at zero once the setpoint is zero and the robot nearly still."""
+    from dataclasses import replace
+
+    from hapticop.devices.ropod.velocity_controller import PlatformControllerParams
+
+    def run(hold_below):
+        ctrl = PlatformVelocityController(replace(PlatformControllerParams(), hold_below=hold_below))
+        plant, tx, rx, v_meas = RopodPlant(), new_tx_image(4), new_rx_image(4), np.zeros(3)
+        plant.write_sensors(tx)
+        vx = []
+        for k in range(6000):  # 0.5 m/s for 2 s, braked along a 1 s ramp, then a zero setpoint for 3 s
+            speed = 0.5 if k < 2000 else max(0.0, 0.5 * (3000 - k) / 1000)
+            ctrl.step(np.array([speed, 0.0, 0.0]), tx, rx, v_meas)
+            plant.step(rx, DT, tx)
+            vx.append(float(plant.twist[0]))
+        return np.array(vx), float(plant.pose[0])
+
+    plain, _ = run(None)
+    held, _ = run(0.02)
+    assert plain[3000:].min() < -0.01  # the plain PI reverses the robot after the stop
+    assert held[3000:].min() > -0.002 and abs(held[-1]) < 1e-3  # held: it stays where it stopped
+    np.testing.assert_allclose(held[:2900], plain[:2900])  # and driving is untouched

@@ -252,3 +252,60 @@ def test_recorder_appends_without_allocating_and_counts_what_it_drops():
     small = TrajectoryRecorder(3)
     assert [small.append(i, pose) for i in range(5)] == [True, True, True, False, False]
     assert small.n == 3 and small.dropped == 2
+
+
+def test_a_short_burst_is_not_sustained_and_a_lasting_ring_is():
+    """The index is the largest 2 s rms of the 1-10 Hz band; sustained means it stays above 2 cm/s for more
+    than 2 s. A half-second burst lifts the index over the limit for less than that; a 3 s ring does not."""
+    def burst(seconds, amplitude=0.06):
+        return lambda t: np.column_stack([0 * t, 0 * t, np.where((t > 2) & (t < 2 + seconds),
+                                                                 amplitude * np.sin(2 * np.pi * 4.5 * t), 0.0)])
+    push = compute_metrics(with_channels(handle_velocity=burst(0.5)), H1)
+    assert push.oscillation_index_mps > 0.02  # the index alone is over the limit
+    assert 1.0 < push.oscillation_s < 2.0 and not push.sustained_oscillation
+    assert targets_met(push, Targets()).checks["no_oscillation"]
+    ring = compute_metrics(with_channels(handle_velocity=burst(3.0)), H1)
+    assert ring.oscillation_s > 2.0 and ring.sustained_oscillation
+    assert not targets_met(ring, Targets()).checks["no_oscillation"]
+
+
+def test_the_oscillation_index_looks_at_2_s_windows():
+    """A 1.5 s ring at 3 cm/s rms is over the limit in a 0.5 s window for as long as it lasts, but a 2 s window
+    averages it down: the definition is the 2 s window's."""
+    ring = lambda t: np.column_stack([0 * t, 0 * t, np.where((t > 2) & (t < 3.5),  # noqa: E731
+                                                             0.03 * math.sqrt(2) * np.sin(2 * np.pi * 4.5 * t), 0.0)])
+    m = compute_metrics(with_channels(handle_velocity=ring), H1)
+    assert m.oscillation_index_mps == pytest.approx(0.03 * math.sqrt(1.5 / 2.0), rel=0.05)
+    assert not m.sustained_oscillation
+
+
+def test_drift_while_stopped_and_the_autonomous_reference_time():
+    still, _ = straight_run()
+    m = compute_metrics(still, H1, v_cruise_mps=0.5)
+    assert m.hold_speed_mps == pytest.approx(0.0, abs=1e-9) and targets_met(m, Targets()).checks["hold_speed"]
+    travel = float(H1.length_m - (H1.start[0] + 0.5 * H1.footprint.length_m)) - H1.dist2_m
+    assert m.t_ref_s == pytest.approx(travel / 0.5 + 0.5 / (2 * 0.5) + 0.15, rel=1e-6)
+    assert m.t_norm == pytest.approx(m.completion_time_s / m.t_ref_s)
+    drifting = dict(still)
+    t = drifting["t"]
+    drifting["pose"] = drifting["pose"].copy()
+    end = t[0] + m.t_end_s  # the run's end: a second after the robot stood still
+    drifting["pose"][:, 0] -= 0.02 * np.maximum(t - (end - 0.4), 0.0)  # backwards at 2 cm/s at the very end
+    m = compute_metrics(drifting, H1)
+    assert m.ended_by == "stopped" and m.hold_speed_mps > 0.005
+    assert not targets_met(m, Targets()).checks["hold_speed"]
+
+
+def test_every_metric_has_a_row_in_the_end_of_run_table():
+    from dataclasses import fields
+
+    from hapticop.sim.targets import judged_rows
+
+    run = with_channels(force_env=np.array([0.0, 0.0, 0.5]), cmd=np.array([0.5, 0.0]))
+    m = compute_metrics(run, H1, v_cruise_mps=0.5)
+    rows = judged_rows(m, H1, "nominal")
+    assert len(rows) >= len(fields(m)) - 6  # t_end, n_collisions/crash, e_pc/pc_active, frac_modified, sustained
+    named = {row["metric"].split(" (")[0]: row for row in rows}
+    assert named["completion time / T_ref"]["ok"] is True and named["rms force rate"]["ok"] is True
+    assert named["passivity controller's share"]["ok"] is None  # not measured: no verdict
+    assert named["divergence"]["value"] == "no" and named["divergence"]["ok"] is True

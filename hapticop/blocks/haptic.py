@@ -23,7 +23,14 @@ from hapticop.haptics.governor import (
     limit_blind_by,
     stop_gap,
 )
-from hapticop.haptics.handle import CentringParams, CentringPD, DrivingParams, handle_to_twist
+from hapticop.haptics.handle import (
+    CentringParams,
+    CentringPD,
+    CorrectionFeel,
+    CorrectionFeelParams,
+    DrivingParams,
+    handle_to_twist,
+)
 from hapticop.haptics.scan_filter import MovingAverageParams, ScanFilterParams, make_scan_filter
 
 
@@ -42,6 +49,9 @@ class HapticControllerParams(Params):
     scan_filter: ScanFilterParams = Field(
         default_factory=MovingAverageParams, discriminator="kind",
         description="the per-beam filter of each scan: 'kind' moving_average or moving_median")
+    correction_feel: CorrectionFeelParams | None = Field(
+        None, description="shared control: render the robot's correction of the command (the velocity_correction "
+        "input) as part of the environmental force ({} for its defaults); null: not felt")
     scan_points: int = Field(811, ge=2, le=10_000, description="points per scan (the ranges and angles ports)")
     centred_within_m: float = Field(0.005, gt=0, description="capability configuration ends with the handle this close")
 
@@ -57,7 +67,7 @@ class HapticController(Block):
     period_params = frozenset({"centring.period_s", "force_model.period_s"})
     # Every law retunes between two cycles (`retune`): a live gain change never stops the robot.
     running_params = frozenset({"blind", "centring", "driving", "force_model", "governor", "scan_filter",
-                                "centred_within_m"})
+                                "centred_within_m", "correction_feel"})
 
     @classmethod
     def interface(cls, params: HapticControllerParams) -> Interface:
@@ -73,6 +83,8 @@ class HapticController(Block):
                                          "predicted (a pose_predictor's travel): the scan is rendered from "
                                          "there (model-mediated); unconnected: measured twist × scan age",
                                          required=False),
+                "velocity_correction": Port("float64", (3,), "m/s, m/s, rad/s", "what a robot-side safety layer "
+                                            "changed of the setpoint (executed minus commanded)", required=False),
             },
             outputs={
                 "force": Port("float64", (3,), "N", "force for the Falcon"),
@@ -122,6 +134,8 @@ class HapticController(Block):
         if "centring" in changed:
             self.pd.params = p.centring
         self.driving = p.driving
+        if "correction_feel" in changed:
+            self._build_feel()
         if changed & {"scan_filter", "force_model", "governor"}:
             self._build_scan_laws()
         self.built_for = p
@@ -146,11 +160,16 @@ class HapticController(Block):
             self._take_scan()
         scan_ok = ranges.valid
         travel = p_in.predicted_travel.value if p_in.predicted_travel.valid else None
+        twist = self.twist_measured()
+        scan_age_s = ranges.age_ns() / 1e9
         if scan_ok:
-            self.model.render(p_in.handle_position.value, self.twist_measured(), out.environment_force.value,
-                              scan_age_s=ranges.age_ns() / 1e9, travel=travel)
+            self.model.render(p_in.handle_position.value, twist, out.environment_force.value, scan_age_s=scan_age_s,
+                              travel=travel)
         else:
             out.environment_force.value[:] = 0.0  # stale scan: no obstacle force to trust
+        correction = p_in.velocity_correction
+        if self.feel is not None and correction.valid:  # the robot disagrees: the operator feels by how much
+            self.feel.add(correction.value, out.environment_force.value)
         setpoint = out.velocity_setpoint.value
         self.pd.compute(p_in.handle_position.value, out.force.value, p_in.handle_velocity.value,
                         out.environment_force.value)
@@ -158,9 +177,12 @@ class HapticController(Block):
         if self.flags["robot_held"]:
             setpoint[:] = 0.0
         if self.governor is not None and scan_ok:
-            # behind a link the robot's own governor decides; this one, on the scan seen from the predicted
-            # pose, is the model of it that keeps the commands sent (and so the prediction) what the robot does
-            gap = self.stop_gap_m if travel is None else self.stop_gap_m - float(travel[0])
+            # The gap now, not at the scan: moved on by what the robot has driven since (§7.4); on the scan's
+            # gap alone the limit fell in 15 Hz steps, each a jolt the operator felt. Behind a link the robot's
+            # own governor decides, and this one, on the scan seen from the predicted pose, is the model of it
+            # that keeps the commands sent (and so the prediction) what the robot does.
+            gap = (self.stop_gap_m - float(travel[0]) if travel is not None
+                   else self.stop_gap_m - max(float(twist[0]), 0.0) * scan_age_s)
             govern_cycle(setpoint, self.beams, gap, setpoint, self.governor)
         self._blind_policy(not scan_ok, setpoint)
         out.force.publish()
@@ -207,6 +229,11 @@ class HapticController(Block):
         self.pd = CentringPD(p.centring)
         self.driving = p.driving
         self._build_scan_laws()
+        self._build_feel()
+
+    def _build_feel(self) -> None:
+        feel = self.params.correction_feel
+        self.feel = None if feel is None else CorrectionFeel(feel, (self.context.period_ns or 1_000_000) / 1e9)
 
     def _build_scan_laws(self) -> None:
         """The scan filter, the force model and the governor: all hang on the scan's angles."""

@@ -32,6 +32,10 @@ class RopodControllerParams(Params):
     torque_constant_nm_per_a: float = Field(_LIBRARY.torque_constant_nm_per_a, gt=0,
                                             description="motor torque per ampere")
     current_limit_a: float = Field(_LIBRARY.current_limit_a, gt=0, description="per-motor current limit")
+    hold_below: float | None = Field(
+        _LIBRARY.hold_below, gt=0, description="standstill hold: with a zero setpoint and the measured twist "
+        "below this (m/s, rad/s), the platform integrators stay at zero, so braking's wind-up cannot drive "
+        "the stopped robot back; null: the plain PI")
     pivot_offsets_rad: tuple[float, ...] = Field(
         _LIBRARY.pivot_offsets_rad,
         description="pivot encoder offsets, SW1 first: a unit's angle is its reading minus its offset")

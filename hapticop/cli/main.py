@@ -158,6 +158,7 @@ def compose(
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
+    check: bool = typer.Option(False, "--check", help="exit 1 when the run's results miss a target (for CI)"),
     group_readable: bool = typer.Option(
         False, "--group-readable", envvar="HAPTICOP_GROUP_READABLE",
         help="let your group read the run's logs and results (directories 0750, files 0640; default: yours alone)"),
@@ -209,8 +210,17 @@ def compose(
         print_recording(result.recording, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
-    console.print(f"exit: {result.outcome.status.name.lower()} ({int(result.outcome.status)})")
-    raise typer.Exit(int(result.outcome.status))
+    status = int(result.outcome.status)
+    if check and status == 0:
+        from hapticop.runtime.report import missed_targets
+
+        missed = missed_targets(result.outcome.run_dir)
+        for name in missed:
+            console.print(f"[red]target missed: {name}[/]")
+        status = 1 if missed else 0
+    console.print(f"exit: {result.outcome.status.name.lower() if status == int(result.outcome.status) else 'failure'}"
+                  f" ({status})")
+    raise typer.Exit(status)
 
 
 def _one_host(validated, file: Path, host: str | None, clock: ClockKind, run_dir: Path | None,

@@ -181,3 +181,49 @@ def handle_to_twist(
     out[TWIST_VY] = 0.0
     out[TWIST_WZ] = YAW_PER_HANDLE_X * params.k2_rad_per_s_m * dead_zone(x, dz, sub)
     return out
+
+
+@parameters
+class CorrectionFeelParams:
+    """How a robot-side correction of the command (executed minus commanded twist, shared control S2) is
+    felt on the handle: the hand is pushed the way the robot was made to go instead."""
+
+    forward_n_per_mps: Annotated[float, Ge(0)] = 3.0
+    """Force along the handle's forward axis per m/s of forward speed taken away (or added)."""
+    lateral_n_per_mps: Annotated[float, Ge(0)] = 10.0
+    """Force to the operator's side per m/s of sideways slide added: a slide to the right pushes right."""
+    turn_n_per_rad_s: Annotated[float, Ge(0)] = 0.0
+    """Force to the operator's side per rad/s of turn rate changed."""
+    force_limit_n: Annotated[float, Gt(0)] = 2.0
+    """Per-axis bound of this force."""
+    smoothing_s: Annotated[float, Ge(0)] = 0.15
+    """Time constant of the first-order low-pass the correction is felt through."""
+
+
+class CorrectionFeel:
+    """The feel of a twist correction ``[dvx, dvy, dwz]`` on the handle, smoothed to the hand's pace.
+
+    Less forward speed pushes the hand back; a slide or turn to the robot's right pushes the hand to the
+    operator's right, which is where the car map would have to be pushed to ask for it. The correction
+    changes with each scan (15 Hz); felt raw, its steps would be the jolts the calm stop removed."""
+
+    def __init__(self, params: CorrectionFeelParams, period_s: float) -> None:
+        self.params = params
+        self.period_s = period_s
+        self.felt = [0.0, 0.0, 0.0]
+
+    def reset(self) -> None:
+        self.felt[:] = [0.0, 0.0, 0.0]
+
+    def add(self, correction: NDArray[np.float64], force: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Add this cycle's force to ``force`` (device frame)."""
+        p, felt = self.params, self.felt
+        a = self.period_s / (p.smoothing_s + self.period_s)
+        for i in range(3):
+            felt[i] += a * (float(correction[i]) - felt[i])
+        limit = p.force_limit_n
+        fz = -BACKWARD_FORCE_Z * p.forward_n_per_mps * felt[TWIST_VX]
+        fx = -RIGHTWARD_FORCE_X * (p.lateral_n_per_mps * felt[TWIST_VY] + p.turn_n_per_rad_s * felt[TWIST_WZ])
+        force[HANDLE_Z] += limit if fz > limit else -limit if fz < -limit else fz
+        force[HANDLE_X] += limit if fx > limit else -limit if fx < -limit else fx
+        return force

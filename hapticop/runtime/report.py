@@ -177,6 +177,15 @@ def print_results(run_dir: Path, console: Console) -> None:
             console.print(f"picture: {run_dir / data['picture']}")
 
 
+def missed_targets(run_dir: Path) -> list[str]:
+    """The rows of the run's results*.json whose verdict is "no", as "title: metric" (for `compose --check`)."""
+    missed = []
+    for path in sorted(run_dir.glob("results*.json")):
+        data = json.loads(path.read_text())
+        missed += [f"{data.get('title', path.stem)}: {row['metric']}" for row in data["rows"] if row["ok"] is False]
+    return missed
+
+
 def print_recording(recording: dict, console: Console) -> None:
     """What the recorder wrote, and every sample it lost (none is the goal)."""
     streams = recording["streams"]

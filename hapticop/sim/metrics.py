@@ -25,6 +25,13 @@ F64 = NDArray[np.float64]
 
 EndReason = Literal["stopped", "crash", "timeout", "incomplete"]
 
+OSCILLATION_LIMIT_MPS = 0.02
+"""§5: a 2 s window whose 1-10 Hz handle velocity has an rms above this is oscillating."""
+OSCILLATION_WINDOW_S = 2.0
+"""§5: the oscillation index is the rms of the band over sliding windows this long."""
+SUSTAINED_S = 2.0
+"""§5: an oscillation is sustained when the index stays above the limit for more than this."""
+
 
 @dataclass(frozen=True)
 class RunMetrics:
@@ -48,6 +55,7 @@ class RunMetrics:
     t_recover_dist1_s: float  # from first dropping below dist1 to first being back at it; 0 if never below
     # 4. completion time
     completion_time_s: float  # start to the moment the final still period began; NaN unless stopped
+    hold_speed_mps: float  # how far the robot moved over the last half of the final still period, per second
     t_ref_s: float  # travel / v_cruise + v_cruise / (2 a_b) + tau_r
     t_norm: float
     # 5. peak force and saturation
@@ -76,7 +84,8 @@ class RunMetrics:
     handle_speed_rms_mps: float
     # 11. oscillation
     oscillation_index_mps: float  # largest 2 s rms of the handle velocity band-passed to 1-10 Hz
-    sustained_oscillation: bool  # oscillation index above 2 cm/s
+    oscillation_s: float  # longest time the sliding 2 s rms stays above OSCILLATION_LIMIT_MPS
+    sustained_oscillation: bool  # oscillation_s of more than SUSTAINED_S
     divergence: bool  # handle at the workspace limit or force saturated for more than 0.5 s
 
 
@@ -151,6 +160,7 @@ def compute_metrics(
         rms_dist1_violation_m=float(np.sqrt((w * np.maximum(g.dist1_m - side, 0.0) ** 2).sum() / total)),
         t_recover_dist1_s=t_rec,
         completion_time_s=T,
+        hold_speed_mps=_hold_speed(t, pose, still_start) if ended_by == "stopped" else math.nan,
         t_ref_s=t_ref,
         t_norm=T / t_ref if t_ref == t_ref else math.nan,
         dithering=_dithering(d, front <= g.dist2_m + near_stop_m),
@@ -160,6 +170,13 @@ def compute_metrics(
         **_authority(w, d),
         **_effort_and_oscillation(t, w, d, force_limit_n, workspace_m),
     )
+
+
+def _hold_speed(t: F64, pose: F64, still_start: int) -> float:
+    """Drift while stopped: the distance moved over the last half of the final still period, per second (its
+    first half is the end of the braking)."""
+    i = int(np.searchsorted(t, 0.5 * (t[still_start] + t[-1])))
+    return float(np.hypot(*(pose[-1, :2] - pose[i, :2])) / (t[-1] - t[i])) if t[-1] > t[i] else math.nan
 
 
 def _speed_from_poses(t: F64, pose: F64) -> F64:
@@ -320,22 +337,27 @@ def _effort_and_oscillation(
         v = d["handle_velocity"].astype(np.float64)
         speed_rms = float(np.sqrt((w * (v * v).sum(axis=1)).sum() / w.sum()))
         dt = float(np.median(np.diff(t)))
-        spec = np.fft.rfft(v, axis=0)
-        freq = np.fft.rfftfreq(len(v), dt)
+        n = len(v)
+        spec = np.fft.rfft(v, 2 * n, axis=0)  # zero-padded: the run's end does not wrap onto its start
+        freq = np.fft.rfftfreq(2 * n, dt)
         spec[(freq < 1.0) | (freq > 10.0)] = 0.0
-        band = np.fft.irfft(spec, len(v), axis=0)
+        band = np.fft.irfft(spec, 2 * n, axis=0)[:n]
         sq = np.concatenate([[0.0], np.cumsum((band * band).sum(axis=1))])
-        win = max(1, min(len(v), int(round(2.0 / dt))))
-        osc = float(np.sqrt(max(((sq[win:] - sq[:-win]) / win).max(), 0.0)))
+        win = max(1, min(n, int(round(OSCILLATION_WINDOW_S / dt))))
+        index = np.sqrt(np.maximum((sq[win:] - sq[:-win]) / win, 0.0))  # one per window inside the run
+        osc = float(index.max())
+        above = np.zeros(n, bool)  # each window's verdict at its centre
+        above[win // 2: win // 2 + len(index)] = index > OSCILLATION_LIMIT_MPS
+        osc_s = _longest_run_s(above, w)
     else:
-        speed_rms = osc = nan
+        speed_rms = osc = osc_s = nan
     at_limit = np.zeros(len(t), bool)
     if "handle_position" in d:
         at_limit |= (np.abs(d["handle_position"]) >= workspace_m - 1e-4).any(axis=1)
     if "force_device" in d:
         at_limit |= (np.abs(d["force_device"]) >= limit * (1.0 - 1e-6)).any(axis=1)
-    return dict(effort_ns=effort, handle_speed_rms_mps=speed_rms, oscillation_index_mps=osc,
-                sustained_oscillation=bool(osc > 0.02), divergence=_longest_run_s(at_limit, w) > 0.5)
+    return dict(effort_ns=effort, handle_speed_rms_mps=speed_rms, oscillation_index_mps=osc, oscillation_s=osc_s,
+                sustained_oscillation=bool(osc_s > SUSTAINED_S), divergence=_longest_run_s(at_limit, w) > 0.5)
 
 
 def metrics_json(metrics: RunMetrics, extra: dict | None = None) -> str:

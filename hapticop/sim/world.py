@@ -29,6 +29,9 @@ class HallwayWorldParams(Params):
                           "its variant sets the targets")
     time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
     plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
+    judge: bool = Field(True, description="judge the run by the hallway experiment's targets; false for an "
+                        "application that does not drive the robot down the hallway (the desk): its "
+                        "trajectory is kept, but nothing is judged")
 
 
 class HallwayWorld(Block):
@@ -40,6 +43,8 @@ class HallwayWorld(Block):
         "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
         "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),
         "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
+        "executed_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the twist a safety layer let through of "
+                                  "the command (shared control): its authority is measured", required=False),
         "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
         "device_force": Port("float64", (3,), "N", "the whole force the Falcon renders", required=False),
         "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip", required=False),
@@ -56,6 +61,8 @@ class HallwayWorld(Block):
 
     @classmethod
     def promises(cls, params: HallwayWorldParams) -> tuple[str, ...]:
+        if not params.judge:  # not a hallway run: the trajectory alone
+            return ("trajectory.npz",)
         return ("trajectory.npz", "metrics.json", "results.json") + (("run.png",) if params.plot else ())
 
     def create(self) -> None:
@@ -75,6 +82,7 @@ class HallwayWorld(Block):
         self.still_since: float | None = None
         self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
         self.command = np.zeros(2)
+        self.executed = np.zeros(2)
         self.nothing = np.zeros(3)
         self.variant = "unknown"  # the operator's, once it has said (clean)
         self.tank_lowest_j = math.inf  # the energy tank's lowest level while driving (inf: no tank)
@@ -97,11 +105,15 @@ class HallwayWorld(Block):
         self.velocity[0], self.velocity[1] = vx, wz
         setpoint = inputs.velocity_setpoint.value
         self.command[0], self.command[1] = setpoint[0], setpoint[2]
+        executed = inputs.executed_setpoint
+        if executed.seq:
+            self.executed[0], self.executed[1] = executed.value[0], executed.value[2]
         force = inputs.environment_force
         tank = inputs.tank_level
         if tank.seq and float(tank.value) < self.tank_lowest_j:
             self.tank_lowest_j = float(tank.value)
         self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
+                             cmd_exec=self.executed if executed.seq else None,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
                              force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
                              force_device=inputs.device_force.value, clearance=clearance)
@@ -130,7 +142,10 @@ class HallwayWorld(Block):
         self.variant = str(operator.get("variant", self.variant))
         self.recorder.meta.update(operator=self.variant, variation=operator.get("variation"))
         self.recorder.save(self.run_dir / "trajectory.npz")
-        metrics = compute_metrics(self.recorder, self.geometry)
+        if not self.params.judge:
+            self.log.info("not a hallway run: trajectory kept, nothing judged")
+            return
+        metrics = compute_metrics(self.recorder, self.geometry, v_cruise_mps=_cruise_speed(operator))
         extra = {"tank_level_min_j": self.tank_lowest_j} if self.tank_lowest_j < math.inf else None
         (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra))
         self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
@@ -147,28 +162,11 @@ class HallwayWorld(Block):
 
     def _results(self, m) -> None:
         """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
-        from hapticop.sim.targets import Targets, targets_met
+        from hapticop.sim.targets import judged_rows
 
-        g = self.geometry
-        checks = targets_met(m, Targets.for_variant(self.variant)).checks
-
-        def row(name, value, unit, target, check):
-            return {"metric": name, "value": None if value is None or value != value else round(float(value), 3),
-                    "unit": unit, "target": target, "ok": checks.get(check) if check else None}
-
-        rows = [
-            {"metric": "ended by", "value": m.ended_by, "unit": "", "target": "stopped", "ok": checks.get("completed")},
-            row(f"collisions (clearance under dist3 = {g.dist3_m} m)", m.n_collisions, "", "0", "no_crash"),
-            row(f"stop error against dist2 = {g.dist2_m} m (+ early)", m.e_stop_m, "m", "-0.05 to +0.10", "e_stop"),
-            row(f"least side clearance (dist1 = {g.dist1_m} m)", m.side_clearance_min_m, "m",
-                f">= {g.dist1_m - 0.10:.2f}", "side_clearance"),
-            row("run ended at (after the operator started)", end_time_s(m, self.recorder), "s", "", None),
-            row("peak force", m.force_peak_n, "N", "<= 8", "force_peak"),
-            row("rms force", m.force_rms_n, "N", "", None),
-            row("rms force rate", m.force_rate_rms_nps, "N/s", "<= 30", "force_rate"),
-        ]
         results = {"title": f"hallway {self.params.hallway}, {self.variant} operator",
-                   "rows": rows, "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
+                   "rows": judged_rows(m, self.geometry, self.variant, end_time_s(m, self.recorder)),
+                   "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
 
 
@@ -178,6 +176,16 @@ def end_time_s(metrics, recorder) -> float:
     if metrics.completion_time_s == metrics.completion_time_s:  # not NaN: it stopped
         return float(metrics.completion_time_s)
     return float(recorder.t[recorder.n - 1] - recorder.t[0])
+
+
+def _cruise_speed(operator: dict) -> float | None:
+    """The cruise speed of the operator the run had (T_ref's speed), or None if it did not say."""
+    from hapticop.sim.operator import BlindOperator
+
+    variant = operator.get("variant")
+    if not variant:
+        return None
+    return BlindOperator.variant(str(variant), seed=operator.get("variation")).profile.cruise_speed()
 
 
 def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray) -> np.ndarray:
