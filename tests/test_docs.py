@@ -26,7 +26,7 @@ from ruamel.yaml import YAML
 
 from hapticop.cli import app
 from hapticop.cli.docpages import PAGES
-from hapticop.cli.main import _bare_option  # what main() does to argv before parsing (a bare --record)
+from hapticop.cli.main import bare_options  # what main() does to argv before parsing (a bare --record)
 from hapticop.cli.new import new
 from hapticop.composition.schema import composition_schema
 from hapticop.validation import validate_path
@@ -146,7 +146,7 @@ def _invocations(line: str) -> list[list[str]]:
 
 def _parse(argv: list[str]) -> None:
     """Parse `argv` as `hapticop` would, down to the command's own options, without running anything."""
-    argv = _bare_option(argv, "--record")
+    argv = bare_options(argv)
     command = typer.main.get_command(app)
     context = command.context_class(command, info_name="hapticop")
     while hasattr(command, "commands") and argv and argv[0] in command.commands:

@@ -191,7 +191,7 @@ def test_without_the_sdk_view_says_so_in_one_line(tmp_path, monkeypatch):
 
     from typer.testing import CliRunner
 
-    from hapticop.cli.main import _bare_option, app
+    from hapticop.cli.main import app, bare_options
 
     monkeypatch.setitem(sys.modules, "foxglove", None)  # as if the [foxglove] extra were not installed
     path = tmp_path / "c.yaml"
@@ -199,8 +199,8 @@ def test_without_the_sdk_view_says_so_in_one_line(tmp_path, monkeypatch):
     result = CliRunner().invoke(app, ["compose", str(path), "--view", ""])
     assert result.exit_code == 2
     assert result.output.strip() == "hapticop: the live view needs foxglove-sdk: pip install 'hapticop[foxglove]'"
-    assert _bare_option(["compose", "c.yaml", "--view"], "--view") == ["compose", "c.yaml", "--view", ""]
-    assert _bare_option(["compose", "--view", "9000", "c.yaml"], "--view")[2] == "9000"
+    assert bare_options(["compose", "c.yaml", "--view"]) == ["compose", "c.yaml", "--view", ""]
+    assert bare_options(["compose", "--view", "9000", "c.yaml"])[2] == "9000"
 
 
 def test_a_running_system_is_shown_from_outside_without_being_touched(tmp_path):

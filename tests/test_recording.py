@@ -19,7 +19,7 @@ from ruamel.yaml import YAML
 from typer.testing import CliRunner
 
 from hapticop.blocks.interface import Port
-from hapticop.cli.main import _bare_option, app
+from hapticop.cli.main import app, bare_options
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo, part_of
 from hapticop.recording.reading import RecordingError, contents, series
 from hapticop.recording.recover import recover
@@ -154,10 +154,10 @@ def test_compose_record_records_a_file_that_says_nothing_of_it(tmp_path):
 
 
 def test_the_record_option_may_stand_alone():
-    assert _bare_option(["compose", "c.yaml", "--record"], "--record") == ["compose", "c.yaml", "--record", ""]
-    assert _bare_option(["compose", "--record", "c.yaml"], "--record") == ["compose", "--record", "", "c.yaml"]
-    assert _bare_option(["compose", "--record", "--seed", "1", "c.yaml"], "--record")[2] == ""
-    assert _bare_option(["compose", "c.yaml", "--record", "x.mcap"], "--record") == [
+    assert bare_options(["compose", "c.yaml", "--record"]) == ["compose", "c.yaml", "--record", ""]
+    assert bare_options(["compose", "--record", "c.yaml"]) == ["compose", "--record", "", "c.yaml"]
+    assert bare_options(["compose", "--record", "--seed", "1", "c.yaml"])[2] == ""
+    assert bare_options(["compose", "c.yaml", "--record", "x.mcap"]) == [
         "compose", "c.yaml", "--record", "x.mcap"]
 
 

@@ -489,15 +489,18 @@ def schema(
         typer.echo(text, nl=False)
 
 
-def _bare_option(argv: list[str], option: str) -> list[str]:
-    """`--record` with no value (last, before another option, or before the composition file)
-    gets the empty value that means "the default file": the command-line parser has no optional values."""
+OPTIONAL_VALUES = ("--record", "--view")  # options whose value may be left out: `--record`, `--view 9000`
+
+
+def bare_options(argv: list[str]) -> list[str]:
+    """`--record` or `--view` with no value (last, before another option, or before the composition
+    file) gets the empty value that means "the default" (file, port): the parser has no optional values."""
     out = []
     for index, arg in enumerate(argv):
         out.append(arg)
         following = argv[index + 1] if index + 1 < len(argv) else None
-        if arg == option and (following is None or following.startswith("-")
-                              or following.endswith((".yaml", ".yml"))):
+        if arg in OPTIONAL_VALUES and (following is None or following.startswith("-")
+                                       or following.endswith((".yaml", ".yml"))):
             out.append("")
     return out
 
@@ -510,7 +513,7 @@ def main() -> None:
     from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:
-        app(args=_bare_option(_bare_option(sys.argv[1:], "--record"), "--view"))
+        app(args=bare_options(sys.argv[1:]))
     except ForcedExit as forced:
         print("hapticop: interrupted again: left at once, without a clean shutdown", file=sys.stderr)
         sys.exit(int(forced.args[0]))
