@@ -108,7 +108,7 @@ def test_json_patch_reaches_integer_schedule_ids(hallway):
     new_tree, _, plan, _ = prepare(tree, patch)
     assert plan.schedules == {"fieldbus": {0: [], 1: []}}
     assert list(new_tree["threads"]["fieldbus"]["schedules"]) == [0, 1]  # still integer keys
-    assert "thread 'fieldbus': schedule 1 [ropod_plant, ethercat, ropod] -> []" in plan.describe()
+    assert "thread 'fieldbus': schedule 1 [ethercat, ropod] -> []" in plan.describe()
 
 
 def test_failing_test_op_refuses_the_patch(hallway):
@@ -154,14 +154,14 @@ def test_replacing_the_whole_document_with_a_list_is_refused(hallway):
 
 def test_merge_patch_changes_a_schedule(hallway):
     tree, _ = hallway
-    patch = load_patch("threads:\n  fieldbus:\n    schedules:\n      1: [ropod_plant, ethercat]\n"
-                       "      2: [ropod_plant, ethercat, ropod]\n", "p.yaml")
+    patch = load_patch("threads:\n  fieldbus:\n    schedules:\n      1: [ethercat]\n"
+                       "      2: [ethercat, ropod]\n", "p.yaml")
     _, _, plan, _ = prepare(tree, patch)
     assert plan.schedules == {
-        "fieldbus": {0: [], 1: ["ropod_plant", "ethercat"], 2: ["ropod_plant", "ethercat", "ropod"]}}
+        "fieldbus": {0: [], 1: ["ethercat"], 2: ["ethercat", "ropod"]}}
     lines = plan.describe()
-    assert "thread 'fieldbus': schedule 1 [ropod_plant, ethercat, ropod] -> [ropod_plant, ethercat]" in lines
-    assert "thread 'fieldbus': schedule 2 (none) -> [ropod_plant, ethercat, ropod]" in lines
+    assert "thread 'fieldbus': schedule 1 [ethercat, ropod] -> [ethercat]" in lines
+    assert "thread 'fieldbus': schedule 2 (none) -> [ethercat, ropod]" in lines
     assert not plan.params and not plan.unsupported
 
 
@@ -197,7 +197,7 @@ def test_patch_making_a_parameter_invalid_is_refused_with_the_validators_diagnos
 
 def test_schedule_naming_an_unknown_activity_is_refused(hallway):
     tree, _ = hallway
-    error = _refused(tree, "threads: {fieldbus: {schedules: {1: [ropod_plant, ethercat, nobody]}}}\n")
+    error = _refused(tree, "threads: {fieldbus: {schedules: {1: [ethercat, nobody]}}}\n")
     (diagnostic,) = error.diagnostics
     assert diagnostic.rule == "unknown-activity"
     assert "nobody" in diagnostic.message
@@ -261,8 +261,8 @@ def test_diff_shows_the_changed_line_and_keeps_comments(hallway):
     new_tree = apply_patch(tree, load_patch("threads:\n  fieldbus:\n    schedules:\n      1: []\n", "p.yaml"))
     diff = documents.diff(tree, new_tree, "hallway.yaml")
     assert diff.startswith("--- a/hallway.yaml\n+++ b/hallway.yaml\n")
-    comment = "# the simulated wheels answer the frame the master sent\n"
-    assert "-      1: [ropod_plant, ethercat, ropod]   " + comment + "+      1: []" + " " * 31 + comment in diff
+    comment = "# the simulated wheels answered the master's last frame meanwhile\n"
+    assert "-      1: [ethercat, ropod]    " + comment + "+      1: []" + " " * 19 + comment in diff
     assert "  watchdog:                   # thread 3: watches the EtherCAT slaves, above thread 2\n" in diff
     assert sum(line.startswith(("+", "-")) for line in diff.splitlines()) == 4  # two headers, one change
     assert "+# yaml-language-server: $schema=" in documents.diff({}, new_tree)

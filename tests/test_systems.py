@@ -18,17 +18,21 @@ def test_system_validates_clean(path):
 def test_hallway_is_the_thesis_layout():
     composition = validate_path(SYSTEMS / "hallway.yaml").composition
     threads = composition.threads
-    # the thesis's four threads, and one for the simulated scanner just before the LIDAR's
-    assert list(threads) == ["main", "simulation", "lidar", "fieldbus", "watchdog"]
-    assert [threads[t].period for t in threads] == [1_000_000, 66_666_667, 66_666_667, 1_000_000, 1_000_000]
+    # the thesis's four threads, one for the simulated world, operator, Falcon and wheels before the
+    # loops they answer, and one for the simulated scanner just before the LIDAR's
+    assert list(threads) == ["simulators", "main", "simulation", "lidar", "fieldbus", "watchdog"]
+    assert [threads[t].period for t in threads] == [1_000_000, 1_000_000, 66_666_667, 66_666_667, 1_000_000,
+                                                    1_000_000]
     assert threads["fieldbus"].priority == 39 and threads["watchdog"].priority == 40
-    assert threads["simulation"].priority is None and threads["simulation"].deploy == "process"
-    # the thesis's thread 0, plus the simulation that stands in for the real world: the world, the
-    # operator and the simulated Falcon, which answers just before the Falcon reads
-    assert threads["main"].schedules == {
-        0: ["mediator"], 1: ["mediator", "world", "operator", "falcon_sim", "falcon", "haptic"]}
+    for simulation in ("simulators", "simulation"):  # outside the real-time loops and their budget
+        assert threads[simulation].priority is None and threads[simulation].deploy == "process"
+    # the thesis's thread 0 and thread 2 carry only what a real system runs
+    assert threads["main"].schedules == {0: ["mediator"], 1: ["mediator", "falcon", "haptic"]}
+    assert threads["fieldbus"].schedules[1] == ["ethercat", "ropod"]
     assert all(threads[t].schedules[0] == [] for t in ("lidar", "fieldbus", "watchdog"))
-    # the simulated world is not the application's to coordinate: its thread runs from the start
+    # the simulated world is not the application's to coordinate: its threads run from the start
+    assert threads["simulators"].start == "auto" and threads["simulators"].schedules == {
+        0: ["world", "operator", "falcon_sim", "ropod_plant"]}
     assert threads["simulation"].start == "auto" and threads["simulation"].schedules == {0: ["lidar_sim"]}
     thesis = {"mediator", "haptic", "falcon", "lidar", "ethercat", "ropod", "ethercat_watchdog"}
     assert set(composition.activities) == thesis | {"world", "operator", "falcon_sim", "lidar_sim", "ropod_plant"}
