@@ -8,6 +8,7 @@ per call and what a call leaves allocated (bench/ reports figures; tests check a
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import time
 import tracemalloc
@@ -163,3 +164,23 @@ def grown_bytes(run: Callable[[], object]) -> int:
     finally:
         tracemalloc.stop()
     return sum(stat.size_diff for stat in after.compare_to(before, "filename") if stat.size_diff > 0)
+
+
+@contextlib.contextmanager
+def stepped_system(validated, run_dir: Path):
+    """A valid composition built on the virtual clock, for a caller that steps its threads itself
+    (`thread.cycle()`); yields the system and its threads, not yet started. However the caller ends,
+    the blocks are cleaned (links closed, worlds withdrawn: the process goes on) and the region freed."""
+    from hapticop.runtime.system import RunOptions, System
+
+    system = System(validated, RunOptions(clock="virtual", run_dir=run_dir, echo=False))
+    threads = dict(system.built.threads)
+    try:
+        yield system, threads
+    finally:
+        for thread in threads.values():
+            for runner in thread.runners.values():
+                runner.block.clean()
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()

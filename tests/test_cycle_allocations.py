@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from hapticop.runtime.system import RunOptions, System
+from hapticop.testing import stepped_system
 from hapticop.validation import validate_text
 
 from .runtime_helpers import counting
@@ -34,9 +35,7 @@ def _virtual_system(tmp_path, text: str, file: str):
     withdrawn: this process runs more tests), however the test ends."""
     validated = validate_text(text, file)
     assert validated.report.ok, validated.report.diagnostics
-    system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
-    threads = dict(system.built.threads)
-    try:
+    with stepped_system(validated, tmp_path) as (system, threads):
         system.start_threads()
 
         def cycles(start: int, count: int) -> None:
@@ -46,13 +45,6 @@ def _virtual_system(tmp_path, text: str, file: str):
                     thread.cycle()
 
         yield system, threads, cycles
-    finally:
-        for thread in threads.values():
-            for runner in thread.runners.values():
-                runner.block.clean()
-        system.writer.stop()
-        system.built = system.main = None
-        system.region.close()
 
 
 @pytest.mark.parametrize("record", ["", "record: {}"])

@@ -39,15 +39,13 @@ class _HookTimer:
 def measure(path: Path, cycles: int = 3_000, warm: int = WARM_CYCLES) -> dict[str, dict[str, float]]:
     """Per 1 kHz thread of the system (threads of simulators only, and empty ones, set aside):
     cycle and framework time (p50, p99, us) over `cycles` steady cycles."""
-    from hapticop.runtime.system import RunOptions, System
+    from hapticop.testing import stepped_system
     from hapticop.validation import validate_path
 
     validated = validate_path(path)
     if not validated.report.ok:
         raise ValueError(f"{path} is not valid")
-    with tempfile.TemporaryDirectory() as run_dir:
-        system = System(validated, RunOptions(clock="virtual", run_dir=Path(run_dir), echo=False))
-        threads = dict(system.built.threads)
+    with tempfile.TemporaryDirectory() as run_dir, stepped_system(validated, Path(run_dir)) as (system, threads):
         names = list(threads)
         periods = {name: threads[name].period for name in names}
         hooks = np.zeros(len(names), dtype=np.int64)
@@ -57,29 +55,21 @@ def measure(path: Path, cycles: int = 3_000, warm: int = WARM_CYCLES) -> dict[st
                 runner.block.flush = _HookTimer(runner.block.flush, hooks, row)
         total = np.zeros((cycles, len(names)), dtype=np.int64)
         inside = np.zeros((cycles, len(names)), dtype=np.int64)
-        try:
-            system.start_threads()
-            due = dict.fromkeys(names, 0)
-            for i in range(warm + cycles):
-                now = i * 1_000_000
-                system.clock.advance_to(now)
-                for row, name in enumerate(names):
-                    if now < due[name]:
-                        continue
-                    due[name] = now + periods[name]
-                    hooks[row] = 0
-                    started = time.thread_time_ns()
-                    threads[name].cycle()
-                    took = time.thread_time_ns() - started
-                    if i >= warm:
-                        total[i - warm, row], inside[i - warm, row] = took, hooks[row]
-        finally:
-            for thread in threads.values():
-                for runner in thread.runners.values():
-                    runner.block.clean()
-            system.writer.stop()
-            system.built = system.main = None
-            system.region.close()
+        system.start_threads()
+        due = dict.fromkeys(names, 0)
+        for i in range(warm + cycles):
+            now = i * 1_000_000
+            system.clock.advance_to(now)
+            for row, name in enumerate(names):
+                if now < due[name]:
+                    continue
+                due[name] = now + periods[name]
+                hooks[row] = 0
+                started = time.thread_time_ns()
+                threads[name].cycle()
+                took = time.thread_time_ns() - started
+                if i >= warm:
+                    total[i - warm, row], inside[i - warm, row] = took, hooks[row]
     found = {}
     for row, name in enumerate(names):
         runners = threads[name].runners.values()
