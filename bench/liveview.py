@@ -22,13 +22,14 @@ import asyncio
 import json
 import re
 import socket
-import statistics
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
+
+from hapticop.benchmark.stats import spread_text
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results" / "liveview.jsonl"
@@ -149,14 +150,6 @@ def _busiest_hz(counts: dict[str, tuple[int, int, int]]) -> float:
     return max(n for topic, (n, _, _) in counts.items() if topic != "/log") / ((end - start) / 1e9)
 
 
-def _spread(values: list[float]) -> str:
-    values = [v for v in values if v is not None]
-    if not values:
-        return "-"
-    if len(values) == 1:
-        return f"{values[0]:.3g}"
-    return f"{statistics.median(values):.3g} ({min(values):.3g}-{max(values):.3g})"
-
 
 def summary(rows: list[dict]) -> str:
     """A table per session kind: with or without a recording, what the client subscribed to, the view's rate."""
@@ -182,17 +175,17 @@ def _table(rows: list[dict], recorded: bool, subscribed: str, rate_hz: float | N
                      f"{sum(r['viewed'] for r in failed)} |")
     for name in FAST_THREADS:
         for key, label in (("p99_us", "wake-up p99 µs"), ("max_us", "wake-up max µs"), ("missed", "missed deadlines")):
-            lines.append(f"| {name} {label} | {_spread([r['threads'][name][key] for r in off])} | "
-                         f"{_spread([r['threads'][name][key] for r in on])} |")
-    lines.append(f"| loops' CPU % of a core | {_spread([r['loops_cpu_percent'] for r in off])} | "
-                 f"{_spread([r['loops_cpu_percent'] for r in on])} |")
+            lines.append(f"| {name} {label} | {spread_text([r['threads'][name][key] for r in off])} | "
+                         f"{spread_text([r['threads'][name][key] for r in on])} |")
+    lines.append(f"| loops' CPU % of a core | {spread_text([r['loops_cpu_percent'] for r in off])} | "
+                 f"{spread_text([r['loops_cpu_percent'] for r in on])} |")
     if recorded:
-        lines.append(f"| recorder process CPU % of a core | {_spread([r['recorder_cpu_percent'] for r in off])} | "
-                     f"{_spread([r['recorder_cpu_percent'] for r in on])} |")
+        lines.append(f"| recorder process CPU % of a core | {spread_text([r['recorder_cpu_percent'] for r in off])} | "
+                     f"{spread_text([r['recorder_cpu_percent'] for r in on])} |")
     for key, label in (("view_cpu_percent", "view process CPU % of a core"), ("received", "messages received"),
                        ("channels_received", "channels received"),
                        ("most_per_channel_hz", "busiest channel but the log, Hz")):
-        lines.append(f"| {label} | | {_spread([r[key] for r in on])} |")
+        lines.append(f"| {label} | | {spread_text([r[key] for r in on])} |")
     return "\n".join(lines)
 
 

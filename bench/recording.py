@@ -20,12 +20,13 @@ import argparse
 import json
 import os
 import signal
-import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from hapticop.benchmark.stats import spread_text
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results" / "recording.jsonl"
@@ -126,13 +127,6 @@ def kill(after_s: float) -> dict:
                 "contiguous": bool((main.sequence[1:] - main.sequence[:-1] == 1).all())}
 
 
-def _spread(values: list[float]) -> str:
-    if not values:
-        return "-"
-    if len(values) == 1:
-        return f"{values[0]:.3g}"
-    return f"{statistics.median(values):.3g} ({min(values):.3g}-{max(values):.3g})"
-
 
 def summary(rows: list[dict]) -> str:
     lines = ["| | without recorder | with recorder |", "| --- | --- | --- |"]
@@ -141,23 +135,24 @@ def summary(rows: list[dict]) -> str:
     lines.append(f"| runs | {len(off)} | {len(on)} |")
     for name in FAST_THREADS:
         for key, label in (("p99_us", "wake-up p99 µs"), ("missed", "missed deadlines")):
-            lines.append(f"| {name} {label} | {_spread([r['threads'][name][key] for r in off])} | "
-                         f"{_spread([r['threads'][name][key] for r in on])} |")
-    lines.append(f"| loops' CPU % of a core | {_spread([r['loops_cpu_percent'] for r in off])} | "
-                 f"{_spread([r['loops_cpu_percent'] for r in on])} |")
+            lines.append(f"| {name} {label} | {spread_text([r['threads'][name][key] for r in off])} | "
+                         f"{spread_text([r['threads'][name][key] for r in on])} |")
+    lines.append(f"| loops' CPU % of a core | {spread_text([r['loops_cpu_percent'] for r in off])} | "
+                 f"{spread_text([r['loops_cpu_percent'] for r in on])} |")
     for key, label in (("recorder_cpu_percent", "recorder CPU % of a core"),
                        ("recorder_cpu_percent_per_fast_stream", "recorder CPU % per 1 kHz stream"),
                        ("bytes_per_sample", "bytes per sample (zstd)"), ("messages", "samples recorded"),
                        ("drops", "samples dropped")):
-        lines.append(f"| {label} | | {_spread([r[key] for r in on])} |")
+        lines.append(f"| {label} | | {spread_text([r[key] for r in on])} |")
     for r in rows:
         if r["kind"] == "run" and r["duration"] == "long":
             lines.append(f"\nlong run ({r['long']}): {r['messages']} samples, {r['drops']} dropped, recorder "
                          f"{r['recorder_cpu_percent']:.2f} % of a core")
     kills = [r for r in rows if r["kind"] == "kill"]
     if kills:
-        lines.append(f"\nkill -9 of the whole run ({len(kills)} times): lost {_spread([r['lost_s'] for r in kills])}"
-                     f" s of log time, {_spread([r['lost_bytes'] for r in kills])} bytes cut; "
+        lost_s = spread_text([r['lost_s'] for r in kills])
+        lines.append(f"\nkill -9 of the whole run ({len(kills)} times): lost {lost_s}"
+                     f" s of log time, {spread_text([r['lost_bytes'] for r in kills])} bytes cut; "
                      f"every recovered stream contiguous: {all(r['contiguous'] for r in kills)}")
     return "\n".join(lines)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import median
 
 import numpy as np
 
@@ -116,3 +117,13 @@ def thread_goals(name: str, latency: dict[str, float], missed_pct: float,
         goals.insert(1, Goal(f"{name}: wake-up p99.9 (us)", latency["p99.9"], 2.0 * baseline["p99.9"],
                              baseline["p99.9"]))
     return goals
+
+
+def spread_text(values: list[float | None]) -> str:
+    """A figure over several runs as 'median (min-max)', the one run's value, or '-' for none."""
+    values = [v for v in values if v is not None]
+    if not values:
+        return "-"
+    if len(values) == 1:
+        return f"{values[0]:.3g}"
+    return f"{median(values):.3g} ({min(values):.3g}-{max(values):.3g})"
