@@ -40,7 +40,6 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     from hapticop.composition.layers import resolve
     from hapticop.composition.yamlsource import Source, read_file
     from hapticop.runtime.system import RunOptions, run_system
-    from hapticop.sim.operator import BlindOperator
     from hapticop.validation import validate_source
     from hapticop.validation.patches import apply_patch
 
@@ -53,12 +52,10 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     if not tuned:  # the model's own defaults, not the hallway's tuning of M1
         tree = apply_patch(tree, {"activities": {"haptic": {"params": {"force_model": None}}}})
     haptic = {"force_model": {"kind": force_model, **(braking_field or {})}, "governor": {} if governor else None}
-    hand_kg = BlindOperator.variant(profile, seed=variation).profile.m_h_kg  # moves with the simulated handle
     limit = 90.0 if hallway == "H6" else TIME_LIMIT_S  # H6 is twice as long
     patch = {"activities": {"haptic": {"params": haptic},
                             "operator": {"params": {"variant": profile, "variation": variation,
                                                     "time_limit_s": limit}},
-                            "falcon_sim": {"params": {"hand_mass_kg": hand_kg}},
                             "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": limit}}}}
     tree = apply_patch(tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
@@ -186,7 +183,7 @@ PROFILES = ("cautious", "nominal", "aggressive", "tremor", "hands_off")
 FIGURE_METRICS = (  # (key, label, scale, target band or line)
     ("e_stop_m", "stop error (cm, + early)", 100.0, (-5.0, 10.0)),
     ("side_clearance_min_m", "least side clearance (m)", 1.0, (None, None)),  # the target: per hallway
-    ("oscillation_s", "oscillation index above 2 cm/s, longest (s)", 1.0, (None, 2.0)),
+    ("oscillation_s", "oscillation (1 s rms) above 2 cm/s, longest (s)", 1.0, (None, 2.0)),
     ("t_norm", "completion time / T_ref", 1.0, (None, 1.2)),
 )
 

@@ -11,7 +11,6 @@ from hypothesis import strategies as st
 from hapticop.devices.ropod.body import Body
 from hapticop.haptics.handle import HANDLE_X, HANDLE_Z, CorrectionFeel, CorrectionFeelParams
 from hapticop.haptics.safety_filter import SafetyFilter, SafetyFilterParams
-from hapticop.sim.operator import BlindOperator
 from hapticop.testing import BlockHarness, allocation_stats
 
 from .conftest import SYSTEMS
@@ -177,12 +176,10 @@ def test_the_correction_is_felt_where_the_robot_was_made_to_go_smoothly_and_boun
 def shared_run(tmp_path_factory):
     """The aggressive operator in H2 (the lateral cue), whose side clearance the operator alone does not keep."""
     tmp = tmp_path_factory.mktemp("shared")
-    hand = BlindOperator.variant("aggressive", seed=0).profile.m_h_kg
     text = f"""
         extends: {SYSTEMS / 'hallway_shared.yaml'}
         activities:
           operator: {{params: {{variant: aggressive, variation: 0, time_limit_s: 50.0}}}}
-          falcon_sim: {{params: {{hand_mass_kg: {hand}}}}}
           world: {{params: {{hallway: H2, plot: false, time_limit_s: 50.0}}}}
         """
     result = compose(tmp, text, duration=None, name="shared", seed=0)

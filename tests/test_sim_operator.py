@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hapticop.sim.operator import SWEEP_RANGES, BlindOperator, OperatorProfile, Tremor
-from hapticop.testing import grown_bytes
+from hapticop.testing import BlockHarness, grown_bytes
 
 KP, KD, M_DEVICE = 55.0, 0.2, 0.1  # the haptic controller's centring PD and §2's device mass
 
@@ -202,3 +202,21 @@ def test_axes_agree_with_the_handle_module():
     felt[handle.HANDLE_Z] = handle.BACKWARD_FORCE_Z * 4.0
     *_, stopped = drive(op, lambda t: felt, 0.5)
     assert op.intent[0] > 0 and stopped[-1], "steers right when pushed right, stops when pushed back"
+
+
+def test_the_hand_mass_follows_the_grip_onto_the_simulated_handle(tmp_path):
+    """A hand that lets go takes its mass with it: the free handle springs back on its own mass."""
+    falcon = BlockHarness("falcon_simulator", {"handle_mass_kg": 0.1, "hand_mass_kg": 0.5}, run_dir=tmp_path)
+    falcon.configure()
+    falcon.step()
+    assert falcon.block.device.mass == pytest.approx(0.6)  # no stream: the parameter's hand holds on
+    falcon.feed("hand_mass", 0.8)
+    falcon.step()
+    assert falcon.block.device.mass == pytest.approx(0.9)
+    falcon.feed("hand_mass", 0.0)
+    falcon.step()
+    assert falcon.block.device.mass == pytest.approx(0.1)
+    operator = BlindOperator.variant("hands_off")
+    assert operator.mass_kg == operator.profile.m_h_kg
+    operator.step(5.5, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
+    assert not operator.holding and operator.mass_kg == 0.0

@@ -48,6 +48,8 @@ class Operator(Block):
         "hand_force": Port("float64", (3,), "N", "the hand's force on the grip, device frame"),
         "driving_time": Port("float64", (), "s", "seconds since the operator started driving (published from then on)"),
         "done": Port("uint8", (), "1", "1 once the operator believes the task is over (stopped a while, or gave up)"),
+        "hand_mass": Port("float64", (), "kg", "the mass of the hand on the grip: the profile's while it holds the "
+                          "grip, 0 while it has let go (the device simulator moves it with the handle)"),
     }
     flags_read = {"operator_go": "the haptic loop runs: the operator may start driving"}
     awaits = frozenset({"operator_go"})
@@ -66,6 +68,7 @@ class Operator(Block):
         """The operator the parameters describe (again after a patch: another one takes the grip)."""
         p = self.params
         self.operator = BlindOperator.variant(p.variant, seed=p.variation, t_max_s=p.time_limit_s)
+        self._publish_mass()
         publish_operator(self.run_dir, self.name, {"variant": p.variant, "variation": p.variation})
 
     def compute(self) -> None:
@@ -84,6 +87,13 @@ class Operator(Block):
             else:
                 hand.fill(0.0)  # hands resting on the grip: nothing asked yet, or homed and waiting to drive
         self.outputs.hand_force.publish()
+        self._publish_mass()
+
+    def _publish_mass(self) -> None:
+        """The hand's mass follows the grip: a released handle moves on its own mass alone."""
+        mass = self.outputs.hand_mass
+        mass.value[...] = self.operator.mass_kg
+        mass.publish()
 
     def _home(self, now: int, hand: np.ndarray) -> None:
         """Grip out, then straight in, again, until the LED turns green: how a Falcon is homed."""

@@ -26,11 +26,15 @@ F64 = NDArray[np.float64]
 EndReason = Literal["stopped", "crash", "timeout", "incomplete"]
 
 OSCILLATION_LIMIT_MPS = 0.02
-"""§5: a 2 s window whose 1-10 Hz handle velocity has an rms above this is oscillating."""
+"""§5: handle velocity in the 1-10 Hz band with an rms above this is oscillating, if it lasts."""
 OSCILLATION_WINDOW_S = 2.0
 """§5: the oscillation index is the rms of the band over sliding windows this long."""
+PERSISTENCE_WINDOW_S = 1.0
+"""§5: whether the band stays above the limit is judged over windows this long: one period of the band's
+lowest frequency, so a steady oscillation anywhere in the band keeps every window's rms steady, while a
+transient lifts only the windows that hold it (a 2 s window would join two transients 2 s apart)."""
 SUSTAINED_S = 2.0
-"""§5: an oscillation is sustained when the index stays above the limit for more than this."""
+"""§5: an oscillation is sustained when the band's 1 s rms stays above the limit for more than this."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +88,7 @@ class RunMetrics:
     handle_speed_rms_mps: float
     # 11. oscillation
     oscillation_index_mps: float  # largest 2 s rms of the handle velocity band-passed to 1-10 Hz
-    oscillation_s: float  # longest time the sliding 2 s rms stays above OSCILLATION_LIMIT_MPS
+    oscillation_s: float  # longest time the sliding 1 s rms of the band stays above OSCILLATION_LIMIT_MPS
     sustained_oscillation: bool  # oscillation_s of more than SUSTAINED_S
     divergence: bool  # handle at the workspace limit or force saturated for more than 0.5 s
 
@@ -328,6 +332,13 @@ def _longest_run_s(mask: NDArray[np.bool_], w: F64) -> float:
     return float((cum[stops] - cum[starts]).max())
 
 
+def _sliding_rms(cumulative_sq: F64, dt: float, window_s: float) -> F64:
+    """The rms over every window of `window_s` inside the run, from the cumulative sum of squares."""
+    n = len(cumulative_sq) - 1
+    win = max(1, min(n, int(round(window_s / dt))))
+    return np.sqrt(np.maximum((cumulative_sq[win:] - cumulative_sq[:-win]) / win, 0.0))
+
+
 def _effort_and_oscillation(
     t: F64, w: F64, d: Mapping[str, np.ndarray], limit: float, workspace_m: float
 ) -> dict[str, object]:
@@ -343,11 +354,11 @@ def _effort_and_oscillation(
         spec[(freq < 1.0) | (freq > 10.0)] = 0.0
         band = np.fft.irfft(spec, 2 * n, axis=0)[:n]
         sq = np.concatenate([[0.0], np.cumsum((band * band).sum(axis=1))])
-        win = max(1, min(n, int(round(OSCILLATION_WINDOW_S / dt))))
-        index = np.sqrt(np.maximum((sq[win:] - sq[:-win]) / win, 0.0))  # one per window inside the run
-        osc = float(index.max())
+        osc = float(_sliding_rms(sq, dt, OSCILLATION_WINDOW_S).max())
+        persistence = _sliding_rms(sq, dt, PERSISTENCE_WINDOW_S)
+        win = n - len(persistence) + 1
         above = np.zeros(n, bool)  # each window's verdict at its centre
-        above[win // 2: win // 2 + len(index)] = index > OSCILLATION_LIMIT_MPS
+        above[win // 2: win // 2 + len(persistence)] = persistence > OSCILLATION_LIMIT_MPS
         osc_s = _longest_run_s(above, w)
     else:
         speed_rms = osc = osc_s = nan

@@ -28,8 +28,8 @@ from hapticop.devices.link import DatagramLink
 class FalconSimulatorParams(Params):
     geometry: Geometry = Field(default_factory=Geometry, description="the simulated mechanism's dimensions")
     handle_mass_kg: float = Field(0.1, gt=0, description="the handle's own moving mass")
-    hand_mass_kg: float = Field(0.5, ge=0, description="the operator's hand, moving with the handle "
-                                "(the nominal operator's; the operator model leaves its mass to the device)")
+    hand_mass_kg: float = Field(0.5, ge=0, description="the operator's hand, moving with the handle, while no "
+                                "hand_mass stream says what grips it (the nominal operator's)")
     sim_fault: Literal["none", "silent", "corrupt"] = Field(
         "none", description="a fault of the simulated link, for fault scenarios (set it by a patch): "
         "'silent' the device stops answering, 'corrupt' every status frame leaves with a byte flipped")
@@ -44,6 +44,8 @@ class FalconSimulator(Block):
         "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip, device frame", required=False),
         "buttons": Port("uint8", (), "1", "the grip buttons the operator holds (bit mask, codec Button bits)",
                         required=False),
+        "hand_mass": Port("float64", (), "kg", "the mass of the hand on the grip now (0: let go); without it the "
+                          "hand_mass_kg parameter's hand never lets go", required=False),
     }
     outputs = {
         "handle_position": Port("float64", (3,), "m", "true handle position, device frame, from the workspace centre"),
@@ -73,6 +75,9 @@ class FalconSimulator(Block):
         dt, self.last_ns = (now - self.last_ns) / 1e9, now
         hand, device, frame_size = self.inputs.hand_force.value, self.device, len(self.command)
         device.buttons = int(self.inputs.buttons.value)
+        hand_mass = self.inputs.hand_mass
+        if hand_mass.valid:  # the operator model leaves its mass to the device: it moves with the handle
+            device.mass = self.params.handle_mass_kg + float(hand_mass.value)
         stepped = False
         while n := self.link.receive_into(self.command):
             if n != frame_size:
