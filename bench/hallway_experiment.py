@@ -144,6 +144,38 @@ def summarise_sweep(path: Path) -> str:
     return "\n".join(out)
 
 
+def summarise_for_readme(path: Path) -> str:
+    """The README's table: a row per hallway and control, every operator together, and which operators
+    missed which target (docs/hallway-experiment.md §12 has the table per operator)."""
+    runs = _runs(path)
+    out = ["| hallway | control | runs | collisions | stops within -5/+10 cm | least side clearance (m) | "
+           "T/T_ref, max | sustained oscillations | force rate rms, max (N/s) | every target met | "
+           "targets missed: operator runs |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for hallway in sorted({r["hallway"] for r in runs}):
+        for model, control in MODEL_NAMES.items():
+            group = [r for r in runs if r["hallway"] == hallway and r["model"] == model]
+            if not group:
+                continue
+            ms = [r["metrics"] for r in group]
+            stops = sum(1 for m in ms if m["e_stop_m"] is not None and -0.05 <= m["e_stop_m"] <= 0.10)
+            sides = [m["side_clearance_min_m"] for m in ms if m["side_clearance_min_m"] is not None]
+            t_norm = [m["t_norm"] for m in ms if m.get("t_norm") is not None]
+            rates = [m["force_rate_rms_nps"] for m in ms if m.get("force_rate_rms_nps") is not None]
+            missed: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+            for r in group:
+                for name in r["missed"]:
+                    missed[name.split(" (")[0]][r["profile"]] += 1
+            cells = [hallway, control, len(group), sum(1 for m in ms if m["n_collisions"]), stops,
+                     f"{min(sides):.2f}" if sides else "-", f"{max(t_norm):.2f}" if t_norm else "-",
+                     sum(1 for m in ms if m["sustained_oscillation"]), f"{max(rates):.1f}" if rates else "-",
+                     sum(1 for r in group if not r["missed"]),
+                     "; ".join(f"{target}: " + ", ".join(f"{p} {n}" for p, n in sorted(who.items()))
+                               for target, who in sorted(missed.items())) or "none"]
+            out.append("| " + " | ".join(str(c) for c in cells) + " |")
+    return "\n".join(out) + "\n"
+
+
 def _row(profile: str, control: str, group: list[dict]) -> str:
     ms = [r["metrics"] for r in group]
 
@@ -183,7 +215,7 @@ PROFILES = ("cautious", "nominal", "aggressive", "tremor", "hands_off")
 FIGURE_METRICS = (  # (key, label, scale, target band or line)
     ("e_stop_m", "stop error (cm, + early)", 100.0, (-5.0, 10.0)),
     ("side_clearance_min_m", "least side clearance (m)", 1.0, (None, None)),  # the target: per hallway
-    ("oscillation_s", "oscillation (1 s rms) above 2 cm/s, longest (s)", 1.0, (None, 2.0)),
+    ("oscillation_s", "oscillation above 2 cm/s (1 s rms), longest (s)", 1.0, (None, 2.0)),
     ("t_norm", "completion time / T_ref", 1.0, (None, 1.2)),
 )
 
@@ -246,6 +278,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--summary", action="store_true", help="only summarise what --out holds")
     parser.add_argument("--figures", type=Path, help="with --sweep: draw a picture per hallway into this folder")
+    parser.add_argument("--readme", action="store_true", help="with --sweep --summary: the README's short table")
     args = parser.parse_args()
     hallways = args.hallways or [args.hallway]
     if args.sweep:
@@ -271,6 +304,9 @@ def main() -> None:
                 out.flush()
                 print(record["hallway"], record["model"], record["profile"], record["variation"], record["ended_by"],
                       record["e_stop_m"], record["wall_s"], record["missed"], flush=True)
+    if args.sweep and args.readme:
+        print(summarise_for_readme(args.out))
+        return
     print(summarise_sweep(args.out) if args.sweep else summarise(args.out))
     if args.sweep and args.figures:
         for picture in plot_sweep(args.out, args.figures):

@@ -27,7 +27,7 @@ def test_the_summary_sets_shared_control_beside_the_operator_alone_and_draws_eac
     bench = bench_module()
     runs = [record("braking_field+governor", "nominal", 0, side=0.27, missed=["least side clearance (dist1 = 0.4 m)"]),
             record("braking_field+governor", "nominal", 1, sustained=True,
-                   missed=["oscillation (1 s rms) above 0.02 m/s, longest"]),
+                   missed=["oscillation above 0.02 m/s (1 s rms), longest"]),
             record("braking_field+governor+shared", "nominal", 0, side=0.36)]
     path = tmp_path / "sweep.jsonl"
     path.write_text("".join(json.dumps(r) + "\n" for r in runs))
@@ -36,8 +36,27 @@ def test_the_summary_sets_shared_control_beside_the_operator_alone_and_draws_eac
     shared = next(line for line in table.splitlines() if "| nominal | shared control |" in line).split(" | ")
     assert alone[2:4] == ["2", "0"]  # two runs, none met every target
     assert alone[11] == "1"  # one sustained oscillation
-    assert "least side clearance (1)" in alone[-1] and "oscillation (1 s rms) above 0.02 m/s, longest (1)" in alone[-1]
+    assert "least side clearance (1)" in alone[-1] and "oscillation above 0.02 m/s (1)" in alone[-1]
     assert shared[2:4] == ["1", "1"] and shared[7] == "0.36 / 0.36"
     pictures = bench.plot_sweep(path, tmp_path / "figures")
     assert [p.name for p in pictures] == ["hallway-sweep-H2.png"]
     assert pictures[0].read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_readme_table_has_a_row_per_hallway_and_control_and_names_who_missed_what(tmp_path):
+    bench = bench_module()
+    runs = [record("braking_field+governor", "nominal", 0, side=0.27, missed=["least side clearance (dist1 = 0.4 m)"]),
+            record("braking_field+governor", "aggressive", 0, side=0.25,
+                   missed=["least side clearance (dist1 = 0.4 m)"]),
+            record("braking_field+governor", "tremor", 0, sustained=True,
+                   missed=["oscillation above 0.02 m/s (1 s rms), longest"]),
+            record("braking_field+governor+shared", "nominal", 0, side=0.36)]
+    path = tmp_path / "sweep.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in runs))
+    rows = [line.split(" | ") for line in bench.summarise_for_readme(path).splitlines() if line.startswith("| H2")]
+    assert [row[1] for row in rows] == ["operator alone", "shared control"]
+    alone, shared = rows
+    assert alone[2:5] == ["3", "0", "3"] and alone[5] == "0.25" and alone[7] == "1" and alone[9] == "0"
+    assert alone[10] == ("least side clearance: aggressive 1, nominal 1; "
+                         "oscillation above 0.02 m/s: tremor 1 |")
+    assert shared[9:] == ["1", "none |"]

@@ -172,7 +172,7 @@ def judged_rows(m: RunMetrics, geometry: HallwayGeometry, variant: str, end_s: f
         row("effort", m.effort_ns, "N s"),
         row("rms handle speed", m.handle_speed_rms_mps, "m/s"),
         row("oscillation index (largest 2 s rms, 1-10 Hz)", m.oscillation_index_mps, "m/s"),
-        row(f"oscillation (1 s rms) above {OSCILLATION_LIMIT_MPS} m/s, longest", m.oscillation_s, "s",
+        row(f"oscillation above {OSCILLATION_LIMIT_MPS} m/s (1 s rms), longest", m.oscillation_s, "s",
             f"<= {SUSTAINED_S:g}" if t.no_oscillation else "",
             not m.sustained_oscillation if t.no_oscillation else None),
         row("divergence (handle at its limit or force saturated > 0.5 s)", m.divergence, "", "no",
