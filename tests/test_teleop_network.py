@@ -100,6 +100,28 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     assert bridge.hold_when_lost == ["WHEEL_FAULT"] and "WHEEL_FAULT" in bridge.import_flags
 
 
+def test_teleop_runs_the_speed_governor_on_the_robots_host_with_its_own_scan():
+    """S1 on the robot (issue 19 item 3): the setpoint that crossed goes through the robot's governor, which reads
+    the robot's own LIDAR on its host, before it reaches the wheels' controller; the operator's side has none."""
+    validated = validate_path(ROOT / "systems" / "teleop.yaml")
+    assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    robot = validated.hosts["robot"].composition
+    operator = validated.hosts["operator"].composition
+    assert place(validated.graph.loaded.composition).host_of("governor") == "robot"
+    assert "governor" in robot.activities and "governor" not in operator.activities
+    assert robot.activities["governor"].block == "speed_governor"
+    assert any("governor" in members for members in robot.threads["robot_main"].schedules.values())
+    setpoint = robot.streams["velocity_setpoint"]
+    assert setpoint.writer == "bridge.in_velocity_setpoint" and "governor.command" in setpoint.readers
+    assert setpoint.max_age == 100_000_000  # the deadman reaches the governor: a stale setpoint is no motion
+    governed = robot.streams["governed_setpoint"]
+    assert governed.writer == "governor.twist" and governed.readers == ["ropod.velocity_setpoint"]
+    assert robot.streams["scan_ranges"].writer == "lidar.ranges"  # the robot's own, undelayed scan
+    assert "governor.ranges" in robot.streams["scan_ranges"].readers
+    assert "governor.angles" in robot.streams["scan_angles"].readers
+    assert "ropod.velocity_setpoint" not in operator.streams["velocity_setpoint"].readers
+
+
 def test_graph_draws_each_host_around_its_threads_and_the_network_streams():
     from hapticop.cli.render import drawing, to_dot
 
