@@ -4,6 +4,7 @@ and, as root, between two network namespaces over a veth the test makes."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -46,6 +47,27 @@ def test_offset_estimator_finds_a_skewed_clock_within_its_bound():
     assert clock.error_ns < 1_000_000
     assert clock.to_local(t3) == pytest.approx(t3 - skew, abs=clock.error_ns)
     assert clock.loss == 0.0
+
+
+def test_time_held_in_an_emulated_link_counts_in_the_round_trip_but_not_in_the_offset():
+    """A bridge with `emulate:` holds pings and pongs on purpose after taking them off the network; the four
+    times are read outside that hold, so the offset stays true while the round trip shows what samples feel."""
+    skew = 2_000_000_000
+    held, plain = OffsetEstimator(window=16), OffsetEstimator(window=16)
+    local = 0
+    for k in range(40):
+        t1 = local
+        t2 = t1 + 300_000 + skew
+        t3 = t2 + 150_000_000  # answered after 150 ms in the answering side's emulated link
+        t4 = t3 - skew + 300_000
+        held.answered(held.sent(), t1, t2, t3, t4, held_ns=150_000_000 + 20_000_000 + 1000 * k)
+        plain.answered(plain.sent(), t1, t2, t3, t4)
+        local = t4 + 50_000_000
+    assert held.offset_ns == plain.offset_ns == pytest.approx(skew)
+    assert held.error_ns == plain.error_ns == pytest.approx(300_000)
+    assert plain.rtt_ns == pytest.approx(600_000)
+    assert held.rtt_ns == pytest.approx(600_000 + 170_000_000, abs=50_000)
+    assert held.jitter_ns > plain.jitter_ns == 0.0
 
 
 def test_offset_estimator_counts_unanswered_pings_and_ignores_stale_pongs():
@@ -237,6 +259,10 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     finally:
         stop(a)
         out = stop(b)
+    # the pings cross the emulated link too: the round trip b reports holds the delay it adds to what it receives
+    link = json.loads((tmp_path / "b" / "results-link.json").read_text())
+    rows = {row["metric"]: row["value"] for row in link["rows"]}
+    assert rows["round trip p50"] >= delay_ms, rows
     data = np.load(tmp_path / "b" / "probe.npz")
     arrived, cycles = data["arrived"], data["cycles"]
     assert len(arrived), out
