@@ -183,10 +183,10 @@ def test_the_link_block_runs_the_same_twice_and_its_streams_have_their_own_luck(
     assert first != arrivals(8)
 
 
-def test_the_round_trip_block_measures_the_echoes_of_its_pings():
+def test_the_round_trip_block_measures_the_echoes_of_its_pings(tmp_path):
     """Each ping [slot, send time] comes back 120 ms later but every fifth, lost. The round trip is the
     echoes', the loss the fraction never echoed, and nothing is said before the first echo."""
-    harness = BlockHarness("round_trip", {"ping_period_s": 0.05})
+    harness = BlockHarness("round_trip", {"ping_period_s": 0.05}, name="pinger", run_dir=tmp_path)
     harness.configure()
     in_flight: list[tuple[int, np.ndarray]] = []
     pings = 0
@@ -207,6 +207,9 @@ def test_the_round_trip_block_measures_the_echoes_of_its_pings():
     assert float(harness.outputs.jitter.value) < 0.002
     harness.clean()
     assert any("round trip 120" in line or "round trip 121" in line for line in harness.log_lines())
+    rows = {row["metric"]: row["value"] for row in json.loads(
+        (tmp_path / "results-link-pinger.json").read_text())["rows"]}
+    assert rows["round trip max"] == pytest.approx(120, abs=1.5) and rows["pings unanswered"] > 0.1
 
 
 def test_the_predictor_dead_reckons_from_the_scans_time_less_the_forward_delay():
@@ -284,6 +287,9 @@ def test_the_hallway_behind_the_emulated_link_runs_the_same_twice(tmp_path):
     metrics = json.loads((tmp_path / "run-a" / "metrics.json").read_text())
     assert 0.18 <= metrics["round_trip_max_s"] <= 0.23 and metrics["link_loss_max"] > 0.0
     assert "round trip" in (tmp_path / "run-a" / "pinger.log").read_text()
+    table = json.loads((tmp_path / "run-a" / "results-link-pinger.json").read_text())  # the end-of-run table
+    rows = {row["metric"]: row["value"] for row in table["rows"]}
+    assert 180 <= rows["round trip p50"] <= 230 and rows["pings unanswered"] > 0.0
 
 
 def test_the_operators_side_governs_its_commands_on_the_scan_seen_from_the_predicted_pose():

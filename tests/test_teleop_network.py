@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from hapticop.composition.placement import place
 from hapticop.network.arrivals import Arrivals
@@ -197,8 +198,9 @@ def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "tw
     return path
 
 
-def start(path: Path, host: str, run_dir: Path, netns: str | None = None) -> subprocess.Popen:
-    command = [sys.executable, "-m", "hapticop.cli", "compose", str(path), "--host", host, "--run-dir", str(run_dir)]
+def start(path: Path, host: str, run_dir: Path, netns: str | None = None, *extra: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "hapticop.cli", "compose", str(path), "--host", host, "--run-dir", str(run_dir),
+               *extra]
     if netns is not None:
         command = ["ip", "netns", "exec", netns, *command]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
@@ -240,11 +242,11 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     """b receives a's samples through an emulated 20 ms one-way delay; each arrives stamped with its
     send time, so its age on arrival includes the network. Then a is killed: b's samples turn
     invalid at their deadline, never later, b's bridge reports the link lost; a restarts, and
-    b's samples and link come back by themselves."""
+    b's samples and link come back by themselves. b records: its link's figures are in the recording."""
     delay_ms = 20
     path = two_hosts(tmp_path, f"tcp/127.0.0.1:{_free_port()}", f"tcp/127.0.0.1:{_free_port()}",
                      f"emulate: {{delay_s: {delay_ms / 1000}, seed: 3}}")
-    b = start(path, "b", tmp_path / "b")  # b first: starting either side first works
+    b = start(path, "b", tmp_path / "b", None, "--record")  # b first: starting either side first works
     a = start(path, "a", tmp_path / "a1")
     bridge_log = tmp_path / "b" / "bridge.log"
     try:
@@ -263,6 +265,12 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     link = json.loads((tmp_path / "b" / "results-link.json").read_text())
     rows = {row["metric"]: row["value"] for row in link["rows"]}
     assert rows["round trip p50"] >= delay_ms, rows
+    recording = next((tmp_path / "b").glob("*.mcap"))
+    with recording.open("rb") as stream:
+        figures = [json.loads(message.data) for _, channel, message in make_reader(stream).iter_messages()
+                   if channel.topic == "/link/bridge"]
+    assert figures and any(f["up"] and f["rtt_ms"] >= delay_ms for f in figures), figures
+    assert any(f["lost"] for f in figures)  # the link's loss, as b's bridge told it, is in the recording too
     data = np.load(tmp_path / "b" / "probe.npz")
     arrived, cycles = data["arrived"], data["cycles"]
     assert len(arrived), out

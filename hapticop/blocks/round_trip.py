@@ -10,6 +10,9 @@ jitter and loss included, not a parameter.
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
@@ -41,7 +44,7 @@ class RoundTrip(Block):
         self.pinged_at = [-1.0] * WINDOW
         self.next_ping_ns = 0
         self.pinged = self.answered = 0
-        self.rtt_max_s = 0.0
+        self.rtts = np.zeros(1 << 16)  # every echo's round trip (s), for the run's table
 
     def compute(self) -> None:
         now = self.clock.now_ns()
@@ -51,8 +54,8 @@ class RoundTrip(Block):
             if 0 <= slot < WINDOW and self.pinged_at[slot] == sent_s:  # not an echo of a slot since reused
                 self.pinged_at[slot] = -1.0  # a duplicate echo is not a second answer
                 self.estimator.echoed(slot, round(sent_s * 1e9), now)
+                self.rtts[self.answered % len(self.rtts)] = self.estimator.last_rtt_ns / 1e9
                 self.answered += 1
-                self.rtt_max_s = max(self.rtt_max_s, self.estimator.last_rtt_ns / 1e9)
         if now < self.next_ping_ns:
             return
         self.next_ping_ns = now + round(self.params.ping_period_s * 1e9)
@@ -72,6 +75,23 @@ class RoundTrip(Block):
 
     def clean(self) -> None:
         estimator = self.estimator
-        self.log.info("round trip %.1f ms (median of the last %d pings), at most %.1f ms; jitter %.1f ms; "
-                      "%d of %d pings unanswered", estimator.rtt_ns / 1e6, WINDOW, self.rtt_max_s * 1e3,
-                      estimator.jitter_ns / 1e6, self.pinged - self.answered, self.pinged)
+        self.log.info("round trip %.1f ms (median of the last %d pings); jitter %.1f ms; %d of %d pings unanswered",
+                      estimator.rtt_ns / 1e6, WINDOW, estimator.jitter_ns / 1e6, self.pinged - self.answered,
+                      self.pinged)
+        if self.answered:
+            self._write_table()
+
+    def _write_table(self) -> None:
+        """The link's figures over the run, as the bridge leaves them (printed with the run's other tables)."""
+        rtts_ms = self.rtts[: min(self.answered, len(self.rtts))] * 1e3
+
+        def row(metric: str, value: float, unit: str = "") -> dict:
+            return {"metric": metric, "value": round(float(value), 4), "unit": unit, "target": "", "ok": None}
+
+        rows = [row("round trip p50", np.percentile(rtts_ms, 50), "ms"),
+                row("round trip p99", np.percentile(rtts_ms, 99), "ms"),
+                row("round trip max", rtts_ms.max(), "ms"),
+                row("jitter (smoothed)", self.estimator.jitter_ns / 1e6, "ms"),
+                row("pings unanswered", 1 - self.answered / max(1, self.pinged))]
+        table = {"title": f"link measured by '{self.name}' (pings through the emulated link and back)", "rows": rows}
+        (self.run_dir / f"results-link-{self.name}.json").write_text(json.dumps(table, indent=1))
