@@ -268,14 +268,16 @@ def test_the_robot_side_governor_stops_before_the_wall_and_on_a_stale_command():
 # -- the composition ------------------------------------------------------------------------------------------------
 
 def test_the_hallway_behind_the_emulated_link_runs_the_same_twice(tmp_path):
-    """systems/teleop_sim.yaml on the virtual clock: the link's luck comes from its seeds, so two runs are one."""
+    """systems/teleop_sim.yaml on the virtual clock: the link's luck comes from its seeds, so two runs are one
+    (the second recorded: its recording holds the link's figures)."""
     from .conftest import SYSTEMS
     from .runtime_helpers import compose
 
     (tmp_path / "hallway.yaml").write_text((SYSTEMS / "hallway.yaml").read_text())
     text = (SYSTEMS / "teleop_sim.yaml").read_text().replace(
         "\nactivities:\n", "\nactivities:\n  world:\n    params: {time_limit_s: 4.0, plot: false}\n", 1)
-    runs = [compose(tmp_path, text, duration=None, name=name, seed=3) for name in "ab"]
+    runs = [compose(tmp_path, text, duration=None, name=name, seed=3, record=None if name == "a" else "")
+            for name in "ab"]
     assert all(run.outcome.status.name == "SUCCESS" for run in runs), [run.outcome.reasons for run in runs]
     a, b = (np.load(tmp_path / f"run-{name}" / "trajectory.npz") for name in "ab")
     assert a["pose"].shape == b["pose"].shape and a["pose"].tobytes() == b["pose"].tobytes()
@@ -290,6 +292,12 @@ def test_the_hallway_behind_the_emulated_link_runs_the_same_twice(tmp_path):
     table = json.loads((tmp_path / "run-a" / "results-link-pinger.json").read_text())  # the end-of-run table
     rows = {row["metric"]: row["value"] for row in table["rows"]}
     assert 180 <= rows["round trip p50"] <= 230 and rows["pings unanswered"] > 0.0
+    from hapticop.recording.reading import series
+
+    recording = next((tmp_path / "run-b").glob("*.mcap"))
+    round_trip = series(recording, "round_trip")
+    assert len(round_trip.values) > 10 and 0.18 <= float(round_trip.values[-1]) <= 0.23
+    assert len(series(recording, "link_loss").values) and len(series(recording, "link_jitter").values)
 
 
 def test_the_operators_side_governs_its_commands_on_the_scan_seen_from_the_predicted_pose():
