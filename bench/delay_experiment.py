@@ -14,6 +14,11 @@ the goal cells uniformly and spread the rest over the other cells.
 
     nice -n 10 python bench/delay_experiment.py --operators 200 --others 3 --others-per-round 2 --workers 2
     python bench/delay_experiment.py --summary
+
+Each record holds the cell, the operator, collisions, the stop error, the completion time against T_ref,
+the oscillation index, how long it stayed above its limit and whether that was sustained, the tank's lowest
+level and whether it ran empty (within EMPTY_J of its floor), and the largest round trip and loss the pings
+measured. A rerun resumes: the runs already in `--out` with this setup are skipped.
 """
 
 from __future__ import annotations
@@ -34,6 +39,14 @@ RESULTS = ROOT / "bench" / "results" / "delay-experiment.jsonl"
 ROUND_TRIPS_MS = (0, 50, 200, 400, 1000)
 PROFILES = ("cautious", "nominal", "aggressive")
 JITTER = 0.10  # of each one-way delay
+EMPTY_J = 1e-3
+"""A tank this close to its floor counts as empty: it is (or was about to be) scaling the cue down."""
+SETUP_TAG = "tank-0.4J-pinged"
+"""What the runs are made with, by name (bump it when a change outside the compositions alters results); with
+a digest of the compositions it makes a record's `setup`. A record of another setup is neither resumed from nor
+summarised (the first runs, a 0.1 J tank and the round trip a parameter: delay-experiment-0.1J.jsonl)."""
+MAIN_SCHEDULE = ("mediator", "falcon", "downlink", "pinger", "predictor", "haptic", "tank", "uplink", "governor")
+"""systems/teleop_sim.yaml's main loop; a cell takes the tank or the governor out of it."""
 MAX_AGE_OVER_RTT_MS = 100  # the received setpoint's deadline: a sample's own jitter and a few losses, no more
 
 
@@ -45,8 +58,7 @@ def cell_patch(rtt_ms: int, loss: float, tank: bool, governor: bool, seed: int) 
     """The merge patch on systems/teleop_sim.yaml for one cell and one operator's link seeds."""
     one_way = rtt_ms / 2000.0
     link = {"delay_s": one_way, "jitter_s": JITTER * one_way, "loss": loss}
-    schedule = ["mediator", "world", "operator", "falcon_sim", "falcon", "downlink", "predictor", "haptic", "tank",
-                "uplink", "governor"]
+    schedule = list(MAIN_SCHEDULE)
     activities: dict = {
         "uplink": {"params": {"link": {**link, "seed": 1000 + seed}}},
         "downlink": {"params": {"link": {**link, "seed": 2000 + seed}}},
@@ -91,6 +103,18 @@ def reference_time_s(profile_name: str, hallway: str) -> float:
     return (front0 - g.dist2_m) / v + v / (2.0 * a_b) + tau_r
 
 
+def setup() -> str:
+    """This setup's name: the tag and a digest of systems/teleop_sim.yaml as resolved (comments aside)."""
+    import hashlib
+
+    from hapticop.composition.documents import dump
+    from hapticop.composition.layers import resolve
+    from hapticop.composition.yamlsource import read_file
+
+    tree = resolve(read_file(ROOT / "systems" / "teleop_sim.yaml")).tree
+    return f"{SETUP_TAG}:{hashlib.sha256(dump(tree).encode()).hexdigest()[:10]}"
+
+
 def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallway: str = "H1") -> dict:
     from hapticop.composition.yamlsource import Source, read_file
     from hapticop.runtime.system import RunOptions, run_system
@@ -114,6 +138,8 @@ def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallwa
         "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": TIME_LIMIT_S}}}})
     validated = validate_source(Source("teleop_sim.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
+    activities = validated.graph.loaded.activities
+    tank_params = activities["tank"].params.tank if "tank" in activities else None
     with tempfile.TemporaryDirectory() as run_dir:
         started = time.perf_counter()
         run_system(validated, RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
@@ -128,7 +154,20 @@ def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallwa
             "t_ref_s": t_ref, "t_norm": completion / t_ref if completion is not None else None,
             "oscillation_index_mps": metrics["oscillation_index_mps"],
             "sustained_oscillation": metrics["sustained_oscillation"], "divergence": metrics["divergence"],
-            "force_peak_n": metrics["force_peak_n"], "tank_level_min_j": metrics.get("tank_level_min_j")}
+            "oscillation_s": metrics.get("oscillation_s"),
+            "force_peak_n": metrics["force_peak_n"], "tank_level_min_j": metrics.get("tank_level_min_j"),
+            "tank_max_j": tank_params.max_j if tank_params else None,
+            "tank_empty": tank_empty(metrics.get("tank_level_min_j"), tank_params),
+            "round_trip_max_s": metrics.get("round_trip_max_s"), "link_loss_max": metrics.get("link_loss_max"),
+            "setup": setup()}
+
+
+def tank_empty(lowest_j: float | None, params) -> bool | None:
+    """Whether the tank ran empty: its lowest level within EMPTY_J of its floor, where it scales the cue down
+    (None without a tank)."""
+    if params is None or lowest_j is None:
+        return None
+    return lowest_j <= params.min_j + EMPTY_J
 
 
 def cells() -> list[tuple[int, float, bool, bool]]:
@@ -164,18 +203,28 @@ def focused(jobs: list[tuple[int, float, bool, bool, int]]) -> list[tuple[int, f
     first += [(1000, loss, tank, governor, 2) for loss, tank, governor in ablations]
     first += [(rtt, 0.05, True, True, 1) for rtt in sorted(ROUND_TRIPS_MS, reverse=True)]
     first += [(400, loss, tank, governor, 2) for loss, tank, governor in ablations]
+    wanted = set(jobs)
+    first = [job for job in first if job in wanted]  # only reordered: nothing is run that was not asked for
     return first + [job for job in jobs if job not in set(first)]
 
 
+def records(path: Path, of_setup: str) -> list[dict]:
+    """The runs `path` holds that were made with this setup."""
+    if not path.exists():
+        return []
+    return [r for r in map(json.loads, filter(str.strip, path.read_text().splitlines())) if r.get("setup") == of_setup]
+
+
 def summarise(path: Path) -> str:
-    runs = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    runs = records(path, setup())
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for run in runs:
         groups[(not run["governor"], not run["tank"], -run["loss"], run["rtt_ms"])].append(run)
     lines = ["| governor | tank | loss | RTT (ms) | operators | runs with collisions | crashes | "
              "stop error within -5/+10 cm | stop error min / median / max (cm) | T/T_ref median / max | "
-             "sustained oscillation | oscillation index median / max (cm/s) | tank's lowest level (J) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "sustained oscillation | oscillation index median / max (cm/s) | tank's lowest level (J) | "
+             "tank empty | measured round trip max (ms) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for key in sorted(groups):
         group = groups[key]
         first = group[0]
@@ -185,13 +234,16 @@ def summarise(path: Path) -> str:
         t_norm = f"{_median(norms, digits=2)} / {max(norms):.2f}" if norms else "-"
         osc = [r["oscillation_index_mps"] for r in group]
         tanks = [r["tank_level_min_j"] for r in group if r["tank_level_min_j"] is not None]
+        empty = [r["tank_empty"] for r in group if r["tank_empty"] is not None]
+        trips = [r["round_trip_max_s"] for r in group if r["round_trip_max_s"] is not None]
         lines.append(
             f"| {'on' if first['governor'] else 'off'} | {'on' if first['tank'] else 'off'} | "
             f"{100 * first['loss']:.0f} % | {first['rtt_ms']} | {len(group)} | "
             f"{sum(1 for r in group if r['collisions'])} | {sum(r['crash'] for r in group)} | "
             f"{sum(1 for s in stops if -0.05 <= s <= 0.10)} of {len(group)} | {spread} | {t_norm} | "
             f"{sum(1 for r in group if r['sustained_oscillation'])} | "
-            f"{_median(osc, 100)} / {100 * max(osc):.1f} | {f'{min(tanks):.3f}' if tanks else '-'} |")
+            f"{_median(osc, 100)} / {100 * max(osc):.1f} | {f'{min(tanks):.3f}' if tanks else '-'} | "
+            f"{f'{sum(empty)} of {len(empty)}' if empty else '-'} | {f'{1000 * max(trips):.0f}' if trips else '-'} |")
     return "\n".join(lines) + "\n"
 
 
@@ -203,18 +255,21 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--summary", action="store_true", help="only summarise what --out holds")
+    parser.add_argument("--limit", type=int, default=None, help="run at most this many of the pending runs")
     args = parser.parse_args()
     if not args.summary:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        done = set()
-        if args.out.exists():
-            done = {(r["rtt_ms"], r["loss"], r["tank"], r["governor"], r["operator"])
-                    for r in map(json.loads, args.out.read_text().splitlines()) if r}
+        done = {(r["rtt_ms"], r["loss"], r["tank"], r["governor"], r["operator"]) for r in records(args.out, setup())}
         todo = [job for job in focused(jobs(args.operators, args.others, args.others_per_round)) if job not in done]
+        print(f"{len(done)} runs of this setup already in {args.out}, {len(todo)} to go", flush=True)
         with ProcessPoolExecutor(args.workers) as pool, args.out.open("a") as out:
-            pending = [pool.submit(run_one, *job) for job in todo]
+            pending = {pool.submit(run_one, *job): job for job in todo[:args.limit]}
             for future in as_completed(pending):  # written as each ends: a sweep cut short keeps every finished run
-                record = future.result()
+                try:
+                    record = future.result()
+                except Exception as error:  # noqa: BLE001 - one run's failure is reported, the sweep goes on
+                    print("failed:", pending[future], repr(error), flush=True)
+                    continue
                 out.write(json.dumps(record) + "\n")
                 out.flush()
                 print(record["rtt_ms"], record["loss"], record["tank"], record["governor"], record["operator"],

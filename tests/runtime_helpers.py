@@ -16,14 +16,14 @@ from hapticop.validation import validate_path
 
 
 def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name="c", on_start=None,
-            shutdown_timeout="2s", control=None) -> RunResult:
+            shutdown_timeout="2s", control=None, record: str | None = None) -> RunResult:
     path = tmp_path / f"{name}.yaml"
     path.write_text(textwrap.dedent(text))
     validated = validate_path(path)
     assert validated.report.ok, "\n".join(d.to_text() for d in validated.report.diagnostics)
     options = RunOptions(clock=clock, duration_ns=parse_duration_ns(duration) if duration else None, seed=seed,
                          run_dir=tmp_path / f"run-{name}", shutdown_timeout_ns=parse_duration_ns(shutdown_timeout),
-                         echo=False, control=control)
+                         echo=False, control=control, record=record)
     return run_system(validated, options, on_start=on_start)
 
 

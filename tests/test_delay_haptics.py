@@ -3,6 +3,7 @@ that put them and the emulated link into a composition (docs/teleop.md)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -182,6 +183,35 @@ def test_the_link_block_runs_the_same_twice_and_its_streams_have_their_own_luck(
     assert first != arrivals(8)
 
 
+def test_the_round_trip_block_measures_the_echoes_of_its_pings(tmp_path):
+    """Each ping [slot, send time] comes back 120 ms later but every fifth, lost. The round trip is the
+    echoes', the loss the fraction never echoed, and nothing is said before the first echo."""
+    harness = BlockHarness("round_trip", {"ping_period_s": 0.05}, name="pinger", run_dir=tmp_path)
+    harness.configure()
+    in_flight: list[tuple[int, np.ndarray]] = []
+    pings = 0
+    for k in range(3000):
+        now = harness.clock.now_ns()
+        while in_flight and in_flight[0][0] <= now:
+            harness.feed("echo", in_flight.pop(0)[1])
+        harness.step()
+        ping = harness.outputs.ping
+        if ping.published > pings:
+            pings = ping.published
+            if pings % 5:
+                in_flight.append((now + 120_000_000, ping.value.copy()))
+        if k == 50:
+            assert harness.outputs.rtt.published == 0  # nothing answered yet: nothing said
+    assert float(harness.outputs.rtt.value) == pytest.approx(0.120, abs=0.0015)
+    assert float(harness.outputs.loss.value) == pytest.approx(0.2, abs=0.05)
+    assert float(harness.outputs.jitter.value) < 0.002
+    harness.clean()
+    assert any("round trip 120" in line or "round trip 121" in line for line in harness.log_lines())
+    rows = {row["metric"]: row["value"] for row in json.loads(
+        (tmp_path / "results-link-pinger.json").read_text())["rows"]}
+    assert rows["round trip max"] == pytest.approx(120, abs=1.5) and rows["pings unanswered"] > 0.1
+
+
 def test_the_predictor_dead_reckons_from_the_scans_time_less_the_forward_delay():
     harness = BlockHarness("pose_predictor", {"prediction": {"forward_delay_s": 0.1}})
     harness.configure()
@@ -238,14 +268,16 @@ def test_the_robot_side_governor_stops_before_the_wall_and_on_a_stale_command():
 # -- the composition ------------------------------------------------------------------------------------------------
 
 def test_the_hallway_behind_the_emulated_link_runs_the_same_twice(tmp_path):
-    """systems/teleop_sim.yaml on the virtual clock: the link's luck comes from its seeds, so two runs are one."""
+    """systems/teleop_sim.yaml on the virtual clock: the link's luck comes from its seeds, so two runs are one
+    (the second recorded: its recording holds the link's figures)."""
     from .conftest import SYSTEMS
     from .runtime_helpers import compose
 
     (tmp_path / "hallway.yaml").write_text((SYSTEMS / "hallway.yaml").read_text())
     text = (SYSTEMS / "teleop_sim.yaml").read_text().replace(
         "\nactivities:\n", "\nactivities:\n  world:\n    params: {time_limit_s: 4.0, plot: false}\n", 1)
-    runs = [compose(tmp_path, text, duration=None, name=name, seed=3) for name in "ab"]
+    runs = [compose(tmp_path, text, duration=None, name=name, seed=3, record=None if name == "a" else "")
+            for name in "ab"]
     assert all(run.outcome.status.name == "SUCCESS" for run in runs), [run.outcome.reasons for run in runs]
     a, b = (np.load(tmp_path / f"run-{name}" / "trajectory.npz") for name in "ab")
     assert a["pose"].shape == b["pose"].shape and a["pose"].tobytes() == b["pose"].tobytes()
@@ -253,6 +285,19 @@ def test_the_hallway_behind_the_emulated_link_runs_the_same_twice(tmp_path):
     assert np.ptp(a["pose"][:, 0]) > 0.1  # the robot drove, behind a link that lost samples
     uplink = (tmp_path / "run-a" / "uplink.log").read_text()
     assert " 0 lost" not in uplink and "lost" in uplink
+    # the pings crossed both links: the round trip measured (and given to the predictor) is the emulated one
+    metrics = json.loads((tmp_path / "run-a" / "metrics.json").read_text())
+    assert 0.18 <= metrics["round_trip_max_s"] <= 0.23 and metrics["link_loss_max"] > 0.0
+    assert "round trip" in (tmp_path / "run-a" / "pinger.log").read_text()
+    table = json.loads((tmp_path / "run-a" / "results-link-pinger.json").read_text())  # the end-of-run table
+    rows = {row["metric"]: row["value"] for row in table["rows"]}
+    assert 180 <= rows["round trip p50"] <= 230 and rows["pings unanswered"] > 0.0
+    from hapticop.recording.reading import series
+
+    recording = next((tmp_path / "run-b").glob("*.mcap"))
+    round_trip = series(recording, "round_trip")
+    assert len(round_trip.values) > 10 and 0.18 <= float(round_trip.values[-1]) <= 0.23
+    assert len(series(recording, "link_loss").values) and len(series(recording, "link_jitter").values)
 
 
 def test_the_operators_side_governs_its_commands_on_the_scan_seen_from_the_predicted_pose():

@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hapticop.network.link import EmulatedLink, LinkParams
+from hapticop.network.link import EmulatedLink, LinkParams, MessageLink
 
 Delivery = tuple[int, float, float, tuple]
 
@@ -148,3 +148,24 @@ def test_the_link_imports_no_network_engine():
     code = "import sys, hapticop.network.link; print('zenoh' in sys.modules)"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "False"
+
+
+def test_messages_of_any_length_cross_once_in_their_time_and_lost_ones_leave_nothing_behind():
+    """A bridge's pings and pongs: bytes of their own lengths, delayed, jittered, lost or duplicated by the link."""
+    params = LinkParams(delay_s=0.02, jitter_s=0.005, loss=0.2, duplicate=0.3, seed=5)
+    messages = MessageLink(params)
+    delivered = []
+    for tick in range(600):
+        now_ns = tick * 1_000_000
+        if tick < 500:
+            messages.send(now_ns, b"x" * (tick % 37) + tick.to_bytes(4, "little"))
+        while (got := messages.receive(now_ns)) is not None:
+            data, sent_ns = got
+            index = int.from_bytes(data[-4:], "little")
+            assert sent_ns == index * 1_000_000 and len(data) == index % 37 + 4
+            assert 0.015 - 1e-9 <= (now_ns - sent_ns) / 1e9 <= 0.025 + 1e-9
+            delivered.append(index)
+    assert len(delivered) == len(set(delivered))  # a duplicate's copy is not a second message
+    link = messages.link
+    assert len(delivered) == link.sent - link.lost > 0 and link.lost > 0 and link.duplicated > 0
+    assert messages.waiting == 0

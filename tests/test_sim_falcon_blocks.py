@@ -87,3 +87,33 @@ def test_the_operator_homes_while_the_led_is_red_rests_when_green_and_drives_whe
     step(int(Flag.LED_GREEN))
     assert operator.outputs.driving_time.published == 2 and float(operator.outputs.driving_time.value) > 0.0
     assert step(int(Flag.LED_RED))[2] > 1.0  # the Falcon lost its homing: homed again, from the start
+
+
+def test_the_falcon_says_nothing_of_lost_frames_before_its_first_one(tmp_path):
+    """Opening the link is no frame: a simulator (or a Falcon) that answers only seconds later, as one in a
+    process still starting does, leaves `frames_ok` false without a warning; its first frame raises it, and
+    only frames that then stop for 100 ms are lost ones."""
+    from hapticop.testing import BlockHarness
+
+    falcon = BlockHarness("falcon", {"driver": "sim", "simulator": "falcon_sim"}, name="falcon", run_dir=tmp_path)
+    falcon.block.create()
+    falcon.block.configure_resources()
+    for _ in range(500):  # half a second with nobody answering
+        falcon.block.configure_capabilities()
+        falcon.advance()
+    assert not falcon.flags["frames_ok"]
+    assert not any("warning" in line for line in falcon.log_lines())
+    device = _block(FalconSimulator, "falcon_sim", FalconSimulatorParams(), falcon.clock, tmp_path)
+    for _ in range(5):
+        device.compute()
+        falcon.block.configure_capabilities()
+        falcon.advance()
+    assert falcon.flags["frames_ok"]
+    assert any("first good frame 0.50 s after opening" in line for line in falcon.log_lines())
+    for _ in range(150):  # the simulator falls silent
+        falcon.block.configure_capabilities()
+        falcon.advance()
+    assert not falcon.flags["frames_ok"]
+    assert any("warning: no good frame for 100 ms" in line for line in falcon.log_lines())
+    falcon.clean()
+    device.clean()

@@ -4,6 +4,7 @@ and, as root, between two network namespaces over a veth the test makes."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from hapticop.composition.placement import place
 from hapticop.network.arrivals import Arrivals
@@ -46,6 +48,27 @@ def test_offset_estimator_finds_a_skewed_clock_within_its_bound():
     assert clock.error_ns < 1_000_000
     assert clock.to_local(t3) == pytest.approx(t3 - skew, abs=clock.error_ns)
     assert clock.loss == 0.0
+
+
+def test_time_held_in_an_emulated_link_counts_in_the_round_trip_but_not_in_the_offset():
+    """A bridge with `emulate:` holds pings and pongs on purpose after taking them off the network; the four
+    times are read outside that hold, so the offset stays true while the round trip shows what samples feel."""
+    skew = 2_000_000_000
+    held, plain = OffsetEstimator(window=16), OffsetEstimator(window=16)
+    local = 0
+    for k in range(40):
+        t1 = local
+        t2 = t1 + 300_000 + skew
+        t3 = t2 + 150_000_000  # answered after 150 ms in the answering side's emulated link
+        t4 = t3 - skew + 300_000
+        held.answered(held.sent(), t1, t2, t3, t4, held_ns=150_000_000 + 20_000_000 + 1000 * k)
+        plain.answered(plain.sent(), t1, t2, t3, t4)
+        local = t4 + 50_000_000
+    assert held.offset_ns == plain.offset_ns == pytest.approx(skew)
+    assert held.error_ns == plain.error_ns == pytest.approx(300_000)
+    assert plain.rtt_ns == pytest.approx(600_000)
+    assert held.rtt_ns == pytest.approx(600_000 + 170_000_000, abs=50_000)
+    assert held.jitter_ns > plain.jitter_ns == 0.0
 
 
 def test_offset_estimator_counts_unanswered_pings_and_ignores_stale_pongs():
@@ -98,6 +121,28 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     # a lost link holds the operator's side as a wheel fault would, until the robot is heard again
     bridge = validated.hosts["operator"].graph.loaded.activities["bridge"].params
     assert bridge.hold_when_lost == ["WHEEL_FAULT"] and "WHEEL_FAULT" in bridge.import_flags
+
+
+def test_teleop_runs_the_speed_governor_on_the_robots_host_with_its_own_scan():
+    """S1 on the robot (issue 19 item 3): the setpoint that crossed goes through the robot's governor, which reads
+    the robot's own LIDAR on its host, before it reaches the wheels' controller; the operator's side has none."""
+    validated = validate_path(ROOT / "systems" / "teleop.yaml")
+    assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    robot = validated.hosts["robot"].composition
+    operator = validated.hosts["operator"].composition
+    assert place(validated.graph.loaded.composition).host_of("governor") == "robot"
+    assert "governor" in robot.activities and "governor" not in operator.activities
+    assert robot.activities["governor"].block == "speed_governor"
+    assert any("governor" in members for members in robot.threads["robot_main"].schedules.values())
+    setpoint = robot.streams["velocity_setpoint"]
+    assert setpoint.writer == "bridge.in_velocity_setpoint" and "governor.command" in setpoint.readers
+    assert setpoint.max_age == 100_000_000  # the deadman reaches the governor: a stale setpoint is no motion
+    governed = robot.streams["governed_setpoint"]
+    assert governed.writer == "governor.twist" and governed.readers == ["ropod.velocity_setpoint"]
+    assert robot.streams["scan_ranges"].writer == "lidar.ranges"  # the robot's own, undelayed scan
+    assert "governor.ranges" in robot.streams["scan_ranges"].readers
+    assert "governor.angles" in robot.streams["scan_angles"].readers
+    assert "ropod.velocity_setpoint" not in operator.streams["velocity_setpoint"].readers
 
 
 def test_graph_draws_each_host_around_its_threads_and_the_network_streams():
@@ -153,8 +198,9 @@ def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "tw
     return path
 
 
-def start(path: Path, host: str, run_dir: Path, netns: str | None = None) -> subprocess.Popen:
-    command = [sys.executable, "-m", "hapticop.cli", "compose", str(path), "--host", host, "--run-dir", str(run_dir)]
+def start(path: Path, host: str, run_dir: Path, netns: str | None = None, *extra: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "hapticop.cli", "compose", str(path), "--host", host, "--run-dir", str(run_dir),
+               *extra]
     if netns is not None:
         command = ["ip", "netns", "exec", netns, *command]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
@@ -196,11 +242,11 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     """b receives a's samples through an emulated 20 ms one-way delay; each arrives stamped with its
     send time, so its age on arrival includes the network. Then a is killed: b's samples turn
     invalid at their deadline, never later, b's bridge reports the link lost; a restarts, and
-    b's samples and link come back by themselves."""
+    b's samples and link come back by themselves. b records: its link's figures are in the recording."""
     delay_ms = 20
     path = two_hosts(tmp_path, f"tcp/127.0.0.1:{_free_port()}", f"tcp/127.0.0.1:{_free_port()}",
                      f"emulate: {{delay_s: {delay_ms / 1000}, seed: 3}}")
-    b = start(path, "b", tmp_path / "b")  # b first: starting either side first works
+    b = start(path, "b", tmp_path / "b", None, "--record")  # b first: starting either side first works
     a = start(path, "a", tmp_path / "a1")
     bridge_log = tmp_path / "b" / "bridge.log"
     try:
@@ -215,6 +261,16 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     finally:
         stop(a)
         out = stop(b)
+    # the pings cross the emulated link too: the round trip b reports holds the delay it adds to what it receives
+    link = json.loads((tmp_path / "b" / "results-link.json").read_text())
+    rows = {row["metric"]: row["value"] for row in link["rows"]}
+    assert rows["round trip p50"] >= delay_ms, rows
+    recording = next((tmp_path / "b").glob("*.mcap"))
+    with recording.open("rb") as stream:
+        figures = [json.loads(message.data) for _, channel, message in make_reader(stream).iter_messages()
+                   if channel.topic == "/link/bridge"]
+    assert figures and any(f["up"] and f["rtt_ms"] >= delay_ms for f in figures), figures
+    assert any(f["lost"] for f in figures)  # the link's loss, as b's bridge told it, is in the recording too
     data = np.load(tmp_path / "b" / "probe.npz")
     arrived, cycles = data["arrived"], data["cycles"]
     assert len(arrived), out

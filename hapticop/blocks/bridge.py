@@ -12,7 +12,9 @@ streams and as the flags `link_up`, `link_lost` and `link_degraded`.
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import zlib
 from typing import Literal
 
 import numpy as np
@@ -24,7 +26,7 @@ from hapticop.blocks.interface import Interface, Params, Port
 from hapticop.network import wire
 from hapticop.network.arrivals import Arrivals
 from hapticop.network.clock import OffsetEstimator
-from hapticop.network.link import EmulatedLink, LinkParams
+from hapticop.network.link import EmulatedLink, LinkParams, MessageLink
 
 WINDOW = 64  # pings the clock estimate looks back over (3.2 s at the default 50 ms)
 STATUS_PERIOD_NS = 1_000_000_000  # how often `hapticop status` learns the link's figures
@@ -105,6 +107,10 @@ class ZenohBridge(Block):
         self.next_ping_ns = 0
         self.links = ({w.stream: EmulatedLink(p.emulate, wire.SAMPLE.size + w.port().nbytes, np.uint8)
                        for w in p.receive} if p.emulate is not None else {})
+        # pings and pongs cross the emulated link too, so the round trip measured is the one the samples feel;
+        # the clocks are compared outside it (docs/teleop.md)
+        self.ping_links = {peer: _impaired(p.emulate, f"ping {peer}") for peer in p.peers} if p.emulate else {}
+        self.pong_link = _impaired(p.emulate, "pong") if p.emulate else None
         self.rtts = np.zeros(1 << 16, dtype=np.int64)  # every answered ping's round trip, for the run's table
         self.answered = 0
         self.pinged = 0
@@ -197,25 +203,30 @@ class ZenohBridge(Block):
 
     def _answer_pings(self) -> None:
         for peer, receiver in self.pings_in.items():
-            while (data := receiver.take()) is not None:
-                # t2 when taken, not the cycle's start: a ping sent after the cycle began would otherwise
-                # look received before it was sent, and pass for the best (shortest) exchange
-                t2 = self.clock.now_ns()
+            # t2 when taken, not the cycle's start: a ping sent after the cycle began would otherwise
+            # look received before it was sent, and pass for the best (shortest) exchange
+            while (taken := _take(receiver, self.ping_links.get(peer), self.clock)) is not None:
+                data, t2 = taken
                 if len(data) == wire.PING.size:
                     _, slot, t1 = wire.PING.unpack(data)
-                    pong = wire.PONG.pack(slot, t1, t2, self.clock.now_ns()) + self.params.host.encode()
+                    t3 = self.clock.now_ns()  # held since t2 in the emulated link, if any: said apart
+                    held = t3 - t2 if self.ping_links else 0
+                    pong = wire.PONG.pack(slot, t1, t2, t3, held) + self.params.host.encode()
                     self.pong_out[peer].put(pong)
 
     def _take_pongs(self) -> None:
-        while (data := self.pongs_in.take()) is not None:
-            t4 = self.clock.now_ns()
-            slot, t1, t2, t3 = wire.PONG.unpack_from(data)
+        while (taken := _take(self.pongs_in, self.pong_link, self.clock)) is not None:
+            data, t4 = taken
+            if len(data) < wire.PONG.size:
+                continue
+            heard = self.clock.now_ns()
+            slot, t1, t2, t3, held = wire.PONG.unpack_from(data)
             peer = data[wire.PONG.size:].decode(errors="replace")
             clock = self.clocks.get(peer)
             # the pong names its ping by slot and send time: an old pong of a reused slot is ignored
             if clock is not None and 0 <= slot < WINDOW and self.pinged_at[peer][slot] == t1:
-                clock.answered(slot, t1, t2, t3, t4)
-                self.heard_ns[peer] = t4
+                clock.answered(slot, t1, t2, t3, t4, held + (heard - t4))
+                self.heard_ns[peer] = heard
                 self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
                 self.answered += 1
                 self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
@@ -297,6 +308,22 @@ class ZenohBridge(Block):
         """This host's session, whether its run ended, and the exported places that hold a token."""
         holding = ",".join(p for p in self.params.export_flags if self.flags[f"out_{p.lower()}"])
         return wire.STATE.pack(self.session_id, ended) + holding.encode()
+
+
+def _impaired(params: LinkParams, name: str) -> MessageLink:
+    """An emulated link for pings or pongs, with luck of its own (from the emulation's seed and its name)."""
+    seed = int(np.random.SeedSequence([params.seed, zlib.crc32(name.encode())]).generate_state(1)[0])
+    return MessageLink(dataclasses.replace(params, seed=seed))
+
+
+def _take(receiver, impaired: MessageLink | None, clock) -> tuple[bytes, int] | None:
+    """The next message that arrived and when it was taken off the network (before any emulated hold)."""
+    if impaired is None:
+        data = receiver.take()
+        return None if data is None else (data, clock.now_ns())
+    while (data := receiver.take()) is not None:
+        impaired.send(clock.now_ns(), data)
+    return impaired.receive(clock.now_ns())
 
 
 def write_link_table(run_dir, bridge: ZenohBridge) -> None:

@@ -22,6 +22,9 @@ from hapticop.devices.falcon.link import DatagramFalconLink, FalconLink
 from hapticop.devices.falcon.mechanism import Geometry
 from hapticop.devices.link import DatagramLink
 
+NO_FRAME_NS = -(1 << 62)
+"""The time of the last good frame before any has come: long enough ago that `frames_ok` is false."""
+
 
 class FalconParams(DeviceParams):
     simulated_by = "a falcon_simulator"
@@ -102,8 +105,9 @@ class Falcon(Block):
         """What a newly opened Falcon starts from: not homed, no position, the parameters' geometry."""
         self.kinematics, self.homing = FalconKinematics(self.params.geometry), Homing()
         self.position = (0.0, 0.0, 0.0)  # device frame, workspace origin: last published, as floats
-        self.fk_ok = False
-        self.opened_ns = self.last_frame_ns = self.last_read_ns = self.clock.now_ns()
+        self.fk_ok = self.framed = False
+        self.opened_ns = self.last_read_ns = self.clock.now_ns()
+        self.last_frame_ns = NO_FRAME_NS  # opening is no frame: `frames_ok` rises with the first one
 
     def configure_resources(self) -> bool:
         if self.open:  # configured before, and now with other parameters: a link of their own
@@ -208,7 +212,10 @@ class Falcon(Block):
         published, so its readers see it age past their streams' `max_age`."""
         ok = now - self.last_frame_ns < 100_000_000
         if ok != self.frames_ok:
-            if ok:
+            if ok and not self.framed:
+                self.framed = True
+                self.log.info("first good frame %.2f s after opening", (now - self.opened_ns) / 1e9)
+            elif ok:
                 self.log.info("frames are back")
             else:
                 self.log.warning("no good frame for 100 ms: the Falcon holds no force, the robot is stopped")

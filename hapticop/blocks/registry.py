@@ -44,6 +44,7 @@ BUILTIN: dict[str, str] = {
     "force_limit": "hapticop.blocks.forces:ForceLimit",
     "button": "hapticop.blocks.button:Button",
     "link": "hapticop.blocks.link:Link",
+    "round_trip": "hapticop.blocks.round_trip:RoundTrip",
     "pose_predictor": "hapticop.blocks.prediction:PosePredictor",
     "energy_tank": "hapticop.blocks.tank:EnergyTankBlock",
     "speed_governor": "hapticop.blocks.governor:SpeedGovernor",

@@ -30,12 +30,13 @@ from hapticop.parameters import parameters
 
 @parameters
 class EnergyTankParams:
-    """The tank's budget (docs/teleop.md): sized from the elastic energy a cue may legitimately hold,
-    about ½·9 N·5 cm ≈ 0.2 J for the Falcon."""
+    """The tank's budget (docs/teleop.md): sized from what the hallway's stopping cue spends (up to 0.2 J
+    measured for the aggressive operators, whatever the delay), with room for twice that; it is empty when
+    it sits at `min_j` (the cue was being scaled down)."""
 
-    initial_j: Annotated[float, Ge(0)] = 0.1
+    initial_j: Annotated[float, Ge(0)] = 0.4
     """E_0: what the tank holds at the start (and after a reset)."""
-    max_j: Annotated[float, Gt(0)] = 0.3
+    max_j: Annotated[float, Gt(0)] = 0.4
     """E_max: what it holds at most; a refill beyond is dumped, so no unbounded credit builds up."""
     min_j: Annotated[float, Ge(0)] = 0.0
     """E_min: the floor; the active force is scaled down rather than take the tank below it."""

@@ -5,6 +5,11 @@ Each exchange gives the four NTP times: t1 ping sent (here), t2 ping received an
 estimate ((t2 - t1) + (t3 - t4)) / 2, exact when both directions take equally long; the error is
 at most half the round trip. So of the last exchanges the one with the shortest round trip
 gives the offset (the least queued, the most symmetric), and its half round trip bounds the error.
+
+An exchange may also have been held on purpose in an emulated link (docs/teleop.md): that time counts
+in the round trip, jitter and loss the link's figures report, as the samples feel it, but not in the
+offset, whose four times are taken outside the emulation, so an emulated delay on one side does not
+bias the clocks.
 """
 
 from __future__ import annotations
@@ -16,7 +21,8 @@ class OffsetEstimator:
     """Offset (remote minus local clock), round trip, jitter and loss over the last `window` pings."""
 
     def __init__(self, window: int = 64) -> None:
-        self._rtt = np.full(window, np.inf)
+        self._rtt = np.full(window, np.inf)  # on the wire: chooses the offset and bounds its error
+        self._trip = np.zeros(window)  # on the wire plus held in an emulated link: the link's figures
         self._offset = np.zeros(window)
         self._answered = np.zeros(window, dtype=bool)
         self._next = 0
@@ -33,19 +39,28 @@ class OffsetEstimator:
         self._filled = min(self._filled + 1, len(self._rtt))
         return slot
 
-    def answered(self, slot: int, t1: int, t2: int, t3: int, t4: int) -> None:
-        """The pong of ping `slot` arrived: local times t1, t4, remote times t2, t3 (ns)."""
+    def answered(self, slot: int, t1: int, t2: int, t3: int, t4: int, held_ns: int = 0) -> None:
+        """The pong of ping `slot` arrived: local times t1, t4, remote times t2, t3 (ns); `held_ns` the time
+        the ping and the pong spent in emulated links besides."""
         if not 0 <= slot < len(self._rtt) or self._answered[slot]:
             return  # a stale or duplicated pong
         rtt = (t4 - t1) - (t3 - t2)
         if rtt < 0:
             return
+        trip = rtt + max(0, held_ns)
         if self.last_rtt_ns:
-            self.jitter_ns += (abs(rtt - self.last_rtt_ns) - self.jitter_ns) / 16.0
-        self.last_rtt_ns = rtt
+            self.jitter_ns += (abs(trip - self.last_rtt_ns) - self.jitter_ns) / 16.0
+        self.last_rtt_ns = trip
         self._rtt[slot] = rtt
+        self._trip[slot] = trip
         self._offset[slot] = ((t2 - t1) + (t3 - t4)) / 2.0
         self._answered[slot] = True
+
+    def echoed(self, slot: int, t1: int, t4: int) -> None:
+        """Ping `slot`, sent at t1, came back at t4 from a far side on this same clock that only echoes it
+        (an emulated link's other end): its round trip, and no offset (the far side's times are the midpoint)."""
+        middle = (t1 + t4) // 2
+        self.answered(slot, t1, middle, middle, t4)
 
     @property
     def synced(self) -> bool:
@@ -63,8 +78,8 @@ class OffsetEstimator:
 
     @property
     def rtt_ns(self) -> float:
-        """The median round trip over the window (0 before an answer)."""
-        answered = self._rtt[self._answered]
+        """The median round trip over the window, emulated holds included (0 before an answer)."""
+        answered = self._trip[self._answered]
         return float(np.median(answered)) if answered.size else 0.0
 
     @property

@@ -145,3 +145,32 @@ class EmulatedLink:
     def next_due_s(self) -> float:
         """When the next packet is due (infinity when none is in flight)."""
         return self._queue[0][0] if self._queue else NOT_IN_FLIGHT
+
+
+class MessageLink:
+    """Messages of any length (a bridge's pings and pongs) through an emulated link: the link decides when
+    each arrives, or whether, and the bytes wait beside it with the time they were handed over."""
+
+    def __init__(self, params: LinkParams) -> None:
+        self.link = EmulatedLink(params, 1, np.int64)
+        self._waiting: dict[int, tuple[bytes, int]] = {}
+
+    def send(self, now_ns: int, data: bytes) -> None:
+        link = self.link
+        dropped = link.lost + link.overflowed
+        sequence = link.send(now_ns / 1e9, 0)
+        if link.lost + link.overflowed == dropped:  # on its way (a lost one never comes: nothing kept)
+            self._waiting[sequence] = (data, now_ns)
+
+    def receive(self, now_ns: int) -> tuple[bytes, int] | None:
+        """The next message due by ``now_ns`` and when it was sent, or None; a duplicate comes once."""
+        while (slot := self.link.receive(now_ns / 1e9)) >= 0:
+            message = self._waiting.pop(self.link.sequence(slot), None)
+            if message is not None:
+                return message
+        return None
+
+    @property
+    def waiting(self) -> int:
+        """Messages on their way."""
+        return len(self._waiting)

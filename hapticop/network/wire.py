@@ -12,7 +12,8 @@ import struct
 
 SAMPLE = struct.Struct("<QQq")  # session, sequence, send time (ns, sender's clock)
 PING = struct.Struct("<QQq")  # session, slot, t1
-PONG = struct.Struct("<Qqqq")  # slot, t1, t2, t3; then the answering host's name
+# slot, t1, t2, t3, held (how long the ping waited in an emulated link); then the answering host's name
+PONG = struct.Struct("<Qqqqq")
 STATE = struct.Struct("<Q?")  # session, ended; then the names of the exported places holding, comma-separated
 
 

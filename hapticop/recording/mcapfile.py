@@ -44,6 +44,7 @@ CHUNK_BYTES = 4 << 20  # larger than a second of a busy run: chunks close at the
 STREAM_TOPIC = "/streams/{}"
 TIMING_TOPIC = "/timing/{}"  # a loop's timing windows (hapticop.runtime.timing_channels)
 LOG_TOPIC = "/log"  # the run's log records (hapticop.runtime.log_channel)
+LINK_TOPIC = "/link/{}"  # a network bridge's link figures (hapticop.runtime.link_channel)
 
 
 def topic_of(stream: str) -> str:

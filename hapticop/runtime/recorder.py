@@ -7,8 +7,9 @@ sample with its number and publication stamp (`RecordingFile`), and hands the sa
 its views, which may derive channels of their own from them (a scan from two streams, the
 robot's frames from a pose) without the loops knowing. A ring the recorder falls a whole
 ring behind on is overwritten, and the lost samples are counted, never waited for. Beside the
-rings it follows sources of its own: each loop's timing counters (`timing_channels`) and the
-run's log files (`log_channel`). Whatever it writes goes to its outputs (`recording.outputs`):
+rings it follows sources of its own: each loop's timing counters (`timing_channels`), the
+run's log files (`log_channel`) and the network bridges' figures (`link_channel`). Whatever it
+writes goes to its outputs (`recording.outputs`):
 the file, the live view (`recording.live`, `compose --view`), or both.
 
 On the wall clock the recorder is a process of its own at normal scheduling, which leaves
@@ -39,6 +40,7 @@ from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.outputs import Fanout, Output
 from hapticop.recording.plan import recorded_streams
 from hapticop.recording.scene import views_for
+from hapticop.runtime.link_channel import LinkChannel
 from hapticop.runtime.log_channel import LogChannel
 from hapticop.runtime.region import Layout
 from hapticop.runtime.streams import SpscQueue, sample_dtype
@@ -279,12 +281,13 @@ def _library() -> str:
 
 
 def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
-    """The loops' timing and the run's log, as the plan asks."""
+    """The loops' timing, the run's log and the network bridges' link figures, as the plan asks."""
     sources: list[Source] = []
     if plan.timing is not None:
         sources.append(LoopTiming(plan.timing, buffer))
     if plan.run_dir is not None:
         sources.append(LogChannel(plan.run_dir))
+        sources.append(LinkChannel(plan.run_dir))
     return sources
 
 

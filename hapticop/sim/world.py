@@ -50,6 +50,12 @@ class HallwayWorld(Block):
         "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip", required=False),
         "tank_level": Port("float64", (), "J", "an energy tank's level on the Falcon's port: its lowest goes "
                            "into the metrics", required=False),
+        "round_trip": Port("float64", (), "s", "a link's measured round trip: its largest goes into the metrics",
+                           required=False),
+        "link_jitter": Port("float64", (), "s", "a link's measured jitter: its largest goes into the metrics",
+                            required=False),
+        "link_loss": Port("float64", (), "1", "a link's measured loss: its largest goes into the metrics",
+                          required=False),
         "handle_position": Port("float64", (3,), "m", "true handle position, device frame", required=False),
         "handle_velocity": Port("float64", (3,), "m/s", "true handle velocity, device frame", required=False),
         "operator_time": Port("float64", (), "s", "seconds the operator has driven: the recording's clock"),
@@ -86,6 +92,8 @@ class HallwayWorld(Block):
         self.nothing = np.zeros(3)
         self.variant = "unknown"  # the operator's, once it has said (clean)
         self.tank_lowest_j = math.inf  # the energy tank's lowest level while driving (inf: no tank)
+        self.link_worst = {"round_trip_max_s": -math.inf, "link_jitter_max_s": -math.inf,
+                           "link_loss_max": -math.inf}  # -inf: no link measured
 
     def compute(self) -> None:
         inputs = self.inputs
@@ -112,6 +120,11 @@ class HallwayWorld(Block):
         tank = inputs.tank_level
         if tank.seq and float(tank.value) < self.tank_lowest_j:
             self.tank_lowest_j = float(tank.value)
+        worst = self.link_worst
+        for key, port in (("round_trip_max_s", inputs.round_trip), ("link_jitter_max_s", inputs.link_jitter),
+                          ("link_loss_max", inputs.link_loss)):
+            if port.seq and float(port.value) > worst[key]:
+                worst[key] = float(port.value)
         self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
                              cmd_exec=self.executed if executed.seq else None,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
@@ -146,8 +159,9 @@ class HallwayWorld(Block):
             self.log.info("not a hallway run: trajectory kept, nothing judged")
             return
         metrics = compute_metrics(self.recorder, self.geometry, v_cruise_mps=_cruise_speed(operator))
-        extra = {"tank_level_min_j": self.tank_lowest_j} if self.tank_lowest_j < math.inf else None
-        (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra))
+        extra = {"tank_level_min_j": self.tank_lowest_j} if self.tank_lowest_j < math.inf else {}
+        extra.update({key: value for key, value in self.link_worst.items() if value > -math.inf})
+        (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra or None))
         self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
                         metrics.ended_by)
         if self.params.plot:
