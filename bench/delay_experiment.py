@@ -118,7 +118,6 @@ def setup() -> str:
 def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallway: str = "H1") -> dict:
     from hapticop.composition.yamlsource import Source, read_file
     from hapticop.runtime.system import RunOptions, run_system
-    from hapticop.sim.operator import BlindOperator
     from hapticop.validation import validate_source
     from hapticop.validation.patches import apply_patch
 
@@ -131,10 +130,8 @@ def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallwa
         tree = apply_patch(tree, {"activities": {"haptic": {"params": {"force_model": None}}}})
         tree = apply_patch(tree, {"activities": {"haptic": {"params": {"force_model": {"kind": "braking_field"}}}}})
     tree = apply_patch(tree, cell_patch(rtt_ms, loss, tank, governor, i))
-    hand_kg = BlindOperator.variant(profile, seed=variation).profile.m_h_kg
     tree = apply_patch(tree, {"activities": {
         "operator": {"params": {"variant": profile, "variation": variation, "time_limit_s": TIME_LIMIT_S}},
-        "falcon_sim": {"params": {"hand_mass_kg": hand_kg}},
         "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": TIME_LIMIT_S}}}})
     validated = validate_source(Source("teleop_sim.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
