@@ -48,14 +48,10 @@ class ActivityRunner:
         self.inputs = [port for port in vars(block.inputs).values()]
         self.lifecycle = Lifecycle(
             region.flags, region.state, region.failed, layout.owner_index[name], layout.flag_index, name,
-            Hooks(block.create, block.configure_resources, block.configure_capabilities, self._compute,
+            Hooks(block.create, block.configure_resources, block.configure_capabilities, block.compute,
                   block.pausing, block.clean),
             start_on_request, log, region.reached,
         )
-
-    def _compute(self) -> object:
-        self.computing = True
-        return self.block.compute()
 
     @property
     def state(self) -> State:
@@ -92,9 +88,8 @@ class ActivityRunner:
         if relay is not None and changed:  # the origins merged last step still stand otherwise
             relay.before_step()
         cpu = time.thread_time_ns() if self.simulator_cpu else 0
-        self.computing = False
         started = time.perf_counter_ns()
-        self.lifecycle.step()
+        self.computing = self.lifecycle.step()
         took = self.took = time.perf_counter_ns() - started
         if self.simulator:
             self.region.sim_ns[self.index] += time.thread_time_ns() - cpu if self.simulator_cpu else took
