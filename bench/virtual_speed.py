@@ -2,9 +2,9 @@
 second of this process's CPU time (which other work on a busy machine stretches less).
 
     python bench/virtual_speed.py systems/hallway.yaml bench/virtual_bench.yaml --duration 30s
-    python bench/virtual_speed.py systems/hallway.yaml systems/teleop_sim.yaml --duration 0 --repeat 3
+    python bench/virtual_speed.py systems/hallway.yaml systems/teleop_sim.yaml --duration end --repeat 3
 
-`--duration 0` runs each composition to its own end (a hallway run: until the world judges it).
+`--duration end` runs each composition to its own end (a hallway run: until the world judges it).
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ from hapticop.validation import validate_path
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("files", nargs="+", type=Path)
-    parser.add_argument("--duration", default="30s")
+    parser.add_argument("--duration", default="30s", help="simulated time per run, or 'end'")
     parser.add_argument("--repeat", type=int, default=1, help="runs of each composition, one row each")
     args = parser.parse_args()
-    duration = parse_duration_ns(args.duration) or None
+    duration = None if args.duration == "end" else parse_duration_ns(args.duration)
     print("| composition | simulated s | wall s | CPU s | simulated s per wall s | per CPU s | cycles |")
     print("|---|---|---|---|---|---|---|")
     for path in args.files:
