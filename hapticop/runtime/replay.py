@@ -227,7 +227,7 @@ class _Captured:
         self.values: list[np.ndarray] = []
         self.stamps: list[int] = []
 
-    def write(self, value: np.ndarray, stamp_ns: int, origins=None) -> None:
+    def push(self, value: np.ndarray, stamp_ns: int, origins=None) -> None:
         self.values.append(np.array(value, copy=True))
         self.stamps.append(int(stamp_ns))
 

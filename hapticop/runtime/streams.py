@@ -141,15 +141,21 @@ class _ByteViews:
     slice copy instead of a `np.copyto` (a tenth of the cost for the small arrays of a 1 kHz
     loop). An array of another dtype or shape has no view and is copied by numpy, with its
     casting. The arrays seen last are held (so an id is never another array's); a few suffice.
+    A handle keeps one of these per use (payloads written, origins written, reads), so the array
+    asked for is nearly always the one asked for last, answered without a lookup.
     """
 
-    __slots__ = ("views",)
+    __slots__ = ("views", "last", "last_view")
     LIMIT = 16
 
     def __init__(self) -> None:
         self.views: dict[int, tuple[np.ndarray, memoryview | None]] = {}
+        self.last: np.ndarray | None = None
+        self.last_view: memoryview | None = None
 
     def of(self, array: np.ndarray, like: np.ndarray) -> memoryview | None:
+        if array is self.last:
+            return self.last_view
         found = self.views.get(id(array))
         if found is None or found[0] is not array:
             if len(self.views) >= self.LIMIT:
@@ -157,6 +163,7 @@ class _ByteViews:
             same = (type(array) is np.ndarray and array.dtype == like.dtype and array.shape == like.shape
                     and array.flags.c_contiguous)
             found = self.views[id(array)] = (array, memoryview(array.reshape(-1).view(np.uint8)) if same else None)
+        self.last, self.last_view = found
         return found[1]
 
 
@@ -177,8 +184,10 @@ class LatestSlot:
     """The newest sample of a stream, seqlock-protected: readers never wait and never tear.
 
     One writer; any number of readers, in any threads and processes, sharing a handle or
-    not. `synchronised=False` drops the protocol for a writer and readers that run one
-    after the other in one thread; the header is kept up to date all the same.
+    not. `synchronised=False` lets this handle's readers skip the protocol, for a writer and
+    readers that run one after the other in one thread (on the virtual clock, every loop);
+    the writer keeps the sequence all the same, so a reader elsewhere (a live view's tap)
+    still reads the slot whole.
     """
 
     def __init__(self, buffer: Buffer, port: Port, synchronised: bool = True) -> None:
@@ -187,7 +196,7 @@ class LatestSlot:
         self._slot = _Slot(_raw(buffer, latest_nbytes(port)), port)
         # One scratch per reading thread: threads sharing this handle must not share it.
         self._scratches: dict[int, tuple[np.ndarray, memoryview, np.ndarray, memoryview]] = {}
-        self._views = _ByteViews()
+        self._written, self._written_origins, self._read = _ByteViews(), _ByteViews(), _ByteViews()
         self._origins_like = np.zeros(ORIGINS, dtype=np.int64)
 
     @property
@@ -200,17 +209,16 @@ class LatestSlot:
         slot = self._slot
         words = slot.words
         seq = words[_SEQ]
-        if self.synchronised:
-            words[_SEQ] = seq + 1
+        words[_SEQ] = seq + 1
         try:
-            view = self._views.of(value, slot.payload)
+            view = self._written.of(value, slot.payload)
             if view is None:
                 np.copyto(slot.payload, value)
             else:
                 slot.payload_bytes[:] = view
             slot.stamps[_STAMP] = stamp_ns
             if origins is not None:
-                view = self._views.of(origins, self._origins_like)
+                view = self._written_origins.of(origins, self._origins_like)
                 if view is None:
                     np.copyto(slot.origins, origins)
                 else:
@@ -219,11 +227,13 @@ class LatestSlot:
         finally:  # a failed copy must not leave the slot locked for ever
             words[_SEQ] = seq + 2
 
-    def read_into(self, out: np.ndarray, meta: np.ndarray, origins: np.ndarray | None = None) -> bool:
-        """Copy the newest sample into `out`, its number and stamp into `meta[0:2]` (and its
-        origins into `origins` when given).
+    push = write  # one name for what a port publishes to: a slot takes every sample
 
-        False, with `out` and `meta` untouched, if nothing was written yet or the writer
+    def read_into(self, out: np.ndarray, meta: np.ndarray, origins: np.ndarray | None = None) -> int:
+        """Copy the newest sample into `out`, its number and stamp into `meta[0:2]` (and its
+        origins into `origins` when given); returns the sample's number.
+
+        0 (false), with `out` and `meta` untouched, if nothing was written yet or the writer
         kept the slot busy for `MAX_RETRIES` attempts.
         """
         slot = self._slot
@@ -231,13 +241,13 @@ class LatestSlot:
         if not self.synchronised:
             count = words[_COUNT]
             if count == 0:
-                return False
+                return 0
             self._copy_out(out, slot.payload, slot.payload_bytes)
             meta[0] = count
             meta[1] = slot.stamps[_STAMP]
             if origins is not None:
                 self._copy_out(origins, slot.origins, slot.origin_bytes)
-            return True
+            return count
         scratch = self._scratches.get(get_ident())
         if scratch is None:  # this thread's first read
             scratch = self._scratches.setdefault(get_ident(), _scratch(self.port))
@@ -247,7 +257,7 @@ class LatestSlot:
             tries -= 1
             seq = words[_SEQ]
             if seq == 0:
-                return False
+                return 0
             if seq & 1:
                 continue
             count = words[_COUNT]
@@ -261,11 +271,11 @@ class LatestSlot:
                 meta[1] = stamp
                 if origins is not None:
                     self._copy_out(origins, scratch_origins, scratch_origin_bytes)
-                return True
-        return False
+                return count
+        return 0
 
     def _copy_out(self, out: np.ndarray, source: np.ndarray, source_bytes: memoryview) -> None:
-        view = self._views.of(out, source)
+        view = self._read.of(out, source)
         if view is None:
             np.copyto(out, source)
         else:

@@ -220,7 +220,7 @@ class System:
         return runner
 
     def new_transports(self, loaded: Loaded, stream: str, owner: dict[str, str]) -> list:
-        return make_transports(loaded, self.region, stream, owner, allocate=True)
+        return make_transports(loaded, self.region, stream, owner, allocate=True, one_thread=self.virtual)
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:

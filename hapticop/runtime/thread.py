@@ -34,6 +34,10 @@ class ActivityRunner:
         self.name, self.block, self.region, self.log = name, block, region, log
         self.relay = relay
         self.simulator = block.simulator
+        # A simulator's time counts as simulation. On the wall clock that is its thread's CPU time
+        # (other threads preempt it); on the virtual clock, where every loop runs in this thread one
+        # after the other, its step's duration, without two system calls per step.
+        self.simulator_cpu = self.simulator and not block.context.clock.virtual
         self.flushes = block.implements_flush()
         self.took = 0  # this cycle's compute time so far (compute, then flush)
         self.computing = False  # this cycle ran the block's compute (a life-cycle hook is no compute)
@@ -44,14 +48,10 @@ class ActivityRunner:
         self.inputs = [port for port in vars(block.inputs).values()]
         self.lifecycle = Lifecycle(
             region.flags, region.state, region.failed, layout.owner_index[name], layout.flag_index, name,
-            Hooks(block.create, block.configure_resources, block.configure_capabilities, self._compute,
+            Hooks(block.create, block.configure_resources, block.configure_capabilities, block.compute,
                   block.pausing, block.clean),
             start_on_request, log, region.reached,
         )
-
-    def _compute(self) -> object:
-        self.computing = True
-        return self.block.compute()
 
     @property
     def state(self) -> State:
@@ -87,13 +87,12 @@ class ActivityRunner:
         relay = self.relay
         if relay is not None and changed:  # the origins merged last step still stand otherwise
             relay.before_step()
-        cpu = time.thread_time_ns() if self.simulator else 0  # a simulator's CPU counts as simulation
-        self.computing = False
+        cpu = time.thread_time_ns() if self.simulator_cpu else 0
         started = time.perf_counter_ns()
-        self.lifecycle.step()
-        self.took = time.perf_counter_ns() - started
+        self.computing = self.lifecycle.step()
+        took = self.took = time.perf_counter_ns() - started
         if self.simulator:
-            self.region.sim_ns[self.index] += time.thread_time_ns() - cpu
+            self.region.sim_ns[self.index] += time.thread_time_ns() - cpu if self.simulator_cpu else took
         if not self.flushes:
             self._finish()
 
