@@ -291,6 +291,10 @@ class BrakingFieldParams:
     """Robust minimum: the k-th smallest clearance (docs/hallway-experiment.md's "3rd smallest")."""
     risk_rate_per_s: Annotated[float, Gt(0)] = 3.0
     """|dρ/dt| limit on the risk state (ρ_z, e_L, e_R): bounds the force step at scan arrival."""
+    side_risk_rate_per_s: Annotated[float, Gt(0)] | None = None
+    """|de/dt| limit on the lateral risks e_L, e_R alone; None: ``risk_rate_per_s``. The lateral loop has its
+    own pace: a cue slowed to calm the stop comes too late to turn the robot off a wall
+    (docs/hallway-experiment.md §9.1)."""
     period_s: Annotated[float, Gt(0)] = 0.001
     """Time between ``render`` (or ``compute``) calls, for the rate limiter."""
     kind: Literal["braking_field"] = "braking_field"
@@ -394,11 +398,12 @@ class BrakingField(ForceModel):
         band = start - p.bumper_m
         # The risk state, each part moved towards its target by at most the rate limit's step.
         step = p.risk_rate_per_s * p.period_s
+        side_step = step if p.side_risk_rate_per_s is None else p.side_risk_rate_per_s * p.period_s
         risk = self.risk
         r_z, r_left, r_right = risk.tolist()
         r_z += _step_towards(r_z, rho_z, step)
-        r_left += _step_towards(r_left, _sat01((start - c_left) / band), step)
-        r_right += _step_towards(r_right, _sat01((start - c_right) / band), step)
+        r_left += _step_towards(r_left, _sat01((start - c_left) / band), side_step)
+        r_right += _step_towards(r_right, _sat01((start - c_right) / band), side_step)
         risk[0], risk[1], risk[2] = r_z, r_left, r_right
         z = float(handle_pos[HANDLE_Z])
         fz = BACKWARD_FORCE_Z * p.fz_max_n * r_z * _sat01(-z / p.z_ramp_m) if z < 0.0 else 0.0
