@@ -173,7 +173,7 @@ def test_the_block_ignores_a_lone_phantom_return_but_not_an_object_a_few_beams_w
         harness.feed("command", [0.5, 0.0, 0.0])
         harness.step()
         assert (harness.outputs.velocity_setpoint.value[0] == pytest.approx(0.0, abs=1e-9)) == stopped, width
-    harness.retune({"scan_filter": {"kind": "moving_average", "window": 1}})  # every beam counts
+    harness.retune({"scan_filter": {"window": 1}})  # every beam counts
     ranges = wall(x_m=5.0)
     ranges[ahead] = near
     harness.feed("ranges", ranges)

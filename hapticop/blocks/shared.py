@@ -16,15 +16,15 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.safety_filter import SafetyFilter, SafetyFilterParams
-from hapticop.haptics.scan_filter import MovingMedianParams, ScanFilterParams, make_scan_filter
+from hapticop.haptics.scan_filter import MovingMedianParams, make_scan_filter
 
 
 class SharedControlParams(Params):
     filter: SafetyFilterParams = Field(default_factory=SafetyFilterParams)
-    scan_filter: ScanFilterParams = Field(
-        default_factory=MovingMedianParams, discriminator="kind",
-        description="the per-beam filter of each scan before the barrier: 'kind' moving_median (a return counts "
-        "only where most of its neighbours agree) or moving_average")
+    scan_filter: MovingMedianParams = Field(
+        default_factory=MovingMedianParams,
+        description="the running median each scan passes before the barrier: a return counts only where most of "
+        "its neighbours agree (window 1: every beam counts)")
     scan_points: int = Field(811, ge=2, le=10_000, description="points per scan (the ranges and angles ports)")
 
 
