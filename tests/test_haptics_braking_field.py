@@ -167,6 +167,30 @@ def test_the_risk_state_is_rate_limited():
     assert m.risk[0] == 0.0
 
 
+
+def test_the_lateral_risk_may_keep_its_own_faster_rate():
+    """side_risk_rate_per_s: the lateral cue rises at its own limit while the stop cue keeps the common one."""
+    wall_and_end = side_wall(0.45) + end_wall(0.05, half_width=0.25)  # a wall 0.15 m to the left, the stop line passed
+    scan, twist, out = robot_scan(ANGLES, wall_and_end), np.array([0.5, 0.0, 0.0]), np.zeros(3)
+    common, own = model(BrakingFieldParams()), model(BrakingFieldParams(side_risk_rate_per_s=6.0))
+    for m in (common, own):
+        m.compute(PUSH, scan, twist, out)
+        for _ in range(99):
+            m.render(PUSH, twist, out)
+    assert common.risk[0] == pytest.approx(0.3) and common.risk[1] == pytest.approx(0.3)
+    assert own.risk[0] == pytest.approx(0.3) and own.risk[1] == pytest.approx(0.6)  # 6 /s for 100 ms
+    assert out[0] == pytest.approx(5.0 * 0.6)  # full speed: F_x = F_x,max·e_L
+
+
+def test_the_lateral_cue_fades_out_before_the_handle_reaches_the_workspace_edge():
+    """A soft hand pushed by the cue must not be driven to the Falcon's 5 cm edge (a divergence, §5)."""
+    m = model()
+    scan, twist, out = robot_scan(ANGLES, side_wall(0.45)), np.array([0.5, 0.0, 0.0]), np.zeros(3)
+    full = m.compute(np.zeros(3), scan, twist, out)[0]
+    assert full > 1.0  # the wall 0.15 m to the left pushes the hand to the right (+x)
+    for x, share in ((0.03, 1.0), (0.04, 1 / 3), (0.045, 0.0), (0.05, 0.0), (-0.05, 1.0)):  # -x: against the cue
+        assert m.compute(np.array([x, 0.0, 0.0]), scan, twist, out)[0] == pytest.approx(full * share), x
+
 def test_compute_and_render_allocate_nothing():
     m = model(BrakingFieldParams())
     ranges = robot_scan(ANGLES, hallway(2.0, 6.0), (0.5, 0.3, math.radians(8))).astype(np.float32)

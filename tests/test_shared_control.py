@@ -157,6 +157,30 @@ def test_the_block_publishes_the_executed_twist_and_the_correction():
     assert harness.outputs.velocity_setpoint.value[0] == pytest.approx(2.0 * 0.1, rel=1e-6)
 
 
+def test_the_block_ignores_a_lone_phantom_return_but_not_an_object_a_few_beams_wide():
+    """The scan's 5-beam median first: one or two beams returning close where their neighbours see far (a
+    phantom, H5) must not stop the robot, which a barrier per point would; three agreeing beams are an object."""
+    harness = BlockHarness("shared_control", {"filter": {"margin_m": 0.3}})
+    harness.feed("angles", ANGLES.astype(np.float32))
+    harness.configure()
+    ahead = int(np.argmin(np.abs(ANGLES)))
+    near = BODY.footprint.length_m / 2 - BODY.lidar.x_m + 0.1  # 0.1 m in front of the body: inside the margin
+    for width, stopped in ((1, False), (2, False), (3, True)):
+        ranges = wall(x_m=5.0)
+        ranges[ahead:ahead + width] = near
+        harness.feed("ranges", ranges)
+        harness.feed("command", [0.5, 0.0, 0.0])
+        harness.step()
+        assert (harness.outputs.velocity_setpoint.value[0] == pytest.approx(0.0, abs=1e-9)) == stopped, width
+    harness.retune({"scan_filter": {"window": 1}})  # every beam counts
+    ranges = wall(x_m=5.0)
+    ranges[ahead] = near
+    harness.feed("ranges", ranges)
+    harness.feed("command", [0.5, 0.0, 0.0])
+    harness.step()
+    assert harness.outputs.velocity_setpoint.value[0] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_the_correction_is_felt_where_the_robot_was_made_to_go_smoothly_and_bounded():
     params = CorrectionFeelParams(forward_n_per_mps=3.0, lateral_n_per_mps=10.0, force_limit_n=2.0, smoothing_s=0.1)
     feel = CorrectionFeel(params, 0.001)

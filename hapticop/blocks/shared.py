@@ -3,7 +3,9 @@
 The filter (``hapticop.haptics.safety_filter``, S2) keeps the robot off whatever its own LIDAR sees;
 the block also publishes what it took away (executed minus commanded), so the haptic side can
 render the correction as a force and the operator feels the robot disagree. Without a fresh scan
-or command nothing is known to be safe: the robot is commanded to stand still.
+or command nothing is known to be safe: the robot is commanded to stand still. Each scan passes a
+per-beam filter first (a 5-beam median by default): the barrier has one constraint per point, so a
+single phantom return would otherwise stop the robot (docs/hallway-experiment.md §10.2).
 """
 
 from __future__ import annotations
@@ -14,16 +16,21 @@ from pydantic import Field
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.safety_filter import SafetyFilter, SafetyFilterParams
+from hapticop.haptics.scan_filter import MovingMedianParams, make_scan_filter
 
 
 class SharedControlParams(Params):
     filter: SafetyFilterParams = Field(default_factory=SafetyFilterParams)
+    scan_filter: MovingMedianParams = Field(
+        default_factory=MovingMedianParams,
+        description="the running median each scan passes before the barrier: a return counts only where most of "
+        "its neighbours agree (window 1: every beam counts)")
     scan_points: int = Field(811, ge=2, le=10_000, description="points per scan (the ranges and angles ports)")
 
 
 class SharedControl(Block):
     Params = SharedControlParams
-    running_params = frozenset({"filter"})  # margins and gains retune between two cycles
+    running_params = frozenset({"filter", "scan_filter"})  # both retune between two cycles
 
     @classmethod
     def interface(cls, params: SharedControlParams) -> Interface:
@@ -45,6 +52,8 @@ class SharedControl(Block):
         self._build()
 
     def retune(self, changed: frozenset[str]) -> None:
+        if "scan_filter" in changed:
+            self._build()
         self.filter.params = self.params.filter
 
     def compute(self) -> None:
@@ -53,7 +62,7 @@ class SharedControl(Block):
         if command.valid and ranges.valid:
             if ranges.meta[0] != self.scan_seq:
                 self.scan_seq = int(ranges.meta[0])
-                self.filter.update_scan(ranges.value)
+                self.filter.update_scan(self.scan_filter.apply(ranges.value))
             self.filter.filter(command.value, out.value, ranges.age_ns() / 1e9)
             np.subtract(out.value, command.value, out=correction.value)
         else:  # nothing known to be safe
@@ -76,6 +85,8 @@ class SharedControl(Block):
     def _build(self) -> None:
         angles = self.inputs.angles
         p = self.params
-        self.filter = SafetyFilter(angles.value if angles.valid
-                                   else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points), p.filter)
+        self.scan_filter = make_scan_filter(p.scan_filter)
+        filtered_angles = self.scan_filter.configure(angles.value if angles.valid
+                                                     else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))
+        self.filter = SafetyFilter(filtered_angles, p.filter)
         self.scan_seq = 0

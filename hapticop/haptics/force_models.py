@@ -284,6 +284,12 @@ class BrakingFieldParams:
     """T_p: lateral prediction horizon (the phase lead §7.5 requires)."""
     fx_max_n: Annotated[float, Ge(0)] = 5.0
     """Lateral cue at full risk on one side."""
+    lateral_edge_m: Annotated[float, Gt(0)] = 0.045
+    """The lateral cue fades out as the handle, pushed its way, nears this displacement: the Falcon's
+    workspace ends at 5 cm, and a soft hand pushed there gains no more steering (our choice)."""
+    lateral_fade_m: Annotated[float, Gt(0)] = 0.015
+    """The fade's width: full cue up to ``lateral_edge_m − lateral_fade_m`` of push (7 N over 1.5 cm is
+    470 N/m, inside the 600 N/m the longitudinal ramp already asks of §7.2's damping)."""
     lateral_speed_ref_mps: Annotated[float, Gt(0)] = 0.25
     """v_ref: lateral cue scales with sat(|v|/v_ref), none at standstill. Not given in docs/hallway-experiment.md;
     our choice is just below the cautious operator's 0.28 m/s cruise."""
@@ -291,6 +297,10 @@ class BrakingFieldParams:
     """Robust minimum: the k-th smallest clearance (docs/hallway-experiment.md's "3rd smallest")."""
     risk_rate_per_s: Annotated[float, Gt(0)] = 3.0
     """|dρ/dt| limit on the risk state (ρ_z, e_L, e_R): bounds the force step at scan arrival."""
+    side_risk_rate_per_s: Annotated[float, Gt(0)] | None = None
+    """|de/dt| limit on the lateral risks e_L, e_R alone; None: ``risk_rate_per_s``. The lateral loop has its
+    own pace: a cue slowed to calm the stop comes too late to turn the robot off a wall
+    (docs/hallway-experiment.md §9.1)."""
     period_s: Annotated[float, Gt(0)] = 0.001
     """Time between ``render`` (or ``compute``) calls, for the rate limiter."""
     kind: Literal["braking_field"] = "braking_field"
@@ -321,7 +331,8 @@ class BrakingField(ForceModel):
 
         c_L, c_R = kth_min footprint clearance per side after translating by v·(age + T_p)
         e_S      = sat((dist1 + m_l − c_S)/(dist1 + m_l − dist3))
-        F_x      = F_x,max·(e_L − e_R)·sat(|v|/v_ref)                         towards the freer side
+        F_x      = F_x,max·(e_L − e_R)·sat(|v|/v_ref)·sat((x_e − x_push)/x_f)  towards the freer side
+                   fading out as the handle, pushed x_push along the cue, nears the workspace edge
 
     Translating by v·T_p equals docs/hallway-experiment.md's c + T_p·ċ for a straight wall; ċ comes from the
     measured robot velocity, not from ω, so no handle-proportional term crosses the network
@@ -394,17 +405,20 @@ class BrakingField(ForceModel):
         band = start - p.bumper_m
         # The risk state, each part moved towards its target by at most the rate limit's step.
         step = p.risk_rate_per_s * p.period_s
+        side_step = step if p.side_risk_rate_per_s is None else p.side_risk_rate_per_s * p.period_s
         risk = self.risk
         r_z, r_left, r_right = risk.tolist()
         r_z += _step_towards(r_z, rho_z, step)
-        r_left += _step_towards(r_left, _sat01((start - c_left) / band), step)
-        r_right += _step_towards(r_right, _sat01((start - c_right) / band), step)
+        r_left += _step_towards(r_left, _sat01((start - c_left) / band), side_step)
+        r_right += _step_towards(r_right, _sat01((start - c_right) / band), side_step)
         risk[0], risk[1], risk[2] = r_z, r_left, r_right
         z = float(handle_pos[HANDLE_Z])
         fz = BACKWARD_FORCE_Z * p.fz_max_n * r_z * _sat01(-z / p.z_ramp_m) if z < 0.0 else 0.0
         speed_scale = _sat01(abs(vx) / p.lateral_speed_ref_mps)
         # Push towards the side with less risk: the right (+x) when the left wall is nearer.
         fx = RIGHTWARD_FORCE_X * p.fx_max_n * (r_left - r_right) * speed_scale
+        pushed = float(handle_pos[HANDLE_X]) if fx > 0.0 else -float(handle_pos[HANDLE_X])  # along the cue
+        fx *= _sat01((p.lateral_edge_m - pushed) / p.lateral_fade_m)
         out_force[HANDLE_X] = fx
         out_force[HANDLE_Y] = 0.0
         out_force[HANDLE_Z] = fz
