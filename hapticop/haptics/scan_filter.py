@@ -40,6 +40,7 @@ class MovingAverageParams:
     min_valid: Annotated[int, Ge(1)] = 1
     """A window with fewer valid beams is NaN (no obstacle); at most ``window``."""
     kind: Literal["moving_average"] = "moving_average"
+    """Names this filter where several may be chosen."""
 
     def __post_init__(self) -> None:
         if self.min_valid > self.window:
@@ -53,6 +54,7 @@ class MovingMedianParams:
     window: Annotated[int, Ge(1), Predicate(odd)] = 5
     """Beams per window, odd; the window // 2 beams at each end pass through."""
     kind: Literal["moving_median"] = "moving_median"
+    """Names this filter where several may be chosen."""
 
 
 ScanFilterParams = MovingAverageParams | MovingMedianParams
