@@ -2,7 +2,7 @@
 1 kHz loops' wake-up latency and misses with a bridge running beside them and without.
 
     sudo python bench/zenoh_link.py transport [--runs 3] [--count 3000]
-    sudo python bench/zenoh_link.py loops [--runs 3] [--seconds 10]
+    sudo python bench/zenoh_link.py loops [--runs 3] [--seconds 10] [--pin]
     python bench/zenoh_link.py linkloss [--runs 3] [--seconds 10]
 
 `transport` makes two namespaces joined by a veth and echoes 64-byte messages paced at 1 kHz, first over
@@ -166,7 +166,7 @@ LOOP = """\
     {hosts}
     threads:
       main: {{period: 10ms, deploy: main, {host_a} schedules: {{0: [mediator]}}}}
-      loop: {{period: 1ms, priority: 38, {host_a} schedules: {{0: [counter]}}}}
+      loop: {{period: 1ms, priority: 38, {host_a} {loop_cpus} schedules: {{0: [counter]}}}}
       {b_main}
       reader: {{period: 1ms, priority: 37, deploy: process, {host_b} schedules: {{0: [echo]}}}}
     activities:
@@ -181,16 +181,20 @@ LOOP = """\
     """
 
 
-def loop_runs(runs: int, seconds: int) -> dict:
+def loop_runs(runs: int, seconds: int, pin: bool = False) -> dict:
+    """With `pin`, the loop runs on the last core and the bridges on the first, in both cases."""
     results = {"with_bridge": [], "without": []}
+    last = (os.cpu_count() or 1) - 1
+    bridge_cpus = ", bridge_cpus: [0]" if pin else ""
     with tempfile.TemporaryDirectory() as tmp:
         for run in range(runs):
             for kind in results:
                 bridged = kind == "with_bridge"
                 text = textwrap.dedent(LOOP).format(
                     tag=f"{os.getpid()}{run}{int(bridged)}",
-                    hosts="hosts: {a: {endpoints: [tcp/127.0.0.1:17481]}, b: {endpoints: [tcp/127.0.0.1:17482]}}"
-                    if bridged else "",
+                    hosts=f"hosts: {{a: {{endpoints: [tcp/127.0.0.1:17481]{bridge_cpus}}}, "
+                    f"b: {{endpoints: [tcp/127.0.0.1:17482]{bridge_cpus}}}}}" if bridged else "",
+                    loop_cpus=f"cpus: [{last}]," if pin else "",
                     host_a="host: a," if bridged else "", host_b="host: b," if bridged else "",
                     b_main="b_main: {period: 10ms, deploy: main, host: b, schedules: {0: [mediator]}}"
                     if bridged else "",
@@ -264,6 +268,7 @@ def main() -> None:
                                          "ping-udp"])
     parser.add_argument("args", nargs="*")
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--pin", action="store_true", help="loops: the loop on the last core, the bridges on the first")
     parser.add_argument("--count", type=int, default=3000, help="round trips per transport run")
     parser.add_argument("--seconds", type=int, default=10,
                         help="length of each loops run; with linkloss, how long the operator drives before its death")
@@ -286,7 +291,7 @@ def main() -> None:
         elif options.what == "linkloss":
             saved["linkloss"] = linkloss_runs(options.runs, options.seconds)
         else:
-            saved["loops"] = loop_runs(options.runs, options.seconds)
+            saved["loops_pinned" if options.pin else "loops"] = loop_runs(options.runs, options.seconds, options.pin)
         saved["machine"] = {"cpus": os.cpu_count(), "kernel": os.uname().release, "date": time.strftime("%Y-%m-%d")}
         out.write_text(json.dumps(saved, indent=1))
         print(f"wrote {out}")

@@ -394,6 +394,9 @@ class Host(Strict):
     emulate: LinkParams | None = Field(
         None, description="make what this host receives worse on purpose (delay, jitter, loss: a seeded emulated "
         "link in its bridge), to test or measure a good network as a bad one")
+    bridge_cpus: list[Annotated[int, Field(ge=0, le=4095)]] | None = Field(
+        None, min_length=1, description="the cores this host's bridge process (and Zenoh's threads in it) may run "
+        "on: keep the network off the real-time loops' cores")
     on_link_lost: list[PlaceName] = Field(
         default_factory=list, description="places of the other hosts' mediators this host holds while the link is "
         "lost, as if they had a token (a robot out of reach is treated as a held one: 'WHEEL_FAULT'); they follow "

@@ -142,6 +142,9 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
     out.setdefault("threads", {})[BRIDGE_THREAD] = {
         "period": BRIDGE_PERIOD, "deploy": "process", "schedules": {0: [BRIDGE]},
         "doc": "normal scheduling: the network never reaches a real-time loop"}
+    cpus = composition.hosts[host].bridge_cpus
+    if cpus is not None:  # Zenoh's threads start in the bridge's process and keep its cores
+        out["threads"][BRIDGE_THREAD]["cpus"] = list(cpus)
     for latency in list(out.get("latencies", {}) or {}):
         spec = composition.latencies[latency]
         if not (is_local(spec.source) and is_local(spec.sink)):
