@@ -212,8 +212,10 @@ def records(path: Path, of_setup: str) -> list[dict]:
     return [r for r in map(json.loads, filter(str.strip, path.read_text().splitlines())) if r.get("setup") == of_setup]
 
 
-def summarise(path: Path) -> str:
-    runs = records(path, setup())
+def summarise(path: Path, goal_only: bool = False) -> str:
+    """A row per cell; `goal_only`: the goal cells alone (governor and tank on, 5 % loss), the README's table."""
+    runs = [r for r in records(path, setup())
+            if not goal_only or is_goal((r["rtt_ms"], r["loss"], r["tank"], r["governor"]))]
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for run in runs:
         groups[(not run["governor"], not run["tank"], -run["loss"], run["rtt_ms"])].append(run)
@@ -252,6 +254,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--summary", action="store_true", help="only summarise what --out holds")
+    parser.add_argument("--readme", action="store_true", help="with --summary: the goal cells only")
     parser.add_argument("--limit", type=int, default=None, help="run at most this many of the pending runs")
     args = parser.parse_args()
     if not args.summary:
@@ -271,7 +274,7 @@ def main() -> None:
                 out.flush()
                 print(record["rtt_ms"], record["loss"], record["tank"], record["governor"], record["operator"],
                       record["ended_by"], record["collisions"], record["e_stop_m"], record["wall_s"], flush=True)
-    print(summarise(args.out))
+    print(summarise(args.out, goal_only=args.readme))
 
 
 if __name__ == "__main__":

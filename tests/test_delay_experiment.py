@@ -92,3 +92,20 @@ def test_a_sweep_resumes_and_summarises_only_the_runs_of_its_setup(bench, tmp_pa
     assert row[-3] == "0.000"
     row = next(line for line in table.splitlines() if "| 400 |" in line).split(" | ")
     assert row[4] == "1"  # the other setup's run is not counted
+
+
+def test_the_readme_table_holds_the_goal_cells_only(bench, tmp_path):
+    """Governor and tank on, 5 % loss: the cells the goals judge; the others stay in the full table."""
+    base = {"operator": 0, "collisions": 0, "crash": False, "e_stop_m": 0.02, "t_norm": 1.05,
+            "oscillation_index_mps": 0.08, "sustained_oscillation": False, "tank_level_min_j": 0.2,
+            "tank_empty": False, "round_trip_max_s": 0.2, "setup": bench.setup()}
+    runs = [{**base, "rtt_ms": 200, "loss": 0.05, "tank": True, "governor": True},
+            {**base, "rtt_ms": 200, "loss": 0.0, "tank": True, "governor": True},
+            {**base, "rtt_ms": 200, "loss": 0.05, "tank": False, "governor": True, "tank_level_min_j": None,
+             "tank_empty": None},
+            {**base, "rtt_ms": 200, "loss": 0.05, "tank": True, "governor": False}]
+    path = tmp_path / "runs.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in runs))
+    rows = [line for line in bench.summarise(path, goal_only=True).splitlines() if line.startswith("| o")]
+    assert rows == [next(line for line in bench.summarise(path).splitlines() if line.startswith("| on | on | 5 %"))]
+    assert len([line for line in bench.summarise(path).splitlines() if line.startswith("| o")]) == 4
