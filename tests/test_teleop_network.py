@@ -123,15 +123,17 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     assert bridge.hold_when_lost == ["WHEEL_FAULT"] and "WHEEL_FAULT" in bridge.import_flags
 
 
-def test_a_hosts_bridge_cpus_pin_its_bridge_process(tmp_path):
+def test_a_hosts_bridge_cpus_and_period_shape_its_bridge_thread(tmp_path):
     """`bridge_cpus` keeps the network (the bridge and Zenoh's threads, started in its process) off the cores
-    the real-time loops use; without it the bridge may run anywhere."""
+    the real-time loops use; without it the bridge may run anywhere. `bridge_period` sets its cycle."""
     pinned = tmp_path / "pinned.yaml"
-    pinned.write_text(f"extends: {ROOT / 'systems' / 'teleop.yaml'}\nhosts:\n  robot: {{bridge_cpus: [0]}}\n")
+    pinned.write_text(f"extends: {ROOT / 'systems' / 'teleop.yaml'}\n"
+                      "hosts:\n  robot: {bridge_cpus: [0], bridge_period: 500us}\n")
     validated = validate_path(pinned)
     assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
-    assert validated.hosts["robot"].composition.threads["bridge"].cpus == [0]
-    assert validated.hosts["operator"].composition.threads["bridge"].cpus is None
+    robot, operator = (validated.hosts[h].composition.threads["bridge"] for h in ("robot", "operator"))
+    assert robot.cpus == [0] and robot.period == 500_000
+    assert operator.cpus is None and operator.period == 1_000_000  # the defaults: anywhere, every millisecond
 
 
 def test_teleop_runs_the_speed_governor_on_the_robots_host_with_its_own_scan():

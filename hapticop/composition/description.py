@@ -394,6 +394,10 @@ class Host(Strict):
     emulate: LinkParams | None = Field(
         None, description="make what this host receives worse on purpose (delay, jitter, loss: a seeded emulated "
         "link in its bridge), to test or measure a good network as a bad one")
+    bridge_period: Duration = Field(
+        "1ms", validate_default=True, description="how often this host's bridge moves samples between the shared "
+        "region and the network: a crossing waits up to a period on either side, so a shorter one takes that much "
+        "off a sample's age at the price of the bridge's CPU ('500us' halves both)")
     bridge_cpus: list[Annotated[int, Field(ge=0, le=4095)]] | None = Field(
         None, min_length=1, description="the cores this host's bridge process (and Zenoh's threads in it) may run "
         "on: keep the network off the real-time loops' cores")

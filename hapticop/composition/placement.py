@@ -18,7 +18,6 @@ from hapticop.composition.description import Composition
 
 BRIDGE = "bridge"
 BRIDGE_THREAD = "bridge"
-BRIDGE_PERIOD = "1ms"
 
 
 @dataclass
@@ -140,7 +139,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                    **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
     }
     out.setdefault("threads", {})[BRIDGE_THREAD] = {
-        "period": BRIDGE_PERIOD, "deploy": "process", "schedules": {0: [BRIDGE]},
+        "period": f"{composition.hosts[host].bridge_period}ns", "deploy": "process", "schedules": {0: [BRIDGE]},
         "doc": "normal scheduling: the network never reaches a real-time loop"}
     cpus = composition.hosts[host].bridge_cpus
     if cpus is not None:  # Zenoh's threads start in the bridge's process and keep its cores
