@@ -91,9 +91,12 @@ class HallwayWorld(Block):
         self.executed = np.zeros(2)
         self.nothing = np.zeros(3)
         self.variant = "unknown"  # the operator's, once it has said (clean)
-        self.tank_lowest_j = math.inf  # the energy tank's lowest level while driving (inf: no tank)
-        self.link_worst = {"round_trip_max_s": -math.inf, "link_jitter_max_s": -math.inf,
-                           "link_loss_max": -math.inf}  # -inf: no link measured
+        # What only some compositions measure, its extreme while driving kept for metrics.json (infinite: never
+        # measured): (key, input, whether the lowest is kept, else the highest)
+        inputs = self.inputs
+        self.watched = (("tank_level_min_j", inputs.tank_level, True), ("round_trip_max_s", inputs.round_trip, False),
+                        ("link_jitter_max_s", inputs.link_jitter, False), ("link_loss_max", inputs.link_loss, False))
+        self.extremes = {key: math.inf if lowest else -math.inf for key, _, lowest in self.watched}
 
     def compute(self) -> None:
         inputs = self.inputs
@@ -117,14 +120,12 @@ class HallwayWorld(Block):
         if executed.seq:
             self.executed[0], self.executed[1] = executed.value[0], executed.value[2]
         force = inputs.environment_force
-        tank = inputs.tank_level
-        if tank.seq and float(tank.value) < self.tank_lowest_j:
-            self.tank_lowest_j = float(tank.value)
-        worst = self.link_worst
-        for key, port in (("round_trip_max_s", inputs.round_trip), ("link_jitter_max_s", inputs.link_jitter),
-                          ("link_loss_max", inputs.link_loss)):
-            if port.seq and float(port.value) > worst[key]:
-                worst[key] = float(port.value)
+        extremes = self.extremes
+        for key, port, lowest in self.watched:
+            if port.seq:
+                value = float(port.value)
+                if value < extremes[key] if lowest else value > extremes[key]:
+                    extremes[key] = value
         self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
                              cmd_exec=self.executed if executed.seq else None,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
@@ -159,8 +160,7 @@ class HallwayWorld(Block):
             self.log.info("not a hallway run: trajectory kept, nothing judged")
             return
         metrics = compute_metrics(self.recorder, self.geometry, v_cruise_mps=_cruise_speed(operator))
-        extra = {"tank_level_min_j": self.tank_lowest_j} if self.tank_lowest_j < math.inf else {}
-        extra.update({key: value for key, value in self.link_worst.items() if value > -math.inf})
+        extra = {key: value for key, value in self.extremes.items() if math.isfinite(value)}
         (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra or None))
         self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
                         metrics.ended_by)
