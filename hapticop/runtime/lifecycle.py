@@ -118,12 +118,7 @@ class Lifecycle:
             flags = self.flags
             a, b, c, d = self._running_requests
             if not (flags[a] or flags[b] or flags[c] or flags[d]):
-                try:
-                    done = self.hooks.compute()
-                except Exception as error:  # noqa: BLE001 - as in `_run`
-                    self.fail_running(error)
-                    return True
-                if done is True:
+                if self._run(self.hooks.compute) is True:
                     self._raise("running_complete")
                 return True
         state = self.state
