@@ -25,7 +25,7 @@ from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params, Port
 from hapticop.network import wire
 from hapticop.network.arrivals import Arrivals
-from hapticop.network.clock import OffsetEstimator
+from hapticop.network.clock import OffsetEstimator, round_trip_rows, table_row
 from hapticop.network.link import EmulatedLink, LinkParams, MessageLink
 
 WINDOW = 64  # pings the clock estimate looks back over (3.2 s at the default 50 ms)
@@ -333,16 +333,10 @@ def write_link_table(run_dir, bridge: ZenohBridge) -> None:
     rtts = bridge.rtts[: min(bridge.answered, len(bridge.rtts))] / 1e6
     clock = next(iter(bridge.clocks.values()))
 
-    def row(metric: str, value, unit: str = "") -> dict:
-        return {"metric": metric, "value": value, "unit": unit, "target": "", "ok": None}
-
-    rows = [row("round trip p50", round(float(np.percentile(rtts, 50)), 3), "ms"),
-            row("round trip p99", round(float(np.percentile(rtts, 99)), 3), "ms"),
-            row("round trip max", round(float(rtts.max()), 3), "ms"),
-            row("jitter (smoothed)", round(clock.jitter_ns / 1e6, 3), "ms"),
-            row("pings unanswered", round(1 - bridge.answered / max(1, bridge.pinged), 4)),
-            row("clock offset (last estimate)", round(bridge.offset_seen[0] / 1e6, 3), "ms"),
-            row("offset error bound", round(bridge.offset_seen[1] / 1e6, 3), "ms")]
+    row = table_row
+    rows = round_trip_rows(rtts, clock.jitter_ns, bridge.answered, bridge.pinged) + [
+        row("clock offset (last estimate)", round(bridge.offset_seen[0] / 1e6, 3), "ms"),
+        row("offset error bound", round(bridge.offset_seen[1] / 1e6, 3), "ms")]
     for stream, count in bridge.sequence.items():
         rows.append(row(f"{stream}: sent", count))
     for stream, arrivals in bridge.arrivals.items():

@@ -17,7 +17,7 @@ from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params, Port
-from hapticop.network.clock import OffsetEstimator
+from hapticop.network.clock import OffsetEstimator, round_trip_rows
 
 WINDOW = 64  # pings the figures look back over, as the bridge's
 
@@ -84,14 +84,6 @@ class RoundTrip(Block):
     def _write_table(self) -> None:
         """The link's figures over the run, as the bridge leaves them (printed with the run's other tables)."""
         rtts_ms = self.rtts[: min(self.answered, len(self.rtts))] * 1e3
-
-        def row(metric: str, value: float, unit: str = "") -> dict:
-            return {"metric": metric, "value": round(float(value), 4), "unit": unit, "target": "", "ok": None}
-
-        rows = [row("round trip p50", np.percentile(rtts_ms, 50), "ms"),
-                row("round trip p99", np.percentile(rtts_ms, 99), "ms"),
-                row("round trip max", rtts_ms.max(), "ms"),
-                row("jitter (smoothed)", self.estimator.jitter_ns / 1e6, "ms"),
-                row("pings unanswered", 1 - self.answered / max(1, self.pinged))]
+        rows = round_trip_rows(rtts_ms, self.estimator.jitter_ns, self.answered, self.pinged)
         table = {"title": f"link measured by '{self.name}' (pings through the emulated link and back)", "rows": rows}
         (self.run_dir / f"results-link-{self.name}.json").write_text(json.dumps(table, indent=1))

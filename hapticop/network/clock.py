@@ -95,3 +95,18 @@ class OffsetEstimator:
     def to_local(self, remote_ns: int) -> int:
         """A time of the remote clock on this host's clock."""
         return int(remote_ns - self.offset_ns)
+
+
+def table_row(metric: str, value, unit: str = "") -> dict:
+    """One row of a link's end-of-run table (a figure, no target)."""
+    return {"metric": metric, "value": value, "unit": unit, "target": "", "ok": None}
+
+
+def round_trip_rows(rtts_ms: np.ndarray, jitter_ns: float, answered: int, pinged: int) -> list[dict]:
+    """The rows every link table starts with: the round trips measured over the run, the smoothed jitter
+    and the share of pings never answered."""
+    return [table_row("round trip p50", round(float(np.percentile(rtts_ms, 50)), 3), "ms"),
+            table_row("round trip p99", round(float(np.percentile(rtts_ms, 99)), 3), "ms"),
+            table_row("round trip max", round(float(rtts_ms.max()), 3), "ms"),
+            table_row("jitter (smoothed)", round(jitter_ns / 1e6, 3), "ms"),
+            table_row("pings unanswered", round(1 - answered / max(1, pinged), 4))]
