@@ -90,10 +90,11 @@ def test_median_rejects_single_beam_outliers_and_keeps_the_scan_length():
     m.configure(RAW)
     r = np.full(811, 4.0)
     r[300] = 0.4  # spurious return
-    r[0] = 0.5  # end beams pass through
+    r[1] = 0.07  # a phantom at the end of the scan: no full window votes for it
     out = m.apply(r)
     assert out.shape == (811,)
-    assert out[300] == 4.0 and out[0] == 0.5
+    assert out[300] == 4.0
+    assert np.isnan(out[:2]).all() and np.isnan(out[-2:]).all() and out[2] == 4.0 and out[-3] == 4.0
     r[500:503] = 1.0  # three beams: a real (thin) object survives
     assert m.apply(r)[501] == 1.0
 

@@ -52,7 +52,7 @@ class MovingMedianParams:
     """A running median that keeps the scan length and rejects single-beam outliers (docs/hallway-experiment.md §9)."""
 
     window: Annotated[int, Ge(1), Predicate(odd)] = 5
-    """Beams per window, odd; the window // 2 beams at each end pass through."""
+    """Beams per window, odd; the window // 2 beams at each end have no full window and read as invalid."""
     kind: Literal["moving_median"] = "moving_median"
     """Names this filter where several may be chosen."""
 
@@ -134,8 +134,10 @@ class MovingAverage:
 class MovingMedian:
     """5-beam (odd ``window``) running median that keeps the scan length: rejects single-beam outliers.
 
-    docs/hallway-experiment.md §9 "common preprocessing". The ``window // 2`` beams at each end are
-    passed through. NaN sorts last, so a window is NaN when most of it is invalid; with a
+    docs/hallway-experiment.md §9 "common preprocessing". The ``window // 2`` beams at each end have
+    no full window, so they are NaN (no return): passed through, a phantom there went unvoted and,
+    inside the robot's own footprint, stopped a safety filter dead (§10.2). NaN sorts last, so a
+    window is NaN when most of it is invalid; with a
     minority of NaN the result is an upper median of the valid beams.
     """
 
@@ -166,6 +168,8 @@ class MovingMedian:
             np.copyto(rows[:, j], out[j : j + m])
         rows.partition(h, axis=1)
         np.copyto(out[h : h + m], rows[:, h])
+        out[:h] = np.nan
+        out[h + m :] = np.nan
         return out
 
 
