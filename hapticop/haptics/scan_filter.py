@@ -137,8 +137,8 @@ class MovingMedian:
     docs/hallway-experiment.md §9 "common preprocessing". The ``window // 2`` beams at each end have
     no full window, so they are NaN (no return): passed through, a phantom there went unvoted and,
     inside the robot's own footprint, stopped a safety filter dead (§10.2). NaN sorts last, so a
-    window is NaN when most of it is invalid; with a
-    minority of NaN the result is an upper median of the valid beams.
+    window is NaN when most of it is invalid; with a minority of NaN the result is an upper median
+    of the valid beams.
     """
 
     def __init__(self, window: int = 5) -> None:
