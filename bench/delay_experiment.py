@@ -24,6 +24,7 @@ measured. A rerun resumes: the runs already in `--out` with this setup are skipp
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import tempfile
@@ -85,22 +86,28 @@ def cell_patch(rtt_ms: int, loss: float, tank: bool, governor: bool, seed: int) 
     return {"threads": {"main": {"schedules": {1: schedule}}}, "activities": activities, "streams": streams}
 
 
-def reference_time_s(profile_name: str, hallway: str) -> float:
-    """§5's autonomous reference: the distance to the stop line at the profile's cruise speed, plus braking
-    at the governor's a_b and a reaction time."""
+@functools.cache
+def reference_time_s(profile_name: str, variation: int, hallway: str) -> float:
+    """§5's autonomous reference for this operator, as the world computes it (`metrics.autonomous_reference_s`
+    at the varied profile's cruise speed), so both experiments judge completion time alike."""
     import numpy as np
 
-    from hapticop.haptics.governor import GovernorParams
-    from hapticop.haptics.handle import DrivingParams
     from hapticop.sim.hallway import HallwayGeometry, World
+    from hapticop.sim.metrics import autonomous_reference_s
     from hapticop.sim.operator import BlindOperator
 
     g = HallwayGeometry.named(hallway)
     front0 = float(World.from_geometry(g).clearances(np.array([g.start]), g.footprint, kinds=("end",))[0])
-    driving, a_b, tau_r = DrivingParams(k1_per_s=28.0, dead_zone_m=0.005), GovernorParams().brake_decel_mps2, 0.15
-    profile = BlindOperator.variant(profile_name).profile
-    v = driving.k1_per_s * (profile.z_c_m - driving.dead_zone_m)
-    return (front0 - g.dist2_m) / v + v / (2.0 * a_b) + tau_r
+    return autonomous_reference_s(front0 - g.dist2_m,
+                                  BlindOperator.variant(profile_name, seed=variation).profile.cruise_speed())
+
+
+def judged(record: dict) -> dict:
+    """A record with T_ref and T/T_ref by the world's definition. Runs before 2026-11-25 stored the bench's own
+    T_ref, from the un-varied profile's cruise speed; their measured completion times are judged again here."""
+    t_ref = reference_time_s(record["profile"], record["operator"], record.get("hallway", "H1"))
+    completion = record["completion_time_s"]
+    return {**record, "t_ref_s": t_ref, "t_norm": completion / t_ref if completion is not None else None}
 
 
 def setup() -> str:
@@ -142,7 +149,7 @@ def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallwa
         run_system(validated, RunOptions(clock="virtual", seed=variation, run_dir=Path(run_dir), echo=False))
         wall = time.perf_counter() - started
         metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
-    t_ref = reference_time_s(profile, hallway)
+    t_ref = metrics["t_ref_s"]  # the world's own, by the same definition as `reference_time_s`
     completion = metrics["completion_time_s"]
     return {"rtt_ms": rtt_ms, "loss": loss, "tank": tank, "governor": governor, "operator": i, "profile": profile,
             "hallway": hallway, "wall_s": round(wall, 2), "ended_by": metrics["ended_by"], "crash": metrics["crash"],
@@ -209,7 +216,8 @@ def records(path: Path, of_setup: str) -> list[dict]:
     """The runs `path` holds that were made with this setup."""
     if not path.exists():
         return []
-    return [r for r in map(json.loads, filter(str.strip, path.read_text().splitlines())) if r.get("setup") == of_setup]
+    return [judged(r) for r in map(json.loads, filter(str.strip, path.read_text().splitlines()))
+            if r.get("setup") == of_setup]
 
 
 def summarise(path: Path, goal_only: bool = False) -> str:

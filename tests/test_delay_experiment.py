@@ -77,7 +77,8 @@ def test_a_sweep_resumes_and_summarises_only_the_runs_of_its_setup(bench, tmp_pa
 
     def run(rtt, operator, *, lowest=0.2, empty=False, of=setup):
         return {"rtt_ms": rtt, "loss": 0.05, "tank": True, "governor": True, "operator": operator,
-                "collisions": 0, "crash": False, "e_stop_m": 0.02, "t_norm": 1.05, "oscillation_index_mps": 0.08,
+                "profile": "nominal", "hallway": "H1", "completion_time_s": 12.0, "collisions": 0, "crash": False,
+                "e_stop_m": 0.02, "t_norm": 1.05, "oscillation_index_mps": 0.08,
                 "sustained_oscillation": False, "tank_level_min_j": lowest, "tank_empty": empty,
                 "round_trip_max_s": rtt / 1000 + 0.001, "setup": of}
 
@@ -96,7 +97,8 @@ def test_a_sweep_resumes_and_summarises_only_the_runs_of_its_setup(bench, tmp_pa
 
 def test_the_readme_table_holds_the_goal_cells_only(bench, tmp_path):
     """Governor and tank on, 5 % loss: the cells the goals judge; the others stay in the full table."""
-    base = {"operator": 0, "collisions": 0, "crash": False, "e_stop_m": 0.02, "t_norm": 1.05,
+    base = {"operator": 0, "profile": "cautious", "hallway": "H1", "completion_time_s": 20.0, "collisions": 0,
+            "crash": False, "e_stop_m": 0.02, "t_norm": 1.05,
             "oscillation_index_mps": 0.08, "sustained_oscillation": False, "tank_level_min_j": 0.2,
             "tank_empty": False, "round_trip_max_s": 0.2, "setup": bench.setup()}
     runs = [{**base, "rtt_ms": 200, "loss": 0.05, "tank": True, "governor": True},
@@ -109,3 +111,17 @@ def test_the_readme_table_holds_the_goal_cells_only(bench, tmp_path):
     rows = [line for line in bench.summarise(path, goal_only=True).splitlines() if line.startswith("| o")]
     assert rows == [next(line for line in bench.summarise(path).splitlines() if line.startswith("| on | on | 5 %"))]
     assert len([line for line in bench.summarise(path).splitlines() if line.startswith("| o")]) == 4
+
+
+def test_the_reference_time_is_the_worlds_own(bench):
+    """T_ref as the hallway runs' worlds computed it (their metrics.json, kept in the sweep's records), to the
+    bit: both experiments judge completion time by one definition."""
+    sweep = ROOT / "bench" / "results" / "hallway-sweep.jsonl"
+    runs = [r for r in map(json.loads, sweep.read_text().splitlines()) if r["model"] == "braking_field+governor"]
+    seen = {(r["profile"], r["variation"], r["hallway"]): r["metrics"]["t_ref_s"] for r in runs}
+    assert len(seen) >= 30
+    for (profile, variation, hallway), t_ref in list(seen.items())[:60]:
+        assert bench.reference_time_s(profile, variation, hallway) == t_ref
+    record = {"profile": "nominal", "operator": 4, "hallway": "H1", "completion_time_s": 12.0, "t_norm": 9.9}
+    assert bench.judged(record)["t_norm"] == 12.0 / bench.reference_time_s("nominal", 4, "H1")
+    assert bench.judged({**record, "completion_time_s": None})["t_norm"] is None

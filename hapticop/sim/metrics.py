@@ -93,6 +93,13 @@ class RunMetrics:
     divergence: bool  # handle at the workspace limit or force saturated for more than 0.5 s
 
 
+def autonomous_reference_s(travel_m: float, v_cruise_mps: float, braking_decel_mps2: float = 0.5,
+                           tau_r_s: float = 0.15) -> float:
+    """§5's T_ref: an autonomous robot covering `travel_m` to the stop line at the operator's cruise speed,
+    braking at `braking_decel_mps2` after a reaction time; the one definition every experiment judges by."""
+    return travel_m / v_cruise_mps + v_cruise_mps / (2.0 * braking_decel_mps2) + tau_r_s
+
+
 def compute_metrics(
     data: TrajectoryRecorder | Mapping[str, np.ndarray],
     geometry: HallwayGeometry,
@@ -144,7 +151,7 @@ def compute_metrics(
     T = float(t[still_start] - t[0]) if ended_by == "stopped" else math.nan
     if v_cruise_mps:
         v = v_cruise_mps
-        t_ref = (float(front[0]) - g.dist2_m) / v + v / (2.0 * braking_decel_mps2) + tau_r_s
+        t_ref = autonomous_reference_s(float(front[0]) - g.dist2_m, v, braking_decel_mps2, tau_r_s)
     else:
         t_ref = math.nan
 
