@@ -2,12 +2,13 @@
 1 kHz loops' wake-up latency and misses with a bridge running beside them and without.
 
     sudo python bench/zenoh_link.py transport [--runs 3] [--count 3000]
-    sudo python bench/zenoh_link.py loops [--runs 3] [--seconds 10] [--pin]
+    sudo python bench/zenoh_link.py loops [--runs 3] [--seconds 10] [--pin] [--low-latency]
     python bench/zenoh_link.py linkloss [--runs 3] [--seconds 10]
 
 `transport` makes two namespaces joined by a veth and echoes 64-byte messages paced at 1 kHz, first over
-Zenoh as the bridges use it (peer mode, explicit endpoints, no scouting, express, REAL_TIME, a ring
-channel of 1), then over a plain UDP socket. `loops` runs a 1 kHz real-time loop whose samples cross to
+Zenoh as a bridge uses it by default (peer mode, explicit endpoints, no scouting, express, REAL_TIME, a ring
+channel of 1), then the same over Zenoh's low-latency transport (a host's `transport: low_latency`), then
+over a plain UDP socket. `loops` runs a 1 kHz real-time loop whose samples cross to
 a second host through the bridges, and the same loop and reader on one host without them. `linkloss`
 kills the operator's side of systems/teleop.yaml after it has driven for a while and measures, on the
 robot's recording, how long after the last setpoint's send time the robot stands still. Figures go to
@@ -35,12 +36,12 @@ PORT = 7447
 
 
 # -- the two ends, each run inside its namespace ------------------------------------------------
-def echo_zenoh(listen: str, connect: str) -> None:
+def echo_zenoh(listen: str, connect: str, low_latency: bool = False) -> None:
     import zenoh
 
     from hapticop.network import transport
 
-    with transport.session([listen], [connect]) as net:
+    with transport.session([listen], [connect], low_latency) as net:
         pong = net.declare_publisher("bench/pong", priority=zenoh.Priority.REAL_TIME, express=True)
         ping = net.declare_subscriber("bench/ping", zenoh.handlers.RingChannel(1))
         print("ready", flush=True)
@@ -48,12 +49,12 @@ def echo_zenoh(listen: str, connect: str) -> None:
             pong.put(ping.recv().payload.to_bytes())
 
 
-def ping_zenoh(listen: str, connect: str, count: int) -> list[int]:
+def ping_zenoh(listen: str, connect: str, count: int, low_latency: bool = False) -> list[int]:
     import zenoh
 
     from hapticop.network import transport
 
-    with transport.session([listen], [connect]) as net:
+    with transport.session([listen], [connect], low_latency) as net:
         ping = net.declare_publisher("bench/ping", priority=zenoh.Priority.REAL_TIME, express=True)
         pong = net.declare_subscriber("bench/pong", zenoh.handlers.RingChannel(1))
         for _ in range(100):  # until the echo answers (the peers have found each other)
@@ -140,12 +141,15 @@ def percentiles(ns: list[int]) -> dict:
 
 
 def transport_runs(runs: int, count: int) -> dict:
-    results = {"zenoh": [], "udp": []}
+    """Each run measures the three in turn, so a busy spell of the machine touches them alike."""
+    results = {"zenoh": [], "zenoh_low_latency": [], "udp": []}
     with Namespaces() as spaces:
         zenoh_a, zenoh_b = f"tcp/{spaces.addr_a}:{PORT}", f"tcp/{spaces.addr_b}:{PORT}"
         for _ in range(runs):
             for kind, echo_args, ping_args in (
                     ("zenoh", ("echo-zenoh", zenoh_b, zenoh_a), ("ping-zenoh", zenoh_a, zenoh_b, str(count))),
+                    ("zenoh_low_latency", ("echo-zenoh", zenoh_b, zenoh_a, "low_latency"),
+                     ("ping-zenoh", zenoh_a, zenoh_b, str(count), "low_latency")),
                     ("udp", ("echo-udp", spaces.addr_b), ("ping-udp", spaces.addr_b, str(count)))):
                 echo = spaces.run(spaces.b, *echo_args)
                 try:
@@ -181,11 +185,12 @@ LOOP = """\
     """
 
 
-def loop_runs(runs: int, seconds: int, pin: bool = False) -> dict:
-    """With `pin`, the loop runs on the last core and the bridges on the first, in both cases."""
+def loop_runs(runs: int, seconds: int, pin: bool = False, low_latency: bool = False) -> dict:
+    """With `pin`, the loop runs on the last core and the bridges on the first, in both cases; with
+    `low_latency`, the hosts use Zenoh's low-latency transport."""
     results = {"with_bridge": [], "without": []}
     last = (os.cpu_count() or 1) - 1
-    bridge_cpus = ", bridge_cpus: [0]" if pin else ""
+    bridge_cpus = (", bridge_cpus: [0]" if pin else "") + (", transport: low_latency" if low_latency else "")
     with tempfile.TemporaryDirectory() as tmp:
         for run in range(runs):
             for kind in results:
@@ -269,15 +274,16 @@ def main() -> None:
     parser.add_argument("args", nargs="*")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--pin", action="store_true", help="loops: the loop on the last core, the bridges on the first")
+    parser.add_argument("--low-latency", action="store_true", help="loops: the hosts on Zenoh's low-latency transport")
     parser.add_argument("--count", type=int, default=3000, help="round trips per transport run")
     parser.add_argument("--seconds", type=int, default=10,
                         help="length of each loops run; with linkloss, how long the operator drives before its death")
     options = parser.parse_args()
     a = options.args
     if options.what == "echo-zenoh":
-        echo_zenoh(a[0], a[1])
+        echo_zenoh(a[0], a[1], a[2:] == ["low_latency"])
     elif options.what == "ping-zenoh":
-        print(json.dumps(ping_zenoh(a[0], a[1], int(a[2]))))
+        print(json.dumps(ping_zenoh(a[0], a[1], int(a[2]), a[3:] == ["low_latency"])))
     elif options.what == "echo-udp":
         echo_udp(a[0])
     elif options.what == "ping-udp":
@@ -291,7 +297,8 @@ def main() -> None:
         elif options.what == "linkloss":
             saved["linkloss"] = linkloss_runs(options.runs, options.seconds)
         else:
-            saved["loops_pinned" if options.pin else "loops"] = loop_runs(options.runs, options.seconds, options.pin)
+            key = "loops" + ("_pinned" if options.pin else "") + ("_low_latency" if options.low_latency else "")
+            saved[key] = loop_runs(options.runs, options.seconds, options.pin, options.low_latency)
         saved["machine"] = {"cpus": os.cpu_count(), "kernel": os.uname().release, "date": time.strftime("%Y-%m-%d")}
         out.write_text(json.dumps(saved, indent=1))
         print(f"wrote {out}")

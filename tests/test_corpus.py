@@ -155,6 +155,8 @@ CASES = [
      "name a place of coordination.standard.sources"),
     ("invalid-host-split-activity.yaml", "host-split-activity", 11, "'counter' is scheduled on hosts desk, robot",
      None),
+    ("invalid-host-transport.yaml", "host-transport", 6, "host 'desk' asks for the low-latency transport but host "
+     "'robot' does not", "the same 'transport:' on every host"),
     ("invalid-network-no-qos.yaml", "network-qos", 24, "crosses from host 'desk' to 'robot' and states no", None),
     ("invalid-network-no-deadline.yaml", "network-deadline", 27, "without a 'deadline'", None),
     ("invalid-network-unbounded.yaml", "network-unbounded", 27, "as a queue without 'depth'", None),

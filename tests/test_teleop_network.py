@@ -136,6 +136,56 @@ def test_a_hosts_bridge_cpus_and_period_shape_its_bridge_thread(tmp_path):
     assert operator.cpus is None and operator.period == 1_000_000  # the defaults: anywhere, every millisecond
 
 
+def test_the_hosts_low_latency_transport_reaches_both_bridges(tmp_path):
+    fast = tmp_path / "fast.yaml"
+    fast.write_text(f"extends: {ROOT / 'systems' / 'teleop.yaml'}\n"
+                    "hosts:\n  robot: {transport: low_latency}\n  operator: {transport: low_latency}\n")
+    validated = validate_path(fast)
+    assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    assert all(validated.hosts[h].graph.loaded.activities["bridge"].params.low_latency for h in ("robot", "operator"))
+    default = validate_path(ROOT / "systems" / "teleop.yaml")
+    assert not any(default.hosts[h].graph.loaded.activities["bridge"].params.low_latency for h in ("robot", "operator"))
+
+
+def test_the_bridge_sends_its_most_urgent_streams_first():
+    """On the low-latency transport, which writes each message on the link as it is put, the bridge's
+    order is the only priority: the setpoint leaves before the scan written in the same cycle."""
+    from hapticop.network import transport
+    from hapticop.network.wire import SAMPLE, sample_key
+    from hapticop.testing import BlockHarness
+
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    streams = [{"stream": "scan", "dtype": "float64", "shape": [4], "priority": "data"},
+               {"stream": "log", "dtype": "float64", "priority": "background"},
+               {"stream": "setpoint", "dtype": "float64", "shape": [3], "priority": "real_time"}]
+    bridge = BlockHarness("zenoh_bridge", {"host": "robot", "system": "order", "listen": [endpoint],
+                                           "send": streams, "low_latency": True})
+    bridge.configure()
+    heard: list[tuple[int, str]] = []  # (the cycle's sequence number, the stream), in the order they arrived
+
+    def hear(sample) -> None:
+        heard.append((SAMPLE.unpack_from(sample.payload.to_bytes())[1], str(sample.key_expr).rsplit("/", 1)[1]))
+
+    with transport.session([f"tcp/127.0.0.1:{_free_port()}"], [endpoint], low_latency=True) as listener:
+        listener.declare_subscriber(sample_key("order", "**"), hear)
+        try:
+            deadline = time.monotonic() + PATIENCE_S
+            while len(heard) < 9:  # the first cycles may leave before the bridge hears of the subscriber
+                assert time.monotonic() < deadline, f"nothing heard within {PATIENCE_S} s"
+                bridge.feed("out_scan", np.zeros(4))
+                bridge.feed("out_log", 0.0)
+                bridge.feed("out_setpoint", np.zeros(3))
+                bridge.step()
+                time.sleep(0.05)
+        finally:
+            bridge.clean()
+    cycles: dict[int, list[str]] = {}
+    for sequence, stream in heard:
+        cycles.setdefault(sequence, []).append(stream)
+    whole = [order for order in cycles.values() if len(order) == 3]
+    assert whole and all(order == ["setpoint", "scan", "log"] for order in whole), heard
+
+
 def test_teleop_runs_the_speed_governor_on_the_robots_host_with_its_own_scan():
     """S1 on the robot (issue 19 item 3): the setpoint that crossed goes through the robot's governor, which reads
     the robot's own LIDAR on its host, before it reaches the wheels' controller; the operator's side has none."""
@@ -185,15 +235,17 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "two") -> Path:
+def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "two",
+              transport: str = "prioritised") -> Path:
     path = tmp_path / f"{name}.yaml"
     path.write_text(textwrap.dedent(f"""\
         version: 1
         name: {name}{os.getpid()}
         hosts:
-          a: {{endpoints: [{a}]}}
+          a: {{endpoints: [{a}], transport: {transport}}}
           b:
             endpoints: [{b}]
+            transport: {transport}
             {emulate}
         threads:
           main_a: {{period: 1ms, deploy: main, host: a, schedules: {{0: [mediator, noise]}}}}
@@ -251,14 +303,16 @@ def log_says(path: Path, text: str) -> bool:
     return path.exists() and text in path.read_text()
 
 
-def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
+@pytest.mark.parametrize("transport", ["prioritised", "low_latency"])
+def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure, transport):
     """b receives a's samples through an emulated 20 ms one-way delay; each arrives stamped with its
     send time, so its age on arrival includes the network. Then a is killed: b's samples turn
     invalid at their deadline, never later, b's bridge reports the link lost; a restarts, and
-    b's samples and link come back by themselves. b records: its link's figures are in the recording."""
+    b's samples and link come back by themselves (on either of Zenoh's transports: its low-latency
+    one once failed to reconnect without scouting). b records: its link's figures are in the recording."""
     delay_ms = 20
     path = two_hosts(tmp_path, f"tcp/127.0.0.1:{_free_port()}", f"tcp/127.0.0.1:{_free_port()}",
-                     f"emulate: {{delay_s: {delay_ms / 1000}, seed: 3}}")
+                     f"emulate: {{delay_s: {delay_ms / 1000}, seed: 3}}", transport=transport)
     b = start(path, "b", tmp_path / "b", None, "--record")  # b first: starting either side first works
     a = start(path, "a", tmp_path / "a1")
     bridge_log = tmp_path / "b" / "bridge.log"
@@ -290,8 +344,8 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure):
     ages_ms = (arrived[:, 0] - arrived[:, 1]) / 1e6
     # stamped with the send time (through the offset, whose error is well under a millisecond here)
     assert ages_ms.min() >= delay_ms - 1.0
-    figure(f"age on arrival: p50 {np.percentile(ages_ms, 50):.2f} ms, p99 {np.percentile(ages_ms, 99):.2f} ms "
-           f"for a {delay_ms} ms one-way delay")
+    figure(f"age on arrival ({transport}): p50 {np.percentile(ages_ms, 50):.2f} ms, "
+           f"p99 {np.percentile(ages_ms, 99):.2f} ms for a {delay_ms} ms one-way delay")
     # the deadman: a sample is valid only while younger than the deadline, and turns invalid once older
     now, valid, stamp = cycles[:, 0], cycles[:, 1].astype(bool), cycles[:, 2]
     seen = stamp > 0

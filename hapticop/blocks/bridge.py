@@ -39,6 +39,10 @@ LINK_OUTPUTS = {
 }
 
 
+Priority = Literal["real_time", "interactive", "data", "background"]
+PRIORITY_ORDER: tuple[Priority, ...] = ("real_time", "interactive", "data", "background")
+
+
 class WireStream(BaseModel):
     """A network stream as one bridge sees it (written by the host split, docs/teleop.md)."""
 
@@ -47,7 +51,7 @@ class WireStream(BaseModel):
     dtype: str
     shape: tuple[int, ...] = ()
     unit: str = "1"
-    priority: Literal["real_time", "interactive", "data", "background"] = "data"
+    priority: Priority = "data"
     keep: Literal["newest", "queue"] = "newest"
     depth: int | None = Field(None, ge=1, le=65536)
     reliability: Literal["best_effort", "reliable"] = "best_effort"
@@ -69,6 +73,8 @@ class BridgeParams(Params):
     import_flags: list[str] = Field(default_factory=list, description="other hosts' places mirrored here")
     peer_end: bool = Field(False, description="raise 'peer_ended' when another host's run ends")
     hold_when_lost: list[str] = Field(default_factory=list, description="imported places held while the link is lost")
+    low_latency: bool = Field(False, description="Zenoh's low-latency transport: no priority queues, a shorter "
+                              "round trip; the other hosts must use it too")
     ping_period_ms: float = Field(50.0, gt=0, description="pings (and this host's state) this often")
     lost_after_ms: float = Field(250.0, gt=0, description="nothing heard for this long: 'link_lost'")
     degraded_rtt_ms: float = Field(300.0, gt=0, description="a round trip above this: 'link_degraded'")
@@ -99,6 +105,9 @@ class ZenohBridge(Block):
         p = self.params
         self.session_id = int.from_bytes(os.urandom(8), "little")
         self.sequence = {w.stream: 0 for w in p.send}
+        # the most urgent streams leave first in every cycle: with the low-latency transport, which writes each
+        # message straight on the link, this order is the only priority there is
+        self.send_order = sorted(p.send, key=lambda w: PRIORITY_ORDER.index(w.priority))
         self.arrivals = {w.stream: Arrivals() for w in p.receive}
         self.peer_sessions = {w.stream: 0 for w in p.receive}
         self.clocks = {peer: OffsetEstimator(WINDOW) for peer in p.peers}
@@ -124,7 +133,7 @@ class ZenohBridge(Block):
         from hapticop.network import transport  # Zenoh only where a bridge runs
 
         p = self.params
-        self.net = transport.session(p.listen, p.connect)
+        self.net = transport.session(p.listen, p.connect, p.low_latency)
         self.senders = {w.stream: transport.Sender(self.net, wire.sample_key(p.system, w.stream), w.priority,
                                                    w.reliability == "reliable", w.congestion == "block")
                         for w in p.send}
@@ -176,7 +185,7 @@ class ZenohBridge(Block):
         self._judge_link(now, publish=due)
 
     def _send_samples(self) -> None:
-        for w in self.params.send:
+        for w in self.send_order:
             port = getattr(self.inputs, f"out_{w.stream}")
             if port.queue:
                 while port.pop():

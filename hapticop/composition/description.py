@@ -398,6 +398,11 @@ class Host(Strict):
         "1ms", validate_default=True, description="how often this host's bridge moves samples between the shared "
         "region and the network: a crossing waits up to a period on either side, so a shorter one takes that much "
         "off a sample's age at the price of the bridge's CPU ('500us' halves both)")
+    transport: Literal["prioritised", "low_latency"] = Field(
+        "prioritised", description="how Zenoh carries this host's link: 'prioritised' queues each message by its "
+        "stream's priority, so a setpoint overtakes a queued scan; 'low_latency' writes each message straight on "
+        "the link (a shorter round trip) with no queue to overtake in, the bridge sending its streams in priority "
+        "order; every host must say the same")
     bridge_cpus: list[Annotated[int, Field(ge=0, le=4095)]] | None = Field(
         None, min_length=1, description="the cores this host's bridge process (and Zenoh's threads in it) may run "
         "on: keep the network off the real-time loops' cores")

@@ -136,6 +136,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                    "listen": list(composition.hosts[host].endpoints), "connect": peers,
                    "send": sends, "receive": receives, "export_flags": exports, "import_flags": imports,
                    "peer_end": ended, "hold_when_lost": list(composition.hosts[host].on_link_lost),
+                   "low_latency": composition.hosts[host].transport == "low_latency",
                    **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
     }
     out.setdefault("threads", {})[BRIDGE_THREAD] = {

@@ -6,6 +6,11 @@ scouting off, so two hosts find each other the same way every time, whichever st
 Subscribers are ring channels polled with `try_recv`: no Python callback shares the bridge's GIL,
 and a reader that lags loses the oldest samples instead of falling behind without bound (Zenoh's
 default handler is a FIFO that never drops).
+
+A session is either Zenoh's default transport, whose per-priority queues and TX thread let a setpoint
+overtake a queued scan, or its low-latency one, which writes each message on the link from the
+caller's thread (less per round trip: docs/teleop.md has the figures) and has no priorities: both
+ends must ask for it, or Zenoh falls back to the default without a word.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ PRIORITIES = {"real_time": zenoh.Priority.REAL_TIME, "interactive": zenoh.Priori
 LEASE_MS = 1000  # Zenoh's default 10 s would notice a dead peer only after the robot has driven on blind
 
 
-def session(listen: list[str], connect: list[str]) -> zenoh.Session:
+def session(listen: list[str], connect: list[str], low_latency: bool = False) -> zenoh.Session:
     """A peer session at these endpoints; no scouting."""
     config = zenoh.Config()
     config.insert_json5("mode", json.dumps("peer"))
@@ -29,6 +34,9 @@ def session(listen: list[str], connect: list[str]) -> zenoh.Session:
     config.insert_json5("scouting/gossip/enabled", "false")
     config.insert_json5("transport/link/tx/lease", str(LEASE_MS))
     config.insert_json5("transport/link/tx/keep_alive", "4")
+    if low_latency:  # Zenoh refuses the low-latency transport with QoS on
+        config.insert_json5("transport/unicast/lowlatency", "true")
+        config.insert_json5("transport/unicast/qos/enabled", "false")
     return zenoh.open(config)
 
 

@@ -54,6 +54,13 @@ def placement(composition: Composition) -> Check:
                                  "lost, but no flag of another host's activity reaches it", ("hosts", name,
                                  "on_link_lost", i), hint="name a place of coordination.standard.sources"
                                  + (f" ({', '.join(sorted(shared))})" if shared else ""))
+    prioritised = sorted(name for name, host in hosts.items() if host.transport == "prioritised")
+    for name, host in hosts.items():
+        if host.transport == "low_latency" and prioritised:
+            yield Diagnostic("host-transport", f"host '{name}' asks for the low-latency transport but host "
+                             f"'{prioritised[0]}' does not: Zenoh would use the prioritised one between them "
+                             "without a word", ("hosts", name, "transport"),
+                             hint="the same 'transport:' on every host")
     where = place(composition)
     for activity, on in where.activity_hosts.items():
         spec = composition.activities.get(activity)
