@@ -223,7 +223,8 @@ def loop_runs(runs: int, seconds: int, pin: bool = False, low_latency: bool = Fa
 
 def linkloss_runs(runs: int, drive_s: float) -> dict:
     """The operator's side of systems/teleop.yaml killed while the robot drives: from the last setpoint's
-    send time to the wheels commanded to zero (the deadman) and to the robot standing still."""
+    send time to the robot's top speed (where the deadman's zero setpoint starts its braking) and to the
+    robot standing still."""
     from hapticop.recording.reading import series
 
     results = []
@@ -257,7 +258,12 @@ def linkloss_runs(runs: int, drive_s: float) -> dict:
             after = twist.publish_ns > last_sent
             still = np.flatnonzero(after & ~moving)
             speed = float(np.abs(twist.values[after][0, 0])) if after.any() else 0.0
+            speeds = np.where(after, np.abs(twist.values[:, 0]), -1.0)
+            # the last sample at its top speed: the robot held it (or still rose) until the deadman's zero came
+            top = int(np.flatnonzero(speeds >= speeds.max() - 0.002)[-1]) if after.any() else None
             figures = {"speed_at_loss_mps": round(speed, 3),
+                       "braking_after_ms": round((int(twist.publish_ns[top]) - last_sent) / 1e6, 1)
+                       if top is not None and speed > 0.01 else None,
                        "last_setpoint_value": [round(float(v), 3) for v in setpoints.values[-1]],
                        "still_after_ms": round((int(twist.publish_ns[still[0]]) - last_sent) / 1e6, 1)
                        if len(still) else None,
