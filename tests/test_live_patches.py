@@ -121,7 +121,8 @@ def test_patches_on_a_live_realtime_system(tmp_path, deploy):
         applied = hapticop_patch(path, "activities: {source: {params: {step: 5}}}", tmp_path)
         assert applied.returncode == 0 and applied.stdout.strip().endswith("applied"), applied.stderr
         assert system.composition.activities["source"].params == {"step": 5}
-        assert source.params.step == 5  # the running block holds the new value...
+        # the running block takes the new value before its next step...
+        wait_for(lambda: source.params.step == 5, "the running block takes the new value")
         wait_for(lambda: system.state("source") is State.RUNNING, "the counter runs again after reconfiguring")
         counted = source.count
         wait_for(lambda: source.count >= counted + 50, "the counter counts on")
@@ -171,7 +172,7 @@ def test_the_haptic_controllers_gain_patched_live_reaches_the_running_controller
         assert applied.returncode == 0 and applied.stdout.strip().endswith("applied"), applied.stderr
         centring = system.composition.activities["haptic"].params["centring"]
         assert centring == {"kp_n_per_m": 30.0, "kd_ns_per_m": 0.2, "force_limit_n": 10.0}  # merged, not replaced
-        assert haptic.params.centring.kp_n_per_m == 30.0
+        wait_for(lambda: haptic.params.centring.kp_n_per_m == 30.0, "the controller takes the new gain")
         wait_for(lambda: haptic.built_for is haptic.params, "the controller rebuilt its laws with the new gain")
         assert haptic.pd.params.kp_n_per_m == 30.0 and haptic.pd.params.kd_ns_per_m == 0.2
 
