@@ -4,7 +4,9 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from hapticop.composition.lcsm import State
 from hapticop.runtime.control import request
@@ -86,6 +88,69 @@ def test_scripted_runs_are_deterministic(tmp_path):
     b = compose(tmp_path, SCRIPTED, duration="400ms", name="b")
     assert a.timing["activities"]["relay"]["steps"] == b.timing["activities"]["relay"]["steps"]
     assert (tmp_path / "run-a" / "probe.log").read_text() == (tmp_path / "run-b" / "probe.log").read_text()
+
+
+TAP = """
+      activities: {%(reader)s: {block: echo}}
+      streams: {tap: {from: relay.output, to: %(reader)s.input}}
+      threads: {main: {schedules: {0: [mediator, source, %(reader)s]}}}
+"""
+
+
+def recorded_times_ms(recording, topic: str) -> np.ndarray:
+    with recording.open("rb") as stream:
+        return np.array([m.publish_time for _, _, m in make_reader(stream).iter_messages(topics=[topic])]) / 1e6
+
+
+def test_a_stream_added_live_is_recorded_from_then_until_it_is_removed(tmp_path):
+    """A recorded run records the streams a patch adds, on a channel of their own from the moment they
+    exist; a stream removed stops being recorded, and one added again under its name goes on in its channel."""
+    text = base() + "record: {}\npatches:\n  plug:\n    at: 200ms\n    patch:" + TAP % {"reader": "probe"} + """
+  unplug:
+    at: 300ms
+    patch:
+      - {op: remove, path: /streams/tap}
+      - {op: remove, path: /activities/probe}
+      - {op: replace, path: /threads/main/schedules/0, value: [mediator, source]}
+  replug:
+    at: 350ms
+    patch:""" + TAP % {"reader": "again"}
+    result = compose(tmp_path, text, duration="500ms")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    tap = recorded_times_ms(tmp_path / "run-c" / "live.mcap", "/streams/tap")
+    # the relay writes every 2 ms: 50 samples while first plugged, 75 from its return to the end
+    assert len(tap) == 125 and tap.min() >= 200 and not np.any((tap > 300) & (tap < 350))
+    assert result.recording["streams"]["tap"] == {"written": 125, "recorded": 125, "dropped": 0}
+    with (tmp_path / "run-c" / "live.mcap").open("rb") as stream:
+        channels = make_reader(stream).get_summary().channels.values()
+    assert [c.topic for c in channels].count("/streams/tap") == 1
+
+
+def test_a_stream_added_by_a_live_patch_reaches_the_recorders_process(tmp_path):
+    """On the wall clock the recorder is a process of its own: it hears of the added stream's ring
+    over its pipe and records it until the run ends."""
+
+    def work(path, system):
+        reply = request(path, {"op": "patch", "text": TAP % {"reader": "probe"}}, timeout=PATIENCE_S)
+        assert reply["ok"] and reply["applied"], reply
+        probe = system.runners["probe"].block
+        wait_for(lambda: probe.received >= 100, "the added stream carries samples")
+
+    while_running(tmp_path, work, text=base() + "record: {}\n", ready="relay")
+    tap = recorded_times_ms(tmp_path / "run-c" / "live.mcap", "/streams/tap")
+    assert len(tap) >= 100
+
+
+def test_an_added_stream_whose_recorder_ring_would_not_fit_is_refused_whole(tmp_path):
+    """Its ring holds 'record.depth' of its samples in the room kept for live additions: a minute of
+    a 500 Hz stream does not fit, so the patch is refused before any of it applies, and says why."""
+    text = base() + "record: {depth: 60s}\npatches:\n  plug:\n    at: 200ms\n    patch:" + TAP % {"reader": "probe"}
+    result = compose(tmp_path, text, duration="300ms")
+    assert result.outcome.status is not ExitStatus.SUCCESS
+    [reason] = result.outcome.reasons
+    assert "scripted patch 'plug' refused" in reason and "the recorder's rings of the new streams" in reason, reason
+    assert "probe" not in result.states
+    assert "tap" not in result.recording["streams"]
 
 
 def hapticop_patch(path, patch: str, tmp_path, *extra: str) -> subprocess.CompletedProcess:

@@ -16,6 +16,7 @@ import numpy as np
 
 from hapticop.composition.description import Composition
 from hapticop.composition.loader import Loaded, ResolvedActivity
+from hapticop.recording.plan import RecordedStream
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
@@ -79,13 +80,14 @@ def _transports(loaded: Loaded, region: Region, owner: dict[str, str], one_threa
 
 
 def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str], allocate: bool = False,
-                    one_thread: bool = False) -> list:
+                    one_thread: bool = False, record: RecordedStream | None = None) -> list:
     """The transports of one stream: a latest slot, or one queue ring per reader; then, if the
     stream is recorded, the recorder's ring (which only the writer sees: readers take theirs by index).
 
-    `allocate` takes the buffers from the arena (a stream added to a running system, never
-    recorded) instead of the layout computed at start. `one_thread`: every loop of the system runs
-    in this thread, one after the other (the virtual clock), so no reader needs the seqlock's retries.
+    `allocate` takes the buffers from the arena (a stream added to a running system) instead of
+    the layout computed at start, the recorder's ring too when `record` says the run records it.
+    `one_thread`: every loop of the system runs in this thread, one after the other (the virtual
+    clock), so no reader needs the seqlock's retries.
     """
     spec = loaded.composition.streams[stream]
     writer_activity, writer_port = spec.writer.split(".")
@@ -104,7 +106,13 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
             offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][index].offset
             objects.append(SpscQueue(region.buffer_at(offset, nbytes), port, spec.policy.capacity,
                                      spec.policy.overflow))
-    recorded = None if allocate else region.layout.recorded.get(stream)
+    recorded = region.layout.recorded.get(stream)
+    if allocate:  # a stream added live: recorded in a ring of its own, if at all (never an earlier one's)
+        recorded = None
+        if record is not None:
+            nbytes = queue_nbytes(port, record.capacity)
+            recorded = region.layout.recorded[stream] = Transport(stream, "queue", region.layout.allocate(nbytes),
+                                                                  nbytes, "recorder")
     if recorded is not None:
         objects.append(recorder_ring(region, recorded, port))
     return objects
@@ -114,7 +122,7 @@ def recorder_ring(region: Region, transport: Transport, port) -> RecorderRing:
     """The recorder's ring of a stream: the loop never waits for it, and overwrites the oldest
     samples when the recorder falls a whole ring behind (the recorder counts them)."""
     capacity = (transport.nbytes - QUEUE_HEADER.itemsize) // latest_nbytes(port)
-    return RecorderRing(region.buffer_at(transport.offset, transport.nbytes), port, capacity)
+    return RecorderRing(region.buffer_at(transport.offset, transport.nbytes), port, capacity, transport.stream)
 
 
 def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,

@@ -22,11 +22,12 @@ from hapticop.composition.description import Composition, Stream
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.composition.units import format_duration
+from hapticop.recording.plan import recorded_streams
 from hapticop.runtime.assembly import thread_of
 from hapticop.runtime.described import Description
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Layout
-from hapticop.runtime.streams import latest_nbytes, queue_nbytes
+from hapticop.runtime.streams import RecorderRing, latest_nbytes, queue_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 from hapticop.validation.changes import ChangePlan
 from hapticop.validation.patches import PatchError, prepare
@@ -115,7 +116,8 @@ def _room_lacking(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> str |
     for name in plan.added_activities:
         iface = loaded.activities[name].interface
         flags[name] = list(flagdefs.activity_flags(name, iface.flags_written, iface.flags_read))
-    buffers = []
+    buffers, rings = [], []
+    recorded = recorded_streams(loaded.composition)  # a recorded run's added streams get a recorder ring each
     for name in plan.added_streams:
         spec = loaded.composition.streams[name]
         writer_activity, writer_port = spec.writer.split(".")
@@ -124,7 +126,12 @@ def _room_lacking(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> str |
             buffers.append(latest_nbytes(port))
         else:
             buffers.extend(queue_nbytes(port, spec.policy.capacity) for _ in spec.readers)
-    return target.layout.room_for(flags, buffers)
+        if name in recorded:
+            rings.append(queue_nbytes(port, recorded[name].capacity))
+    lacking = target.layout.room_for(flags, buffers + rings)
+    if lacking and rings and target.layout.room_for(flags, buffers) is None:
+        lacking += ": the recorder's rings of the new streams would not fit ('record.depth' sets their length)"
+    return lacking
 
 
 def apply(target: LiveTarget, pending: PendingPatch) -> None:
@@ -141,7 +148,7 @@ def apply(target: LiveTarget, pending: PendingPatch) -> None:
     for name in plan.removed_activities:
         target.set_flag(f"{name}.lcsm.request_cleaning")
     for name in plan.removed_streams:
-        _disconnect(target, old.composition.streams[name])
+        _disconnect(target, name, old.composition.streams[name])
     for name in plan.added_activities:
         runner = target.new_runner(name, pending.resolved[name], new.composition)
         thread = new.owner_thread.get(name)
@@ -209,8 +216,12 @@ def _connect(target: LiveTarget, stream: str, new: Description) -> None:
         getattr(runner.block.inputs, port).connect(objects[index] if queue else objects[0], queue, spec.max_age or 0)
 
 
-def _disconnect(target: LiveTarget, spec: Stream) -> None:
+def _disconnect(target: LiveTarget, name: str, spec: Stream) -> None:
     writer_activity, writer_port = spec.writer.split(".")
+    writer = target.runners.get(writer_activity)
+    if writer is not None:  # its record ends with it: the writer stops pushing into the recorder's ring
+        output = getattr(writer.block.outputs, writer_port)
+        output.transports = [t for t in output.transports if not (isinstance(t, RecorderRing) and t.stream == name)]
     for reader in spec.readers:
         activity, port = reader.split(".")
         runner = target.runners.get(activity)

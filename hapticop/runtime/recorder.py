@@ -38,11 +38,11 @@ from hapticop.composition.loader import Loaded
 from hapticop.recording.live import LiveOptions, LiveServer, LiveViewUnavailable
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.outputs import Fanout, Output
-from hapticop.recording.plan import recorded_streams
+from hapticop.recording.plan import RecordedStream, recorded_streams
 from hapticop.recording.scene import views_for
 from hapticop.runtime.link_channel import LinkChannel
 from hapticop.runtime.log_channel import LogChannel
-from hapticop.runtime.region import Layout
+from hapticop.runtime.region import Layout, Transport
 from hapticop.runtime.streams import SpscQueue, sample_dtype
 from hapticop.runtime.taps import LatestTap, tapped_streams
 from hapticop.runtime.timing_channels import LoopTiming, TimingPlan
@@ -149,11 +149,13 @@ class Recorder:
                 self.file.attach(name, media_type, data, now)
             for name, values_ in plan.metadata.items():
                 self.file.metadata(name, values_)
-        self.streams = {ring.info.name: ring.info for ring in plan.rings}
-        self.channels = {ring.info.name: self._stream_channel(ring) for ring in plan.rings}
-        self.batches = {ring.info.name: np.zeros(min(BATCH, ring.capacity), sample_dtype(ring.port()))
-                        for ring in plan.rings}
-        self.recorded = dict.fromkeys(self.streams, 0)
+        self.streams: dict[str, StreamInfo] = {}
+        self.channels: dict[str, int] = {}
+        self.batches: dict[str, np.ndarray] = {}
+        self.recorded: dict[str, int] = {}
+        self.earlier: dict[str, tuple[int, int]] = {}  # (written, dropped) of the rings a stream had before
+        for ring in plan.rings:
+            self._follow(ring, rings[ring.info.name])
         self.views: Sequence[View] = plan.views
         for view in self.views:
             view.start(self.out, self.streams)
@@ -163,6 +165,32 @@ class Recorder:
         if self.file is not None:
             self.file.flush()  # schemas, channels, attachments: on disk before any sample
         self.flushed_ns = now
+
+    def add(self, ring: RecordedRing, queue: SpscQueue) -> None:
+        """A stream a live patch added: recorded from now on, on a channel of its own (a stream added
+        again after its removal, with the same samples, goes on in the channel it had)."""
+        name = ring.info.name
+        old = self.rings.get(name)
+        if old is not None:  # what its earlier writer left, before the new ring takes its place
+            self.drain()
+            written, dropped = self.earlier.get(name, (0, 0))
+            self.earlier[name] = (written + int(old.written), dropped + int(old.dropped))
+            old.close()
+        was = self.streams.get(name)
+        if was is None or (was.dtype, was.shape) != (ring.info.dtype, ring.info.shape):
+            self.channels.pop(name, None)
+        self._follow(ring, queue)
+        if self.file is not None:
+            self.file.flush()
+
+    def _follow(self, ring: RecordedRing, queue: SpscQueue | LatestTap) -> None:
+        name = ring.info.name
+        self.rings[name] = queue
+        if name not in self.channels:
+            self.channels[name] = self._stream_channel(ring)
+        self.streams[name] = ring.info
+        self.batches[name] = np.zeros(min(BATCH, ring.capacity), sample_dtype(ring.port()))
+        self.recorded.setdefault(name, 0)
 
     def _stream_channel(self, ring: RecordedRing) -> int:
         if ring.kind == "latest":  # a tapped slot, read at the display rate already, and never recorded
@@ -210,7 +238,8 @@ class Recorder:
                 "view": {"address": self.address, "sent": self.live.sent} if self.live is not None else None,
                 "view_error": self.view_error, "cpu_s": time.process_time() - self.cpu_started,
                 "elapsed_s": (self.clock() - self.started_ns) / 1e9, "streams": {
-            name: {"written": int(ring.written), "recorded": self.recorded[name], "dropped": int(ring.dropped)}
+            name: {"written": int(ring.written) + self.earlier.get(name, (0, 0))[0], "recorded": self.recorded[name],
+                   "dropped": int(ring.dropped) + self.earlier.get(name, (0, 0))[1]}
             for name, ring in self.rings.items()}}
 
     def finish(self) -> dict:
@@ -250,13 +279,7 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
     plan = recorded_streams(composition)
     rings = [] if path is not None else [RecordedRing(info, offset, nbytes, 1, "latest")  # shown, not recorded
                                          for info, offset, nbytes in tapped_streams(loaded, layout)]
-    for name, transport in layout.recorded.items():
-        spec = composition.streams[name]
-        activity, port_name = spec.writer.split(".")
-        port = loaded.activities[activity].interface.outputs[port_name]
-        info = StreamInfo(name, np.dtype(port.dtype).name, tuple(port.shape), port.unit, plan[name].rate_hz,
-                          plan[name].every, spec.writer, tuple(spec.readers), spec.doc or port.doc)
-        rings.append(RecordedRing(info, transport.offset, transport.nbytes, plan[name].capacity))
+    rings += [recorded_ring(loaded, transport, plan[name]) for name, transport in layout.recorded.items()]
     params = {name: resolved.params.model_dump(mode="json") for name, resolved in loaded.activities.items()}
     clock = "virtual" if virtual else "CLOCK_MONOTONIC"
     run = {"composition": composition.name or Path(file).stem, "file": str(file), "clock": clock, "seed": str(seed),
@@ -269,6 +292,16 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
                         {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]), live,
                         TimingPlan.of(composition, layout), run_dir, run["composition"])
+
+
+def recorded_ring(loaded: Loaded, transport: Transport, recorded: RecordedStream) -> RecordedRing:
+    """A recorded stream's ring, with what the file says of its samples."""
+    spec = loaded.composition.streams[transport.stream]
+    activity, port_name = spec.writer.split(".")
+    port = loaded.activities[activity].interface.outputs[port_name]
+    info = StreamInfo(transport.stream, np.dtype(port.dtype).name, tuple(port.shape), port.unit, recorded.rate_hz,
+                      recorded.every, spec.writer, tuple(spec.readers), spec.doc or port.doc)
+    return RecordedRing(info, transport.offset, transport.nbytes, recorded.capacity)
 
 
 def _library() -> str:
@@ -292,12 +325,14 @@ def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
 
 
 def rings_of(plan: RecorderPlan, buffer) -> dict[str, SpscQueue | LatestTap]:
-    rings: dict[str, SpscQueue | LatestTap] = {}
-    for ring in plan.rings:
-        view = np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset)
-        rings[ring.info.name] = (LatestTap(view, ring.port()) if ring.kind == "latest" else
-                                 SpscQueue(view, ring.port(), ring.capacity, "drop_oldest"))
-    return rings
+    return {ring.info.name: ring_of(ring, buffer) for ring in plan.rings}
+
+
+def ring_of(ring: RecordedRing, buffer) -> SpscQueue | LatestTap:
+    """The recorder's side of one ring in the region."""
+    view = np.ndarray((ring.nbytes,), np.uint8, buffer=buffer, offset=ring.offset)
+    return (LatestTap(view, ring.port()) if ring.kind == "latest" else
+            SpscQueue(view, ring.port(), ring.capacity, "drop_oldest"))
 
 
 # -- on the wall clock: a process of its own ---------------------------------------------------
@@ -336,7 +371,15 @@ def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> 
         while not orphaned.is_set():
             recorder.drain()
             if messages.poll(plan.drain_ns / 1e9):
-                break  # the parent's stop: its loops are done, the rings hold their last samples
+                try:
+                    message = messages.recv()
+                except (EOFError, OSError):  # the parent is gone: finish what we have
+                    orphaned.set()
+                    break
+                if message == "stop":
+                    break  # its loops are done, the rings hold their last samples
+                _, ring = message  # ("add", RecordedRing): a stream a live patch added
+                recorder.add(ring, ring_of(ring, memory.buf))
         summary = recorder.finish()
         if not orphaned.is_set():
             messages.send(("finished", summary))
@@ -383,6 +426,13 @@ class RecorderProcess:
         return (f"the recorder (process {self.pid}) did not start within {timeout_s:g} s "
                 f"(exit code {self.process.exitcode}); the run goes on unrecorded")
 
+    def add(self, ring: RecordedRing) -> None:
+        """Record a stream a live patch added (its ring lies in the region's spare room)."""
+        try:
+            self.messages.send(("add", ring))
+        except (OSError, EOFError):
+            pass  # the recorder is gone: the run says so when it stops it
+
     def stop(self) -> tuple[dict | None, str | None]:
         """Ask for the last drain and the finished file: (summary, None), or (None, what went wrong)."""
         try:
@@ -413,6 +463,7 @@ class InlineRecorder:
 
     def __init__(self, plan: RecorderPlan, buffer, clock: Callable[[], int]):
         self.rings = rings_of(plan, buffer)
+        self.buffer = buffer
         self.recorder = Recorder(plan, self.rings, clock, sources_of(plan, buffer))
         self.clock = clock
         self.drain_ns = plan.drain_ns
@@ -422,6 +473,10 @@ class InlineRecorder:
     @staticmethod
     def wait_started() -> None:
         return None
+
+    def add(self, ring: RecordedRing) -> None:
+        """Record a stream a live patch added (its ring lies in the region's spare room)."""
+        self.recorder.add(ring, ring_of(ring, self.buffer))
 
     def between_cycles(self) -> None:
         now = self.clock()

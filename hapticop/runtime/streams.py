@@ -460,8 +460,9 @@ class RecorderRing(SpscQueue):
     counted by the recorder), and leaves the origin stamps out, which are the loops' business
     (measured latencies), not the record's: a push costs the writing loop less."""
 
-    def __init__(self, buffer: Buffer, port: Port, capacity: int) -> None:
+    def __init__(self, buffer: Buffer, port: Port, capacity: int, stream: str = "") -> None:
         super().__init__(buffer, port, capacity, "drop_oldest")
+        self.stream = stream  # which stream's record it is: a stream removed live takes its ring off its writer
 
     def push(self, value: np.ndarray, stamp_ns: int, origins: np.ndarray | None = None) -> bool:
         return SpscQueue.push(self, value, stamp_ns)

@@ -28,6 +28,7 @@ from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
 from hapticop.recording.live import LiveOptions
+from hapticop.recording.plan import recorded_streams
 from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of, make_runner, make_transports
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
@@ -36,7 +37,7 @@ from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.modes import Modes
 from hapticop.runtime.preflight import DevicesMissing, missing_devices
-from hapticop.runtime.recorder import InlineRecorder, RecorderProcess, plan_of
+from hapticop.runtime.recorder import InlineRecorder, RecorderProcess, plan_of, recorded_ring
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.rundirs import directory_mode, new_run_directory
@@ -220,7 +221,14 @@ class System:
         return runner
 
     def new_transports(self, loaded: Loaded, stream: str, owner: dict[str, str]) -> list:
-        return make_transports(loaded, self.region, stream, owner, allocate=True, one_thread=self.virtual)
+        """An added stream's buffers; if the run records it to a file, its recorder ring too, which the
+        recorder follows from now on."""
+        record = recorded_streams(loaded.composition).get(stream) if self.records and self.recorder else None
+        objects = make_transports(loaded, self.region, stream, owner, allocate=True, one_thread=self.virtual,
+                                  record=record)
+        if record is not None:
+            self.recorder.add(recorded_ring(loaded, self.region.layout.recorded[stream], record))
+        return objects
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:
