@@ -183,6 +183,27 @@ def test_transparency_authority_effort_and_dithering():
     assert near.dithering > 10
 
 
+def test_unseen_scan_arrivals_are_bounded_by_the_largest_step_in_any_cycle():
+    """A world that does not see when a scan reached the force model cannot measure the step then; the
+    largest step in any cycle bounds it, and meets the target for it or tells nothing."""
+    from hapticop.sim.targets import scan_step
+
+    def steps(size):  # the force steps by `size` 15 times a second and is flat between
+        return lambda t: np.column_stack([0 * t, 0 * t, size * np.floor(t * 15)])
+
+    small = compute_metrics(with_channels(force_env=steps(0.04)), H1)
+    assert math.isnan(small.scan_step_max_n) and small.cycle_step_max_n == pytest.approx(0.04)
+    assert scan_step(small, Targets()) == (pytest.approx(0.04), True)
+    assert targets_met(small, Targets()).checks["scan_step"] is True
+    large = compute_metrics(with_channels(force_env=steps(0.3)), H1)
+    assert math.isnan(scan_step(large, Targets())[0])
+    assert targets_met(large, Targets()).checks["scan_step"] is None  # above the target, a bound tells nothing
+    seen = compute_metrics(with_channels(force_env=steps(0.3), scan=lambda t: np.diff(np.floor(t * 15), prepend=0) > 0),
+                           H1)
+    assert scan_step(seen, Targets()) == (pytest.approx(0.3), False)
+    assert targets_met(seen, Targets()).checks["scan_step"] is False
+
+
 def test_oscillation_index_and_divergence():
     osc = lambda f, amp: lambda t: np.column_stack([0 * t, 0 * t, amp * np.sin(2 * np.pi * f * t)])  # noqa: E731
     m = compute_metrics(with_channels(handle_velocity=osc(5.0, 0.05)), H1)
@@ -325,7 +346,8 @@ def test_every_metric_has_a_row_in_the_end_of_run_table():
     run = with_channels(force_env=np.array([0.0, 0.0, 0.5]), cmd=np.array([0.5, 0.0]))
     m = compute_metrics(run, H1, v_cruise_mps=0.5)
     rows = judged_rows(m, H1, "nominal")
-    assert len(rows) >= len(fields(m)) - 6  # t_end, n_collisions/crash, e_pc/pc_active, frac_modified, sustained
+    # t_end, n_collisions/crash, e_pc/pc_active, frac_modified, sustained, cycle_step (in the scan step's row)
+    assert len(rows) >= len(fields(m)) - 7
     named = {row["metric"].split(" (")[0]: row for row in rows}
     assert named["completion time / T_ref"]["ok"] is True and named["rms force rate"]["ok"] is True
     assert named["passivity controller's share"]["ok"] is None  # not measured: no verdict

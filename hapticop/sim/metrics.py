@@ -69,7 +69,8 @@ class RunMetrics:
     # 6. smoothness
     force_rate_rms_nps: float  # rms |dF_env/dt|
     hf_ratio: float  # power of F_env above 10 Hz / total power (mean included)
-    scan_step_max_n: float  # largest |F_env| step in a cycle where a scan arrived
+    scan_step_max_n: float  # largest |F_env| step in a cycle where a scan arrived (NaN: arrivals not seen)
+    cycle_step_max_n: float  # largest |F_env| step in any cycle: a bound on the step at a scan
     dithering: int | None  # sign reversals of the commanded v within near_stop_m of the stop line
     # 7. energy and passivity
     e_env_min_j: float  # min over time of E_env = -int F_env . dp/dt dt (0 at the start)
@@ -237,7 +238,7 @@ def _force_metrics(t: F64, w: F64, d: Mapping[str, np.ndarray], limit: float) ->
     nan = math.nan
     if "force_env" not in d:
         return dict(force_peak_n=nan, force_rms_n=nan, saturation_frac=nan, force_rate_rms_nps=nan,
-                    hf_ratio=nan, scan_step_max_n=nan)
+                    hf_ratio=nan, scan_step_max_n=nan, cycle_step_max_n=nan)
     f = d["force_env"].astype(np.float64)
     fn = _norm(f)
     dev = d.get("force_device", f)
@@ -261,7 +262,7 @@ def _force_metrics(t: F64, w: F64, d: Mapping[str, np.ndarray], limit: float) ->
         scan_step = nan
     return dict(force_peak_n=float(fn.max()), force_rms_n=float(np.sqrt((w * fn**2).sum() / w.sum())),
                 saturation_frac=float(w[sat].sum() / w.sum()), force_rate_rms_nps=rate_rms, hf_ratio=hf,
-                scan_step_max_n=scan_step)
+                scan_step_max_n=scan_step, cycle_step_max_n=float(step.max()) if len(step) else nan)
 
 
 def _dithering(d: Mapping[str, np.ndarray], near: NDArray[np.bool_]) -> int | None:
