@@ -129,6 +129,21 @@ def test_between_scans_the_clearance_is_predicted_with_what_the_robot_drove():
     assert first == pytest.approx(0.5) and later == pytest.approx(2.0 * (0.3 - 0.1), rel=1e-6)
 
 
+def test_the_prediction_sums_each_output_over_its_own_cycle():
+    """0.5 m/s for 0.1 s, then standing still for 0.1 s: the robot is 0.05 m nearer, not 0.1 m (the
+    last output times the scan's age) nor 0 (the standing output times it). Otherwise the bound
+    depends on the output it bounds, and a sliding robot's speed saws at the scan rate."""
+    f = SafetyFilter(ANGLES, SafetyFilterParams(margin_m=0.3, gain_per_s=2.0))
+    front = BODY.footprint.length_m / 2
+    f.update_scan(wall(x_m=front + 0.6))
+    assert f.filter(np.array([0.5, 0.0, 0.0]), np.zeros(3), 0.0)[0] == pytest.approx(0.5)
+    assert f.filter(np.array([0.0, 0.0, 0.0]), np.zeros(3), 0.1)[0] == 0.0
+    allowed = f.filter(np.array([0.8, 0.0, 0.0]), np.zeros(3), 0.2)[0]
+    assert allowed == pytest.approx(2.0 * (0.3 - 0.05), rel=1e-6)
+    f.update_scan(wall(x_m=front + 0.6))  # a new scan: measured again, nothing predicted yet
+    assert f.filter(np.array([0.8, 0.0, 0.0]), np.zeros(3), 0.0)[0] == pytest.approx(0.6, rel=1e-6)
+
+
 def test_a_filter_cycle_allocates_nothing():
     f = SafetyFilter(ANGLES)
     f.update_scan(wall(y_m=0.6))

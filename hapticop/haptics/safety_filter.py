@@ -14,9 +14,12 @@ stopping), then scaled towards zero until every constraint holds exactly. Every 
 is ≥ 0, so standing still is always allowed and the scaling always ends feasible; projection onto
 sets holding the origin never lengthens v, so the filter never adds speed.
 
-Between scans (15 Hz) each clearance is predicted with the filter's own last output, as the
-governor predicts its gap. The turn rate passes unchanged: the swept corners of a turn are not
-modelled (the governor bounds turning near the side walls). Work is split as elsewhere:
+Between scans (15 Hz) each clearance is predicted from the filter's own outputs since the scan,
+integrated cycle by cycle. (Multiplying the last output by the scan's age instead closes a loop
+within the cycle: a sideways slide that shortens the predicted clearance shrinks the next output,
+which lengthens it again, and the robot's sideways speed rings at the scan rate.) The turn rate
+passes unchanged: the swept corners of a turn are not modelled (the governor bounds turning near
+the side walls). Work is split as elsewhere:
 ``update_scan`` once per scan, ``filter`` every cycle, both into preallocated arrays.
 """
 
@@ -73,6 +76,8 @@ class SafetyFilter:
         self._work = np.zeros(n)
         self._mask = np.zeros(n, dtype=bool)
         self.executed = np.zeros(3)  # the last output, for the prediction between scans
+        self.moved = np.zeros(2)  # how far the outputs since the scan have moved the robot, x and y
+        self.scan_age_s = 0.0  # the scan's age at the last cycle
 
     def update_scan(self, ranges: NDArray[np.floating]) -> None:
         """A new scan: each point's clearance from the body and its normal (15 Hz)."""
@@ -100,16 +105,23 @@ class SafetyFilter:
         np.divide(ey, self._work, out=ey, where=inside)
         np.greater(d, self.params.influence_m, out=inside)
         np.copyto(d, self.FAR_M, where=inside)  # out of influence: never binding
+        self.moved[:] = 0.0
+        self.scan_age_s = 0.0
 
     def filter(self, command: F64, out: F64, scan_age_s: float = 0.0) -> F64:
         """The executed twist for a commanded one (``out`` may be ``command``)."""
         p = self.params
         vx, vy, wz = float(command[TWIST_VX]), float(command[TWIST_VY]), float(command[TWIST_WZ])
         nx, ny, bound, excess = self.nx, self.ny, self.bound, self.excess
-        # Clearances now: those of the scan less what the last output has driven towards each point since.
-        last = self.executed
-        np.multiply(nx, float(last[TWIST_VX]) * scan_age_s, out=bound)
-        np.multiply(ny, float(last[TWIST_VY]) * scan_age_s, out=excess)
+        # Clearances now: those of the scan less what the outputs since have driven towards each point,
+        # each held for its cycle (the first from the scan's stamp: what came before it is in the scan).
+        held = scan_age_s - self.scan_age_s
+        if held > 0.0:
+            self.moved[0] += float(self.executed[TWIST_VX]) * held
+            self.moved[1] += float(self.executed[TWIST_VY]) * held
+            self.scan_age_s = scan_age_s
+        np.multiply(nx, float(self.moved[0]), out=bound)
+        np.multiply(ny, float(self.moved[1]), out=excess)
         bound += excess
         np.subtract(self.clearance, bound, out=bound)
         bound -= p.margin_m
