@@ -106,13 +106,14 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
             offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][index].offset
             objects.append(SpscQueue(region.buffer_at(offset, nbytes), port, spec.policy.capacity,
                                      spec.policy.overflow))
-    recorded = region.layout.recorded.get(stream)
-    if allocate:  # a stream added live: recorded in a ring of its own, if at all (never an earlier one's)
+    if not allocate:
+        recorded = region.layout.recorded.get(stream)
+    elif record is not None:  # added live to a recorded run: a ring of its own, never an earlier stream's
+        nbytes = queue_nbytes(port, record.capacity)
+        recorded = region.layout.recorded[stream] = Transport(stream, "queue", region.layout.allocate(nbytes),
+                                                              nbytes, "recorder")
+    else:
         recorded = None
-        if record is not None:
-            nbytes = queue_nbytes(port, record.capacity)
-            recorded = region.layout.recorded[stream] = Transport(stream, "queue", region.layout.allocate(nbytes),
-                                                                  nbytes, "recorder")
     if recorded is not None:
         objects.append(recorder_ring(region, recorded, port))
     return objects
