@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import zlib
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -40,7 +40,7 @@ LINK_OUTPUTS = {
 
 
 Priority = Literal["real_time", "interactive", "data", "background"]
-PRIORITY_ORDER: tuple[Priority, ...] = ("real_time", "interactive", "data", "background")
+PRIORITY_ORDER: tuple[Priority, ...] = get_args(Priority)  # most urgent first
 
 
 class WireStream(BaseModel):
