@@ -238,9 +238,13 @@ class Recorder:
                 "view": {"address": self.address, "sent": self.live.sent} if self.live is not None else None,
                 "view_error": self.view_error, "cpu_s": time.process_time() - self.cpu_started,
                 "elapsed_s": (self.clock() - self.started_ns) / 1e9, "streams": {
-            name: {"written": int(ring.written) + self.earlier.get(name, (0, 0))[0], "recorded": self.recorded[name],
-                   "dropped": int(ring.dropped) + self.earlier.get(name, (0, 0))[1]}
-            for name, ring in self.rings.items()}}
+            name: self._counts(name, ring) for name, ring in self.rings.items()}}
+
+    def _counts(self, name: str, ring: SpscQueue | LatestTap) -> dict[str, int]:
+        """A stream's samples written, recorded and dropped, over every ring it had."""
+        written, dropped = self.earlier.get(name, (0, 0))
+        return {"written": int(ring.written) + written, "recorded": self.recorded[name],
+                "dropped": int(ring.dropped) + dropped}
 
     def finish(self) -> dict:
         """The last samples, the drop counts stored in the file, the file finished and renamed."""
