@@ -379,3 +379,12 @@ class AgeProbe(Block):
     def clean(self):
         np.savez(self.run_dir / f"{self.name}.npz", arrived=self.arrived[: self.n_arrived],
                  cycles=self.cycles[: self.n_cycles])
+
+
+class Unbuildable(Block):
+    """A block whose activity cannot be built: its constructor raises (a device that is not there)."""
+
+    outputs = {"value": Port("float64", (), "1")}
+
+    def __init__(self, context):
+        raise OSError("the device is not there")

@@ -339,9 +339,14 @@ def patch(
 def status(
     system: str = typer.Argument(..., help="the running system's name (or its control socket path)"),
     json_output: bool = typer.Option(False, "--json", help="the whole status as JSON"),
+    params: list[str] = typer.Option(None, "--params", help="also each named activity's parameters as it runs "
+                                     "them (a mode's values included); repeat it for more; 'all' for every one"),
 ) -> None:
-    """LCSM states, selected schedules, flags, markings and timing of a running system."""
+    """LCSM states, selected schedules, flags, markings, timing and parameters of a running system."""
     import json
+    import textwrap
+
+    from hapticop.composition.documents import dump
 
     reply = _ask(system, {"op": "status"})
     if not reply.get("ok"):
@@ -351,7 +356,8 @@ def status(
     if json_output:
         typer.echo(json.dumps(state, indent=2))
         return
-    typer.echo(f"{state['name']}: {state['clock']} clock, up {state['uptime_s']:.1f} s")
+    typer.echo(f"{state['name']}: {state['clock']} clock, up {state['uptime_s']:.1f} s, "
+               f"description revision {state.get('revision', 0)}")
     for name, t in state["threads"].items():
         timing = state["timing"]["threads"][name]
         failed = f" FAILED: {t['failed']}" if t["failed"] else ""
@@ -361,6 +367,12 @@ def status(
         failed = f" FAILED: {a['failed']}" if a["failed"] else ""
         waiting = f", waiting for {a['waiting_for']}" if a.get("waiting_for") else ""
         typer.echo(f"  activity {name}: {a['state']}{waiting}{failed}")
+        if params and ("all" in params or name in params):
+            typer.echo(textwrap.indent(dump(a.get("params") or {}), "      "), nl=False)
+    unknown = sorted(set(params or ()) - set(state["activities"]) - {"all"})
+    if unknown:
+        typer.echo(f"error: no activity {', '.join(repr(u) for u in unknown)} in '{state['name']}'", err=True)
+        raise typer.Exit(1)
     for net, marking in state["markings"].items():
         typer.echo(f"  net {net}: {marking}")
     if state.get("modes") is not None:

@@ -17,6 +17,7 @@ import errno
 import json
 import os
 import re
+import select
 import selectors
 import socket
 import stat
@@ -98,6 +99,21 @@ class ControlServer:
         self._wake_write: socket.socket | None = None
         self._stopping = threading.Event()
         self._inode: int | None = None
+        self._asking: socket.socket | None = None  # the connection whose request the handler is answering
+
+    def client_present(self) -> bool:
+        """While the handler runs (on the server's thread): whether the client that asked is still
+        connected, so that nothing is done on behalf of a client that left. A client that only shut
+        down its sending side still waits for its answer, and is present."""
+        connection = self._asking
+        if connection is None:
+            return True
+        poller = select.poll()
+        poller.register(connection, select.POLLHUP | select.POLLERR)
+        try:
+            return not poller.poll(0)
+        except OSError:
+            return False
 
     # -- life cycle ----------------------------------------------------------------
 
@@ -246,6 +262,7 @@ class ControlServer:
                             selector.register(self._listener, selectors.EVENT_READ)
             finally:
                 for client in clients.values():
+                    _flush(client)  # every request that was read gets its answer, also at shutdown
                     client.connection.close()
 
     def _accept(self, selector: selectors.BaseSelector, clients: dict[socket.socket, _Client]) -> None:
@@ -299,6 +316,7 @@ class ControlServer:
         selector.modify(client.connection, events or selectors.EVENT_READ)
 
     def _read(self, selector: selectors.BaseSelector, client: _Client, chunk: bytes) -> None:
+        self._asking = client.connection  # the handler may ask whether it is still there (`client_present`)
         if not chunk:
             client.eof = True  # the end of the stream ends the line too
             self._answer(selector, client, self._reply(bytes(client.buffer)))
@@ -351,6 +369,8 @@ class ControlServer:
             reply = self.handler(message)
         except Exception as error:  # noqa: BLE001 - a handler bug must not end the server
             return {"ok": False, "error": str(error) or type(error).__name__}
+        finally:
+            self._asking = None
         if not isinstance(reply, dict):
             return {"ok": False, "error": f"the handler answered a {type(reply).__name__}, not a JSON object"}
         return reply
@@ -368,6 +388,17 @@ class _Client:
     reply: bytearray = field(default_factory=bytearray)
     received: int = 0
     eof: bool = False
+
+
+def _flush(client: _Client, timeout: float = 0.5) -> None:
+    """Send what is left of a client's reply, waiting a little for a slow reader; give up quietly."""
+    if not client.reply:
+        return
+    try:
+        client.connection.settimeout(timeout)
+        client.connection.sendall(client.reply)
+    except OSError:
+        pass
 
 
 _BRACKETS = re.compile(rb'"(?:[^"\\]|\\.)*"|[\[\]{}]')

@@ -20,10 +20,11 @@ class Description:
     tree: CommentedMap
     loaded: Loaded
     owner_thread: dict[str, str]  # activity -> the thread that schedules it
+    revision: int = 0  # how many changes the running description has taken (status shows it)
 
     @classmethod
-    def of(cls, tree: CommentedMap, loaded: Loaded) -> Description:
-        return cls(tree, loaded, thread_of(loaded.composition))
+    def of(cls, tree: CommentedMap, loaded: Loaded, revision: int = 0) -> Description:
+        return cls(tree, loaded, thread_of(loaded.composition), revision)
 
     @property
     def composition(self) -> Composition:
@@ -37,4 +38,4 @@ class Description:
                 resolved: dict[str, ResolvedActivity]) -> Description:
         """The description a patch leaves: its tree and composition, the activities it
         resolved (new parameters, added activities) over the ones kept."""
-        return Description.of(tree, Loaded(composition, {**self.loaded.activities, **resolved}))
+        return Description.of(tree, Loaded(composition, {**self.loaded.activities, **resolved}), self.revision + 1)

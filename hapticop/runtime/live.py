@@ -1,20 +1,32 @@
 """Changing a running system: a validated patch's plan, applied at a cycle boundary.
 
 The control thread checks what the plan asks against what this runtime can do without a
-restart (`check`), then hands it to the main thread, which applies it between two cycles
-(`apply`): changed parameters take their activity through resource or capability
-configuration, changed schedules take effect from the next cycle, removed activities are
-cleaned, added ones start their life cycle in the spare room of the region. Threads in
-their own process receive their share over a pipe, noticed through a counter in the
-region so that their loop makes no system call to look. A patch reaches the system only
-through `LiveTarget`; the new description replaces the old one whole, last.
+restart (`check`) and decides, per activity, whether new parameters are retuned in place or
+take it through configuration again (`Effect`), so that a dry run can say so. It then hands the
+patch to the main thread, which applies it between two cycles (`apply`): changed schedules take
+effect from the next cycle, removed activities are cleaned, added ones start their life cycle
+in the spare room of the region. Threads in their own process receive their share over a pipe,
+noticed through a counter in the region so that their loop makes no system call to look.
+
+A patch means what its reply says (docs/running.md, "Live patches"):
+- it is applied whole or not at all: what can fail (building an added activity) is done
+  before anything running changes, and undone if it fails;
+- it lands only on the description it was prepared on (compare-and-swap on the description's
+  tree): one prepared before another change landed is prepared again, never applied over that
+  change, so no change undoes another;
+- a patch whose client gave up, or one still waiting at shutdown, is cancelled under the lock
+  the main thread takes it with: it was either applied and is reported so, or it never is.
+A patch reaches the system only through `LiveTarget`; the new description replaces the old one
+whole, last.
 """
 
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from hapticop.composition import flags as flagdefs
@@ -61,15 +73,87 @@ class LiveTarget(Protocol):
         """An added stream's buffers, taken from the region's spare room."""
 
 
+class StaleBase(Exception):
+    """The running description is no longer the one the patch was prepared on."""
+
+
+@dataclass(frozen=True)
+class Effect:
+    """What new parameters do to a running activity, decided when the patch is prepared."""
+
+    changed: frozenset[str]
+    request: str | None  # None: retuned in place; else the LCSM request that re-configures it
+
+    def describe(self, name: str) -> str:
+        fields = ", ".join(sorted(self.changed)) or "no field"
+        if self.request is None:
+            return f"activity '{name}': retuned in place ({fields})"
+        stage = "capability" if self.request == "request_capability_configuration" else "resource"
+        return f"activity '{name}': reconfigured: stops and restarts {name} ({stage} configuration, for {fields})"
+
+
+def effects(base: Description, plan: ChangePlan, resolved: dict[str, ResolvedActivity]) -> dict[str, Effect]:
+    """Per activity whose parameters change: retuned while it runs, or re-configured (which stops it)."""
+    found = {}
+    for name in plan.params:
+        was, now = base.activities[name], resolved[name]
+        changed = frozenset(k for k in type(now.params).model_fields
+                            if getattr(now.params, k) != getattr(was.params, k))
+        block = was.block
+        if changed <= block.running_params:
+            request = None
+        elif changed <= block.capability_params | block.running_params:
+            request = "request_capability_configuration"
+        else:
+            request = "request_resource_configuration"
+        found[name] = Effect(changed, request)
+    return found
+
+
+WAITING, APPLYING, APPLIED, FAILED, CANCELLED, STALE = "waiting", "applying", "applied", "failed", "cancelled", "stale"
+
+
 @dataclass
 class PendingPatch:
+    """A prepared patch on its way to the main thread, and what became of it (`outcome`, then `done`)."""
+
     plan: ChangePlan
     composition: Composition
     tree: object
     resolved: dict[str, ResolvedActivity]
-    applied: threading.Event
+    base: Description  # the description it was prepared on: it applies to that one only
+    effects: dict[str, Effect]
     diff: str = ""
     error: str = ""
+    outcome: str = WAITING
+    done: threading.Event = field(default_factory=threading.Event, repr=False)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def changes(self) -> list[str]:
+        """The plan's lines, and each parameter change said as retuned in place or reconfigured."""
+        return self.plan.describe() + [effect.describe(name) for name, effect in self.effects.items()]
+
+    def take(self) -> bool:
+        """The main thread's claim; False when the patch was cancelled meanwhile (it is then skipped)."""
+        with self._lock:
+            if self.outcome != WAITING:
+                return False
+            self.outcome = APPLYING
+            return True
+
+    def cancel(self, why: str) -> bool:
+        """Withdraw a patch the main thread has not taken; False when it has (then wait for `done`)."""
+        with self._lock:
+            if self.outcome != WAITING:
+                return False
+            self.outcome, self.error = CANCELLED, why
+        self.done.set()
+        return True
+
+    def finish(self, outcome: str, error: str = "") -> None:
+        with self._lock:
+            self.outcome, self.error = outcome, error
+        self.done.set()
 
 
 def _refuse(path: tuple, message: str) -> Diagnostic:
@@ -135,22 +219,26 @@ def _room_lacking(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> str |
 
 
 def apply(target: LiveTarget, pending: PendingPatch) -> None:
-    """On the main thread, between cycles."""
+    """On the main thread, between cycles: all of the patch, or (raising) none of it."""
     plan = pending.plan
     old = target.description
+    if old.tree is not pending.base.tree:
+        raise StaleBase("the system changed since the patch was prepared")
     new = old.patched(pending.tree, pending.composition, pending.resolved)
     lacking = _room_lacking(target, plan, new.loaded)  # patches prepared together may not all fit
     if lacking:
         raise PatchError([_refuse(("activities",) if plan.added_activities else ("streams",), lacking)])
-    for name, resolved in pending.resolved.items():
-        if name in plan.params:
-            _new_params(target, old, name, resolved)
+    runners = _build_added(target, plan, pending, new)  # what may fail, before anything running changes
+    for name, effect in pending.effects.items():
+        retuned = effect.changed if effect.request is None else frozenset()  # a re-configuration rebuilds it all
+        retune(target, old, name, pending.resolved[name].params, retuned)
+        if effect.request is not None:
+            target.set_flag(f"{name}.lcsm.{effect.request}")
     for name in plan.removed_activities:
         target.set_flag(f"{name}.lcsm.request_cleaning")
     for name in plan.removed_streams:
         _disconnect(target, name, old.composition.streams[name])
-    for name in plan.added_activities:
-        runner = target.new_runner(name, pending.resolved[name], new.composition)
+    for name, runner in runners.items():
         thread = new.owner_thread.get(name)
         if thread is not None:
             target.threads[thread].runners[name] = runner
@@ -170,24 +258,25 @@ def apply(target: LiveTarget, pending: PendingPatch) -> None:
         else:
             target.send(thread, ("schedules", schedules))
     target.description = new
-    for line in plan.describe():
+    for line in pending.changes():
         target.log.always("patch: %s", line)
 
 
-def _new_params(target: LiveTarget, old: Description, name: str, resolved: ResolvedActivity) -> None:
-    """Running parameters reach the block between two of its cycles; others re-configure it."""
-    was = old.activities[name]
-    changed = frozenset(k for k in type(resolved.params).model_fields
-                        if getattr(resolved.params, k) != getattr(was.params, k))
-    if changed <= was.block.running_params:
-        request = None
-    elif changed <= was.block.capability_params | was.block.running_params:
-        request = "request_capability_configuration"
-    else:
-        request = "request_resource_configuration"
-    retune(target, old, name, resolved.params, changed if request is None else frozenset())
-    if request is not None:  # a re-configuration rebuilds it all
-        target.set_flag(f"{name}.lcsm.{request}")
+def _build_added(target: LiveTarget, plan: ChangePlan, pending: PendingPatch,
+                 new: Description) -> dict[str, ActivityRunner]:
+    """The added activities' blocks, built but not yet scheduled. If one cannot be built, those built
+    before it are dropped, their room in the region is given back, and the error propagates."""
+    mark = target.layout.mark()
+    runners: dict[str, ActivityRunner] = {}
+    try:
+        for name in plan.added_activities:
+            runners[name] = target.new_runner(name, pending.resolved[name], new.composition)
+    except BaseException:
+        for name in plan.added_activities:
+            target.runners.pop(name, None)
+        target.layout.rollback(mark)
+        raise
+    return runners
 
 
 def retune(target: LiveTarget, description: Description, name: str, params, changed: frozenset[str]) -> None:
@@ -238,63 +327,123 @@ def _disconnect(target: LiveTarget, name: str, spec: Stream) -> None:
 class LiveChanges:
     """The patches of one running system: asked over the control socket, or scripted in its file."""
 
+    ATTEMPTS = 3  # a live patch prepared again at most this often when other changes keep landing first
+
     def __init__(self, target: LiveTarget, name: str, reasons: list[str]):
         self.target, self.name, self.reasons = target, name, reasons  # name: the file's, for diffs
         self.pending: deque[PendingPatch] = deque()
-        # (at, name, patch, prepared PendingPatch or None, the tree it was prepared on)
+        self.closed: str | None = None  # why no patch is taken any more (the system is shutting down)
+        self._closing = threading.Lock()
+        # (at, name, patch, prepared PendingPatch or None)
         patches = target.description.composition.patches
-        self.scripted = sorted(((p.at, name, p, None, None) for name, p in patches.items()),
+        self.scripted = sorted(((p.at, name, p, None) for name, p in patches.items()),
                                key=lambda item: (item[0], item[1]))
 
-    def prepare(self, patch, patch_file: str = "<patch>", base=None) -> PendingPatch:
+    def prepare(self, patch, patch_file: str = "<patch>", base: Description | None = None) -> PendingPatch:
         """Apply and validate a patch against the running description (any thread), or against
-        `base`, a (tree, composition) some earlier pending patch will leave."""
-        current = self.target.description
-        tree, composition = base or (current.tree, current.composition)
-        prepared = prepare(tree, patch, old=composition, patch_file=patch_file, name=self.name)
+        `base`, the description some earlier pending patch will leave."""
+        base = base or self.target.description
+        prepared = prepare(base.tree, patch, old=base.composition, patch_file=patch_file, name=self.name)
         resolved = check(self.target, prepared.plan, prepared.loaded)
-        return PendingPatch(prepared.plan, prepared.composition, prepared.tree, resolved, threading.Event(),
-                            prepared.diff)
+        return PendingPatch(prepared.plan, prepared.composition, prepared.tree, resolved, base,
+                            effects(base, prepared.plan, resolved), prepared.diff)
+
+    def ask(self, patch, patch_file: str, present: Callable[[], bool], timeout_s: float,
+            settle_s: float = 30.0) -> PendingPatch:
+        """A client's patch, prepared, handed to the main thread and waited for (the control thread).
+
+        Its `outcome` is the truth: applied, failed, or cancelled (its client left, the main thread did
+        not reach a cycle boundary within `timeout_s`, or the system is shutting down), in which case it
+        never takes effect. One that the main thread took is waited for up to `settle_s` more. When
+        another change landed first, it is prepared again on the description as it is now."""
+        deadline = time.monotonic() + timeout_s
+        pending = self.prepare(patch, patch_file)
+        for _ in range(self.ATTEMPTS):
+            self._hand_over(pending, present)
+            self._await(pending, present, deadline, settle_s)
+            if pending.outcome != STALE:
+                return pending
+            pending = self.prepare(patch, patch_file)
+        pending.cancel(f"other changes landed first {self.ATTEMPTS} times; ask again")
+        return pending
+
+    def _hand_over(self, pending: PendingPatch, present: Callable[[], bool]) -> None:
+        with self._closing:
+            if self.closed:
+                pending.cancel(self.closed)
+            elif not present():
+                pending.cancel("its client left before it was applied")
+            else:
+                self.pending.append(pending)
+
+    @staticmethod
+    def _await(pending: PendingPatch, present: Callable[[], bool], deadline: float, settle_s: float) -> None:
+        while not pending.done.wait(0.05):
+            if not present():
+                why = "its client left before it was applied"
+            elif time.monotonic() >= deadline:
+                why = "the main thread did not reach a cycle boundary in time"
+            else:
+                continue
+            if not pending.cancel(why):  # the main thread took it: it finishes, so wait for what happened
+                pending.done.wait(settle_s)
+            return
+
+    def close(self, why: str) -> None:
+        """No more patches: every one still waiting is cancelled with `why` (at shutdown)."""
+        with self._closing:
+            self.closed = why
+            while self.pending:
+                self.pending.popleft().cancel(why)
 
     def prepare_scripted(self) -> None:
-        """Validate the scripted patches before any loop runs, each on the tree the one before
-        leaves: validating takes about a second, which a 1 kHz main loop cannot spare. A patch
-        whose base changed meanwhile (a live patch came between) is prepared again when due."""
-        current = self.target.description
-        tree, composition, prepared = current.tree, current.composition, []
-        for at, name, scripted, _, _ in self.scripted:
+        """Validate the scripted patches before any loop runs, each on the description the one before
+        leaves: validating takes about a second, which a 1 kHz main loop cannot spare. A patch whose
+        base changed meanwhile (a live patch came between) is prepared again when due."""
+        base, prepared = self.target.description, []
+        for at, name, scripted, _ in self.scripted:
             pending = None
             try:
-                pending = self.prepare(scripted.patch, f"patches.{name}", base=(tree, composition))
+                pending = self.prepare(scripted.patch, f"patches.{name}", base=base)
             except PatchError:
                 pass  # refused when due, with its reason
-            prepared.append((at, name, scripted, pending, tree))
+            prepared.append((at, name, scripted, pending))
             if pending is not None:
-                tree, composition = pending.tree, pending.composition
+                base = base.patched(pending.tree, pending.composition, pending.resolved)
         self.scripted = prepared
 
     def apply_due(self, since_start_ns: int) -> None:
         """Between two main-thread cycles: the patches asked meanwhile, then a scripted one if due."""
         while self.pending:
             pending = self.pending.popleft()
+            if not pending.take():
+                continue  # cancelled: its client was told it was not applied
             try:
                 apply(self.target, pending)
+            except StaleBase as error:
+                pending.finish(STALE, str(error))
             except Exception as error:  # noqa: BLE001 - reported to the client, the system runs on
-                pending.error = f"{type(error).__name__}: {error}"
-                self.target.log.error("patch not applied: %s", pending.error)
-            pending.applied.set()
+                message = f"{type(error).__name__}: {error}"
+                self.target.log.error("patch not applied: %s", message)
+                pending.finish(FAILED, message)
+            else:
+                pending.finish(APPLIED)
         if self.scripted and since_start_ns >= self.scripted[0][0]:
             self._apply_scripted(self.scripted.pop(0))
 
     def _apply_scripted(self, item) -> None:
-        at, name, scripted, pending, base = item
+        at, name, scripted, pending = item
         log = self.target.log
         try:
-            if pending is None or base is not self.target.description.tree:
+            if pending is None or pending.base.tree is not self.target.description.tree:
                 pending = self.prepare(scripted.patch, patch_file=f"patches.{name}")
             apply(self.target, pending)
             log.always("scripted patch '%s' applied at %s", name, format_duration(at))
         except PatchError as error:
             message = f"scripted patch '{name}' refused: {error.diagnostics[0].message}"
+            self.reasons.append(message)
+            log.error(message)
+        except Exception as error:  # noqa: BLE001 - a block that cannot be built: none of the patch, run on
+            message = f"scripted patch '{name}' not applied: {type(error).__name__}: {error}"
             self.reasons.append(message)
             log.error(message)

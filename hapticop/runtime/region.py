@@ -75,6 +75,20 @@ class Layout:
             self.flag_index[flag] = len(self.flags)
             self.flags.append(flag)
 
+    def mark(self) -> tuple[int, int, int]:
+        """Where the spare room's use stands, to give back what a failed live addition took (`rollback`)."""
+        return len(self.activities), len(self.flags), self.arena_used
+
+    def rollback(self, mark: tuple[int, int, int]) -> None:
+        activities, flags, arena_used = mark
+        for name in self.activities[activities:]:
+            del self.activity_index[name], self.owner_index[name]
+        del self.activities[activities:]
+        for flag in self.flags[flags:]:
+            del self.flag_index[flag]
+        del self.flags[flags:]
+        self.arena_used = arena_used
+
     def room_for(self, flags_by_activity: dict[str, list[str]], buffers: list[int]) -> str | None:
         """What the spare room lacks for these live additions (None: they fit); changes nothing, so
         a patch that would not fit is refused before any of it is applied."""

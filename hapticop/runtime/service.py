@@ -5,14 +5,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from hapticop.composition.description import Composition
+from hapticop.blocks.interface import Params
 from hapticop.composition.lcsm import State
 from hapticop.coordination.coordinator import Coordinator
 from hapticop.published import published
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.control import ControlError, ControlServer, is_system_name, socket_path
+from hapticop.runtime.described import Description
 from hapticop.runtime.lifecycle import OK
-from hapticop.runtime.live import LiveChanges
+from hapticop.runtime.live import APPLIED, APPLYING, LiveChanges
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing
@@ -44,12 +45,14 @@ class ControlService:
     and handed to the main thread through `live.pending`."""
 
     def __init__(self, name: str, live: LiveChanges, region: Region, clock: RealtimeClock | VirtualClock,
-                 coordinator: Coordinator, composition: Callable[[], Composition], log: Logger,
-                 run_dir: Path | None = None, attach: Callable[[], dict] | None = None):
+                 coordinator: Coordinator, description: Callable[[], Description], log: Logger,
+                 run_dir: Path | None = None, attach: Callable[[], dict] | None = None,
+                 params: Callable[[], dict[str, Params]] | None = None):
         self.name, self.live, self.region, self.clock = name, live, region, clock
         self.run_dir = run_dir  # where activities publish what `status` shows of them (a bridge's link)
         self.attach = attach  # what `hapticop view` needs to read the region from outside (viewer.Attachment)
-        self.coordinator, self.composition, self.log = coordinator, composition, log  # composition(): the running one
+        self.coordinator, self.description, self.log = coordinator, description, log  # description(): the running one
+        self.params = params  # each activity's parameters as it runs them (modes over its description)
         self.server: ControlServer | None = None
 
     def start(self, path: Path) -> None:
@@ -78,18 +81,22 @@ class ControlService:
         file = request.get("file", "<patch>")
         try:
             patch = load_patch(request["text"], file)
-            pending = self.live.prepare(patch, file)
+            if request.get("dry_run"):
+                pending = self.live.prepare(patch, file)
+            else:
+                present = self.server.client_present if self.server is not None else _always
+                pending = self.live.ask(patch, file, present, APPLY_TIMEOUT_S)
         except PatchError as error:
             return {"ok": False, "error": "patch refused", "diagnostics": [d.to_json() for d in error.diagnostics]}
-        result = {"ok": True, "diff": pending.diff, "changes": pending.plan.describe()}
+        result = {"ok": True, "diff": pending.diff, "changes": pending.changes(), "revision": pending.base.revision}
         if request.get("dry_run"):
             return {**result, "applied": False}
-        self.live.pending.append(pending)
-        if not pending.applied.wait(timeout=APPLY_TIMEOUT_S):
-            return {"ok": False, "error": "the main thread did not reach a cycle boundary within 5 s"}
-        if pending.error:
-            return {"ok": False, "error": f"patch not applied: {pending.error}"}
-        return {**result, "applied": True}
+        if pending.outcome == APPLIED:
+            return {**result, "applied": True, "revision": pending.base.revision + 1}
+        if pending.outcome == APPLYING:  # taken by the main thread, still not finished: say so, not a guess
+            return {"ok": False, "applied": None, "error": "the patch is being applied and has not finished; "
+                    "`hapticop status` shows the revision once it has"}
+        return {"ok": False, "applied": False, "error": f"patch not applied: {pending.error}"}
 
     def _waiting(self, activity: str, state: str) -> str | None:
         """What a configuring activity waits for; nothing once it left configuration."""
@@ -102,14 +109,20 @@ class ControlService:
         owners = {owner: {"state": region.state_of(owner).flag_name,
                           "failed": failure(region, owner) if region.failed[i] != OK else None}
                   for owner, i in layout.owner_index.items()}
-        composition = self.composition()
+        description = self.description()
+        composition = description.composition
+        running = self.params() if self.params is not None else {}
+        params = {a: (running.get(a) or resolved.params).model_dump(mode="json")
+                  for a, resolved in description.activities.items()}
         return {
             "name": self.name,
             "clock": "virtual" if isinstance(clock, VirtualClock) else "realtime",
             "uptime_s": (clock.now_ns() - int(region.system[Region.STARTED_NS])) / SECOND,
             "threads": {t: {**owners[f"threads.{t}"], "schedule": int(region.selected[i])}
                         for t, i in layout.thread_index.items()},
-            "activities": {a: {**owners[a], "waiting_for": self._waiting(a, owners[a]["state"])}
+            "revision": description.revision,
+            "activities": {a: {**owners[a], "waiting_for": self._waiting(a, owners[a]["state"]),
+                               "params": params.get(a)}
                            for a in layout.activity_index},
             "flags": sorted(name for name, i in layout.flag_index.items() if region.flags[i]),
             "markings": self.coordinator.markings(),
@@ -129,6 +142,10 @@ class ControlService:
             if value is not None:
                 found[path.stem] = value
         return found
+
+
+def _always() -> bool:
+    return True
 
 
 PATCH_FIELDS = {"text": (str, "the patch's text"), "file": (str, "a file name"), "dry_run": (bool, "true or false")}

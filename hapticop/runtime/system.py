@@ -145,7 +145,8 @@ class System:
                     "run_dir": str(self.run_dir), "pid": os.getpid(), "name": self.name}
 
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
-                                      lambda: self.description.composition, self.log, self.run_dir, attach)
+                                      lambda: self.description, self.log, self.run_dir, attach,
+                                      lambda: dict(self.modes.given))
         self.main.supervisor = self._between_cycles
         if self.layout.recorded or options.view is not None:
             path = None if not self.records else Path(options.record) if options.record else \
@@ -256,6 +257,7 @@ class System:
         finally:
             self.finished = True
             self.supervisor.restore_signals(previous)
+            self.live.close("the system is shutting down")  # a patch still waiting is answered, never applied
             self.service.stop()
             self.scheduler.stop()
             self._stop_recorder()
