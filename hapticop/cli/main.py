@@ -398,10 +398,12 @@ def graph(
                              help="dataflow (threads, activities, streams), nets (every net and its flags), "
                                   "the name of one net, or all"),
     output: Path | None = typer.Option(None, "-o", "--output", metavar="PATH",
-                                       help="where to write (default: FILE-VIEW.FORMAT in the current directory)"),
+                                       help="where to write, '-' for standard output (default: FILE-VIEW.FORMAT in the "
+                                            "current directory)"),
     format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
     """Draw a composition: by default its dataflow; its nets and flag maps with --view nets."""
+    from hapticop.cli.outputs import is_stdout, say_wrote, written
     from hapticop.cli.render import RenderError, drawing, render, to_dot
 
     validated = validate_path(file)
@@ -418,20 +420,22 @@ def graph(
     except RenderError as error:
         typer.echo(f"error: {error}", err=True)
         raise typer.Exit(2) from None
-    if format is GraphFormat.dot and output is None:
+    if format is GraphFormat.dot and (output is None or is_stdout(output)):
         typer.echo(to_dot(picture), nl=False)
         return
     target = output or Path.cwd() / f"{file.stem}-{view}.{format.value}"
     if format is GraphFormat.dot:
         target.write_text(to_dot(picture))
-        typer.echo(f"wrote {target}")
+        typer.echo(say_wrote(target))
         return
     try:
-        used = render(picture, target, format.value)
+        with written(target, f".{format.value}") as path:
+            used = render(picture, path, format.value)
     except RenderError as error:
         typer.echo(f"error: {error}", err=True)
         raise typer.Exit(1) from None
-    typer.echo(f"wrote {target}" + (" (without graphviz: a simple layout)" if used == "layered" else ""))
+    typer.echo(say_wrote(target, " (without graphviz: a layered layout)" if used == "layered" else ""),
+               err=is_stdout(target))
 
 
 @app.command()
