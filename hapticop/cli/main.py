@@ -158,7 +158,9 @@ def compose(
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
-    check: bool = typer.Option(False, "--check", help="exit 1 when the run's results miss a target (for CI)"),
+    check: bool = typer.Option(False, "--check",
+                               help="exit 1 when the run's results miss a target (for CI; without it the last line "
+                                    "says which were missed and the status stays 0)"),
     group_readable: bool = typer.Option(
         False, "--group-readable", envvar="HAPTICOP_GROUP_READABLE",
         help="let your group read the run's logs and results (directories 0750, files 0640; default: yours alone)"),
@@ -178,7 +180,7 @@ def compose(
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_recording, print_results, print_timing
+    from hapticop.runtime.report import closing_line, missed_targets, print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     live = None if view is None else _live_options(view, view_host, view_rate)
@@ -210,16 +212,11 @@ def compose(
         print_recording(result.recording, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
-    status = int(result.outcome.status)
-    if check and status == 0:
-        from hapticop.runtime.report import missed_targets
-
-        missed = missed_targets(result.outcome.run_dir)
-        for name in missed:
-            console.print(f"[red]target missed: {name}[/]")
-        status = 1 if missed else 0
-    console.print(f"exit: {result.outcome.status.name.lower() if status == int(result.outcome.status) else 'failure'}"
-                  f" ({status})")
+    missed = missed_targets(result.outcome.run_dir)
+    for name in missed:
+        console.print(f"[red]target missed: {name}[/]")
+    status, line = closing_line(int(result.outcome.status), result.outcome.status.name.lower(), missed, check)
+    console.print(f"[red]{line}[/]" if status or missed else line, highlight=False)
     raise typer.Exit(status)
 
 
