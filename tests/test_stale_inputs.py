@@ -27,13 +27,18 @@ class Reader(Block):
         self.valid = 0
 
     def compute(self):
-        self.valid += self.inputs.sample.valid
+        port = self.inputs.sample
+        if port.queue:  # every sample, in order
+            while port.pop():
+                self.valid += port.valid
+        else:
+            self.valid += port.valid
 
     def clean(self):
         (self.run_dir / "valid.txt").write_text(str(self.valid))
 
 
-def linked(delay_s: float, max_age: str, stamp: str = "sent") -> str:
+def linked(delay_s: float, max_age: str, stamp: str = "sent", policy: str = "{kind: latest}") -> str:
     return f"""
     version: 1
     threads:
@@ -50,7 +55,7 @@ def linked(delay_s: float, max_age: str, stamp: str = "sent") -> str:
       reader: {{block: "tests.test_stale_inputs:Reader"}}
     streams:
       sent: {{from: source.sample, to: [link.sample]}}
-      received: {{from: link.sample_received, to: [reader.sample], max_age: {max_age}}}
+      received: {{from: link.sample_received, to: [reader.sample], max_age: {max_age}, policy: {policy}}}
     """
 
 
@@ -59,8 +64,9 @@ def _warnings(run):
                       r"max_age 50.0 ms \(([0-9]+) in a row\)", (run / "reader.log").read_text())
 
 
-def test_a_link_slower_than_the_deadline_is_said_with_age_and_deadline_rate_limited(tmp_path):
-    result = compose(tmp_path, linked(0.07, "50ms"), duration="25s")
+@pytest.mark.parametrize("policy", ["{kind: latest}", "{kind: queue, capacity: 4}"])
+def test_a_link_slower_than_the_deadline_is_said_with_age_and_deadline_rate_limited(tmp_path, policy):
+    result = compose(tmp_path, linked(0.07, "50ms", policy=policy), duration="25s")
     run = tmp_path / "run-c"
     assert (run / "valid.txt").read_text() == "0"  # the reader never had a sample: the robot never moved
     said = _warnings(run)

@@ -106,7 +106,11 @@ class InputPort:
 
     def pop(self) -> bool:
         """Take the next queued sample into `value`; False when the queue is empty."""
-        return self.transport is not None and self.transport.pop_into(self.value, self.meta, self.origins)
+        if self.transport is None or not self.transport.pop_into(self.value, self.meta, self.origins):
+            return False
+        if self.max_age_ns:
+            self._judge_arrival()
+        return True
 
     @property
     def seq(self) -> int:
