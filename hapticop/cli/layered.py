@@ -259,7 +259,7 @@ def _chains(boxes: dict[str, _Box], edges: list[tuple[int, Edge]],
         middle = (a + b) // 2 if (b - a) % 2 == 0 else a + 1
         for layer in range(a + 1, b):
             dummy = f"\0{i}:{layer}"
-            w, h = _text_size(edge.label, FONT - 2) if layer == middle and edge.label else (0.0, 0.0)
+            w, h = _text_size(_wrapped(edge.label), FONT - 2) if layer == middle and edge.label else (0.0, 0.0)
             boxes[dummy] = _Box(w + 4, h + 4, layer)
             chain.append(dummy)
         chain.append(right)
@@ -424,7 +424,7 @@ def _edge_svg(edge: Edge, chain: list[str], boxes: dict[str, _Box], vertical: bo
     out = [f'<polyline points="{path}" fill="none" stroke="{edge.color}"{dash}{marker}>{title}</polyline>']
     label_box = next((boxes[n] for n in chain[1:-1] if boxes[n].height > 4), None)
     if edge.label and label_box is not None:
-        out.append(_text(edge.label, label_box.x, label_box.y, FONT - 2, edge.color))
+        out.append(_text(_wrapped(edge.label), label_box.x, label_box.y, FONT - 2, edge.color))
     elif edge.label:  # no column between: beside the middle of the line
         (x0, y0), (x1, y1) = points[0], points[-1]
         out.append(_text(edge.label, (x0 + x1) / 2, (y0 + y1) / 2 - 6, FONT - 2, edge.color))
@@ -443,6 +443,12 @@ def _node_svg(label: str, shape: str, box: _Box, fill: str, peripheries: int) ->
     colour = "white" if shape == "bar" else "black"
     return [f'<rect x="{left:.1f}" y="{top:.1f}" width="{box.width:.1f}" height="{box.height:.1f}" '
             f'rx="{radius}" fill="{fill}" stroke="black"/>', _text(label, box.x, box.y, FONT, colour)]
+
+
+def _wrapped(label: str) -> str:
+    """An edge's label with what it says of the stream in brackets on a line of its own (a network
+    stream's QoS is longer than its name)."""
+    return label.replace(" (", "\n(", 1)
 
 
 def _text(label: str, x: float, y: float, font: float, colour: str = "black") -> str:

@@ -216,7 +216,7 @@ def compose(
     for name in missed:
         console.print(f"[red]target missed: {name}[/]")
     status, line = closing_line(int(result.outcome.status), result.outcome.status.name.lower(), missed, check)
-    console.print(f"[red]{line}[/]" if status or missed else line, highlight=False)
+    console.print(f"[red]{line}[/]" if status or missed else line, highlight=False, soft_wrap=True)  # one line
     raise typer.Exit(status)
 
 
