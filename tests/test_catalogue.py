@@ -90,3 +90,27 @@ def test_an_installed_package_names_its_blocks(installed_package):
     assert result.exit_code == 0 and "spring" in result.output and "from a package of its own" in result.output
     (entry,) = catalogue(["spring"])
     assert entry.origin == "installed" and entry.outputs["force"]["unit"] == "N"
+
+
+def test_nested_parameter_sets_are_shown_with_their_units_and_what_chooses_them():
+    """A choice told apart by `kind` (the workspace's sphere, the force models), an optional set (the
+    governor) and a list of sets: each key listed under the parameter holding it, indented."""
+    result = runner.invoke(app, ["blocks", "workspace_limit", "haptic_controller", "zenoh_bridge", "scripted_hand"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert "    param limit.radius_m (kind 'sphere'): number > 0 = 0.04 [m] (retunes live) - Its radius." in lines
+    assert any(line.startswith("    param limit.half_size_m (kind 'box'): [number > 0, number > 0, number > 0]")
+               and "[m]" in line for line in lines)
+    assert any(line.startswith("    param force_model.fz_max_n (kind 'braking_field'): number >= 0 = 6.0 [N]")
+               for line in lines)
+    assert any(line.startswith("    param force_model.k3_n_per_m (kind 'thesis' or 'thesis_corrected')")
+               for line in lines)
+    assert any(line.startswith("    param governor.brake_decel_mps2 (when given): number > 0 = 0.5 [m/s²]")
+               for line in lines)
+    assert any(line.startswith("    param emulate.delay_s (when given): number >= 0 = 0.0 [s]") for line in lines)
+    assert any(line.startswith("    param script[].t_s: number >= 0.0") and "[s]" in line for line in lines)
+    assert any(line.startswith("  param centring: CentringParams (retunes live) - ") for line in lines)
+    assert "    param centring.kp_n_per_m: number >= 0 = 55.0 [N/m] (retunes live) - Spring to the origin, N/m." \
+        in lines
+    markdown = to_markdown(catalogue(["workspace_limit"]))
+    assert "| &nbsp;&nbsp;&nbsp;&nbsp;`limit.radius_m` (kind 'sphere') | number > 0 | `0.04` | m |" in markdown

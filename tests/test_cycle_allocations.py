@@ -14,11 +14,13 @@ from hapticop.validation import validate_text
 from .runtime_helpers import counting
 
 
-def _assert_nothing_stays(system, run_cycles) -> None:
-    """What `run_cycles` leaves allocated, the log writer's thread aside (not the cycle's business)."""
+def _assert_nothing_stays(system, run_cycles, aside: tuple[str, ...] = ()) -> None:
+    """What `run_cycles` leaves allocated, the log writer's thread aside (not the cycle's business),
+    and the files `aside` names (what they hold is data in flight, replaced as it goes)."""
     while not system.writer.queue.empty():
         time.sleep(0.01)
-    only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py")]
+    only_cycle = [tracemalloc.Filter(False, "*/logs.py"), tracemalloc.Filter(False, "*/threading.py"),
+                  *(tracemalloc.Filter(False, pattern) for pattern in aside)]
     tracemalloc.start()
     before = tracemalloc.take_snapshot().filter_traces(only_cycle)
     run_cycles()
@@ -183,3 +185,14 @@ def test_every_haptic_effect_summed_and_limited_allocates_nothing_that_stays(tmp
             for name in names:
                 felt[name] = max(felt[name], float(np.abs(main.runners[name].block.outputs.force.value).max()))
         assert all(felt.values()), felt  # each one rendered something
+
+
+def test_a_stream_stale_on_every_arrival_allocates_nothing_that_stays(tmp_path):
+    """Judging each arrival against max_age, and saying so every 10 s, leaves nothing behind."""
+    from .test_stale_inputs import linked
+
+    with _virtual_system(tmp_path, linked(0.07, "50ms"), "stale.yaml") as (system, _, cycles):
+        cycles(0, 2_000)  # stale from the first arrivals on, said once already
+        # said again at 10 s; the emulated link's 70 packets in flight are new ones, not more ones
+        _assert_nothing_stays(system, lambda: cycles(2_000, 12_000), aside=("*/network/link.py",))
+    assert (tmp_path / "reader.log").read_text().count("every sample arrives stale") == 2

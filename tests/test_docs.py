@@ -219,3 +219,31 @@ def test_the_tutorials_mistakes_print_what_it_shows(tmp_path, monkeypatch):
     result = CliRunner().invoke(app, ["validate", "my_grip.yaml"])
     assert result.exit_code == 1
     assert result.output == shown
+
+
+def test_the_composition_reference_has_every_model_of_the_format():
+    """Every model a composition file reaches outside a block's `params` (the hosts, a stream's network
+    settings, an emulated link) has a section of its own in docs/reference/composition.md."""
+    from hapticop.cli.docpages import FORMAT_MODELS
+    from hapticop.composition.schema import composition_schema
+
+    schema = composition_schema()
+    reached: set[str] = set()
+
+    def walk(node) -> None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if key == "$ref" and value.rsplit("/", 1)[-1] not in reached:
+                    reached.add(value.rsplit("/", 1)[-1])
+                    walk(schema["$defs"][value.rsplit("/", 1)[-1]])
+                elif key != "params":  # a block's parameters: the catalogue's
+                    walk(value)
+        elif isinstance(node, list):
+            for value in node:
+                walk(value)
+
+    walk(schema["properties"])
+    assert {"Host", "NetworkQoS", "LinkParams"} <= reached
+    assert reached <= set(FORMAT_MODELS)
+    page = (ROOT / "docs" / "reference" / "composition.md").read_text()
+    assert "| `delay_s` | number (s) | `0.0` |" in page and "[NetworkQoS](#networkqos)" in page

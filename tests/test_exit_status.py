@@ -3,8 +3,14 @@ or results an activity promised and did not leave, fail the run with one line ea
 
 from __future__ import annotations
 
+import json
+
+import pytest
+from typer.testing import CliRunner
+
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params
+from hapticop.cli.main import app
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import SYSTEMS
@@ -72,3 +78,42 @@ def test_a_hallway_run_too_short_to_operate_says_what_never_ran(tmp_path):
     assert "'haptic' never reached running (it got as far as resource configuration)" in reasons, reasons
     assert any(r.startswith("'world' ran but left no trajectory.npz, metrics.json, results.json")
                and r.endswith("results lost") for r in reasons), reasons
+
+
+class VerdictParams(Params):
+    met: bool = False
+
+
+class Verdict(Block):
+    """Leaves a results.json with one target, met or missed, as the hallway's world does."""
+
+    Params = VerdictParams
+
+    def clean(self):
+        row = {"metric": "distance to the goal", "value": 2.5, "unit": "m", "target": "< 0.1", "ok": self.params.met}
+        (self.run_dir / "results.json").write_text(json.dumps({"title": "goal", "rows": [row]}))
+
+
+@pytest.mark.parametrize(("met", "check", "status", "last"), [
+    (True, False, 0, "exit: success (0)"),
+    (True, True, 0, "exit: success (0)"),
+    (False, False, 0, "exit: success (0), but 1 target missed (goal: distance to the goal); --check makes that exit 1"),
+    (False, True, 1, "exit: failure (1): 1 target missed (goal: distance to the goal)"),
+])
+def test_the_last_line_says_a_missed_target(tmp_path, met, check, status, last):
+    """A run that misses its own targets does not end saying a plain success; --check makes it exit 1."""
+    path = tmp_path / "verdict.yaml"
+    path.write_text(f"""
+    version: 1
+    threads:
+      main: {{period: 1ms, deploy: main, schedules: {{0: [mediator, verdict]}}}}
+    activities:
+      mediator: {{block: mediator}}
+      verdict: {{block: "tests.test_exit_status:Verdict", params: {{met: {str(met).lower()}}}}}
+    """)
+    result = CliRunner().invoke(app, ["compose", str(path), "--clock", "virtual", "--duration", "20ms",
+                                      "--run-dir", str(tmp_path / "run"), "--control", str(tmp_path / "ctl")]
+                                + (["--check"] if check else []))
+    assert result.exit_code == status, result.output
+    assert result.output.rstrip().splitlines()[-1] == last
+    assert ("target missed: goal: distance to the goal" in result.output) is not met

@@ -109,3 +109,44 @@ def test_an_unknown_view_lists_the_views():
     result = runner.invoke(app, ["graph", str(HALLWAY), "--view", "medaitor"])
     assert result.exit_code == 2
     assert "no view 'medaitor': choose one of dataflow, nets, all, mediator" in result.output
+
+
+# -- the layout without graphviz: legible on the shipped systems ---------------------------------
+
+# Edge crossings the layered layout drew before it packed parts, chose its direction and kept its
+# best ordering (counted with `crossings` on that layout): it may not draw more.
+CROSSINGS_BEFORE = {
+    ("hallway", "dataflow"): 21, ("hallway", "nets"): 184, ("hallway", "all"): 248,
+    ("teleop", "dataflow"): 42, ("teleop", "nets"): 185, ("teleop", "all"): 284,
+    ("teleop_sim", "dataflow"): 87, ("teleop_sim", "nets"): 184, ("teleop_sim", "all"): 328,
+    ("wall", "dataflow"): 10, ("wall", "nets"): 1, ("wall", "all"): 11,
+}
+
+
+@pytest.fixture(scope="module")
+def laid_out():
+    from hapticop.cli.layered import layout
+
+    graphs = {name: validate_path(SYSTEMS / f"{name}.yaml").graph for name, _ in CROSSINGS_BEFORE}
+    return {(name, view): (drawing(graphs[name], view), layout(drawing(graphs[name], view)))
+            for name, view in CROSSINGS_BEFORE}
+
+
+@pytest.mark.parametrize(("name", "view"), list(CROSSINGS_BEFORE))
+def test_the_layout_without_graphviz_is_legible(laid_out, name, view):
+    from hapticop.cli.layered import crossings, to_svg
+
+    picture, laid = laid_out[(name, view)]
+    # no two boxes overlap: nodes, and the edges' labels laid out as boxes
+    shown = [(nid, box) for nid, box in laid.boxes.items() if nid in picture.nodes or box.height > 4]
+    shown.sort(key=lambda item: item[1].x - item[1].width / 2)
+    for i, (first, a) in enumerate(shown):
+        for second, b in shown[i + 1:]:
+            if b.x - b.width / 2 >= a.x + a.width / 2:
+                break  # sorted by left edge: none further can overlap `a`
+            assert abs(a.y - b.y) >= (a.height + b.height) / 2, (first, second)
+    # the picture about a screen's shape, not a strip (the dataflow was 2634 x 428 px)
+    svg = ET.fromstring(to_svg(picture))
+    width, height = float(svg.get("width")), float(svg.get("height"))
+    assert 1 / 3 <= width / height <= 3, (width, height)
+    assert crossings(laid) <= CROSSINGS_BEFORE[(name, view)]

@@ -47,15 +47,15 @@ class WireStream(BaseModel):
     """A network stream as one bridge sees it (written by the host split, docs/teleop.md)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
-    stream: str
-    dtype: str
-    shape: tuple[int, ...] = ()
-    unit: str = "1"
-    priority: Priority = "data"
-    keep: Literal["newest", "queue"] = "newest"
-    depth: int | None = Field(None, ge=1, le=65536)
-    reliability: Literal["best_effort", "reliable"] = "best_effort"
-    congestion: Literal["drop", "block"] = "drop"
+    stream: str = Field(description="the stream's name in the composition")
+    dtype: str = Field(description="its samples' element type")
+    shape: tuple[int, ...] = Field((), description="its samples' shape")
+    unit: str = Field("1", description="its samples' unit")
+    priority: Priority = Field("data", description="the stream's network priority (NetworkQoS)")
+    keep: Literal["newest", "queue"] = Field("newest", description="the newest sample only, or a queue (NetworkQoS)")
+    depth: int | None = Field(None, ge=1, le=65536, description="a queue's depth (NetworkQoS)")
+    reliability: Literal["best_effort", "reliable"] = Field("best_effort", description="Zenoh's reliability")
+    congestion: Literal["drop", "block"] = Field("drop", description="what Zenoh does with a full queue")
 
     def port(self) -> Port:
         return Port(self.dtype, self.shape, self.unit, f"stream '{self.stream}' across the network")

@@ -16,7 +16,8 @@ from hapticop.blocks.interface import Port
 from hapticop.blocks.registry import BUILTIN, UnknownBlock, installed, resolve
 
 # Units by the suffix of a parameter's name (the project names SI quantities with their unit).
-_UNITS = [("_n_per_m", "N/m"), ("_ns_per_m", "N·s/m"), ("_rad_per_s_m", "rad/(s·m)"), ("_per_s", "1/s"),
+_UNITS = [("_n_per_mps", "N·s/m"), ("_n_per_rad_s", "N·s/rad"), ("_n_per_m", "N/m"), ("_ns_per_m", "N·s/m"),
+          ("_rad_per_s_m", "rad/(s·m)"), ("_per_s", "1/s"),
           ("_rad_s", "rad/s"),
           ("_mps2", "m/s²"), ("_mps", "m/s"), ("_nm_per_a", "N·m/A"), ("_n_per_s", "N/s"), ("_n", "N"),
           ("_m", "m"), ("_s", "s"), ("_ms", "ms"), ("_hz", "Hz"), ("_fhz", "Hz"), ("_deg", "°"), ("_rad", "rad"),
@@ -31,6 +32,8 @@ class ParameterEntry:
     unit: str
     description: str
     live: str  # "retunes live", "capability configuration", "resource configuration"
+    variant: str = ""  # for a parameter inside one of a choice's models: which (kind 'sphere', when given)
+    depth: int = 0  # how deep in nested parameter sets (0: a key of `params` itself)
 
 
 @dataclass
@@ -121,19 +124,54 @@ def _parameters(cls: type[Block], defaults: dict) -> list[ParameterEntry]:
             else:
                 return prop
 
-    def walk(properties: dict, prefix: str, top: str) -> None:
+    def walk(properties: dict, prefix: str, top: str, variant: str, depth: int) -> None:
         for name, prop in properties.items():
+            if variant.startswith("kind") and name == "kind":
+                continue  # the variant's heading says it
             dotted, root = f"{prefix}{name}", top or name
             target = deref(prop)
-            if "properties" in target:
-                walk(target["properties"], f"{dotted}.", root)
+            description = " ".join((prop.get("description") or target.get("description", "")).split())
+            if "properties" in target:  # a nested parameter set: its heading, then its own
+                found.append(ParameterEntry(dotted, target.get("title", "parameters"), "", "", description,
+                                            _live(cls, root), variant, depth))
+                walk(target["properties"], f"{dotted}.", root, variant, depth + 1)
                 continue
-            found.append(ParameterEntry(dotted, _type_name(prop, deref), _default_at(defaults, dotted),
-                                        _unit(name), prop.get("description") or target.get("description", ""),
-                                        _live(cls, root)))
+            # inside one of a choice's models the defaults at hand are another model's: the schema's
+            default = prop.get("default", "(required)") if variant else _default_at(defaults, dotted)
+            found.append(ParameterEntry(dotted, _type_name(prop, deref), default, unit_of(name), description,
+                                        _live(cls, root), variant, depth))
+            for label, model, nested in _nested_models(target, deref):
+                walk(model["properties"], f"{dotted}{nested}", root, label, depth + 1)
 
-    walk(schema.get("properties", {}), "", "")
+    walk(schema.get("properties", {}), "", "", "", 0)
     return found
+
+
+def _nested_models(prop: dict, deref) -> list[tuple[str, dict, str]]:
+    """The parameter sets inside a parameter that is not one itself, with what chooses each and
+    how their keys are reached: a choice told apart by `kind` (the workspace's box or sphere, the
+    force models), an optional set (the governor: null or its parameters), a list or mapping of sets."""
+    options = [deref(option) for option in prop.get("oneOf") or prop.get("anyOf") or ()]
+    models = [option for option in options if "properties" in option]
+    if models:
+        nullable = len(models) < len(options)
+        return [(_variant_label(model, nullable), model, ".") for model in models]
+    items = deref(prop.get("items", {})) if prop.get("type") == "array" else {}
+    if "properties" in items:
+        return [("", items, "[].")]
+    values = prop.get("additionalProperties")
+    values = deref(values) if isinstance(values, dict) else {}
+    if "properties" in values:
+        return [("", values, ".NAME.")]
+    return []
+
+
+def _variant_label(model: dict, nullable: bool) -> str:
+    kind = model["properties"].get("kind", {})
+    kinds = [kind["const"]] if "const" in kind else kind.get("enum", [])
+    if kinds:
+        return "kind " + " or ".join(repr(k) for k in kinds)
+    return "when given" if nullable else ""
 
 
 def _default_at(defaults: dict, dotted: str) -> Any:
@@ -159,17 +197,22 @@ def _type_name(prop: dict, deref) -> str:
         if key in prop:
             return " or ".join(_type_name(option, deref) for option in prop[key])
     if "properties" in prop:
-        kind = prop["properties"].get("kind", {})
-        return f"{prop.get('title', 'object')}" + (f" (kind {kind['const']!r})" if "const" in kind else "")
+        label = _variant_label(prop, False)
+        return f"{prop.get('title', 'object')}" + (f" ({label})" if label else "")
     kind = prop.get("type", "any")
+    if kind == "array" and "prefixItems" in prop:
+        return f"[{', '.join(_type_name(item, deref) for item in prop['prefixItems'])}]"
     if kind == "array":
         return f"list of {_type_name(prop.get('items', {}), deref)}"
+    if kind == "object" and isinstance(prop.get("additionalProperties"), dict):
+        return f"mapping of names to {_type_name(prop['additionalProperties'], deref)}"
     bounds = [f"{word} {prop[key]}" for key, word in (("minimum", ">="), ("exclusiveMinimum", ">"),
                                                       ("maximum", "<="), ("exclusiveMaximum", "<")) if key in prop]
     return " ".join([kind, *bounds])
 
 
-def _unit(name: str) -> str:
+def unit_of(name: str) -> str:
+    """A parameter's unit, read off its name's suffix (`delay_s`: s); '' when it has none."""
     for suffix, unit in _UNITS:
         if name.endswith(suffix):
             return unit
@@ -183,7 +226,9 @@ def to_markdown(entries: list[BlockEntry]) -> str:
              "(regenerate with `hapticop blocks --markdown > docs/blocks.md`; a test keeps it current).",
              "Ports are described for the block's default parameters; *live* says what a patch of that",
              "parameter does to a running activity: it retunes between two cycles, or takes the activity",
-             "through capability or resource configuration.", ""]
+             "through capability or resource configuration. Nested parameter sets are indented under the",
+             "key that holds them; inside a choice (`kind`) or an optional set, a parameter says which",
+             "it belongs to; `[]` is each item of a list, `NAME` each entry of a mapping.", ""]
     for entry in entries:
         lines += [f"## `{entry.name}`", "", f"`{entry.target}` ({entry.origin}). {entry.summary}", ""]
         if entry.error:
@@ -207,7 +252,8 @@ def to_markdown(entries: list[BlockEntry]) -> str:
                 lines += [f"{title}: " + "; ".join(f"`{n}` ({d})" for n, d in flags.items()) + ".", ""]
         if entry.parameters:
             lines += ["| parameter | type | default | unit | live | |", "|---|---|---|---|---|---|"]
-            lines += [f"| `{p.name}` | {p.type.replace('|', '∣')} | `{p.default}` | {p.unit} | {p.live} | "
+            lines += [f"| {'&nbsp;' * 4 * p.depth}`{p.name}`{f' ({p.variant})' if p.variant else ''} | "
+                      f"{p.type.replace('|', '∣')} | `{p.default}` | {p.unit} | {p.live} | "
                       f"{p.description.replace('|', '∣')} |" for p in entry.parameters]
             lines.append("")
     return "\n".join(lines).rstrip() + "\n"

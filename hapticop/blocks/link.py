@@ -37,6 +37,9 @@ class LinkBlockParams(Params):
         description="the streams through the link, by name: each gets an input <name>, and outputs "
         "<name>_received and <name>_delay (by default one scalar stream, 'samples')")
     link: LinkParams = Field(default_factory=LinkParams)
+    stamp: Literal["arrival", "sent"] = Field(
+        "arrival", description="a received sample's time stamp: when it arrived (its age starts at zero there), "
+        "or when it was sent, as a network bridge stamps it, so that a reader's max_age also judges the crossing")
 
 
 class Link(Block):
@@ -66,7 +69,7 @@ class Link(Block):
             emulated = EmulatedLink(dataclasses.replace(link, seed=seed), width, stream.dtype)
             source, received = getattr(self.inputs, name), getattr(self.outputs, f"{name}_received")
             self.lanes.append(_Lane(source, source.value.reshape(-1), received, received.value.reshape(-1),
-                                    getattr(self.outputs, f"{name}_delay"), emulated))
+                                    getattr(self.outputs, f"{name}_delay"), emulated, self.params.stamp == "sent"))
 
     def compute(self) -> None:
         now_s = self.clock.now_ns() / 1e9
@@ -90,8 +93,10 @@ class _Lane:
     arrival: np.ndarray  # its value, flat (a view)
     delay: object
     link: EmulatedLink
+    stamp_sent: bool = False  # stamp a received sample with its send time, as a bridge does
     newest: int = -1
     late: int = 0
+    sent_ns: float = 0.0  # when the held sample was sent
 
     def step(self, now_s: float) -> None:
         source, link = self.source, self.link
@@ -108,8 +113,11 @@ class _Lane:
                 continue
             self.newest = sequence
             self.arrival[:] = link.payload(slot)
+            self.sent_ns = link.sent_s(slot) * 1e9
             self.delay.value[...] = now_s - link.sent_s(slot)  # type: ignore[attr-defined]
             arrived = True
         if arrived:
+            if self.stamp_sent:
+                self.received.stamp_ns = round(self.sent_ns)  # type: ignore[attr-defined]
             self.received.publish()  # type: ignore[attr-defined]
             self.delay.publish()  # type: ignore[attr-defined]

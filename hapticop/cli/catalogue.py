@@ -51,5 +51,7 @@ def _detail(entry) -> None:
         typer.echo(f"  needs: parameter '{param}' names an activity providing {provides}")
     for p in entry.parameters:
         unit = f" [{p.unit}]" if p.unit else ""
-        typer.echo(f"  param {p.name}: {p.type} = {json.dumps(p.default, default=str)}{unit} ({p.live})"
+        variant = f" ({p.variant})" if p.variant else ""
+        value = f" = {json.dumps(p.default, default=str)}" if p.default != "" else ""  # a set: its keys follow
+        typer.echo(f"  {'  ' * p.depth}param {p.name}{variant}: {p.type}{value}{unit} ({p.live})"
                    + (f" - {p.description}" if p.description else ""))

@@ -19,6 +19,7 @@ DOCS = Path(__file__).resolve().parents[2] / "docs"
 FORMAT_MODELS = [
     "Thread", "Activity", "Stream", "LatestPolicy", "QueuePolicy", "Coordination", "StandardCoordination",
     "PetriNet", "Place", "Transition", "FlagMap", "Mode", "ScriptedPatch", "Latency", "Record",
+    "Host", "NetworkQoS", "LinkParams",
 ]
 
 
@@ -87,6 +88,8 @@ def composition_reference(root: Any = None) -> str:
 
 def _model_section(name: str, model: dict, defs: dict) -> list[str]:
     """One model's fields as a table; the heading's anchor (its name in lower case) is what links use."""
+    from hapticop.blocks.catalogue import unit_of
+
     required = set(model.get("required", []))
     lines = [f"## {name}", ""]
     if name == "Composition":
@@ -96,7 +99,9 @@ def _model_section(name: str, model: dict, defs: dict) -> list[str]:
     lines += ["| key | type | default | |", "|---|---|---|---|"]
     for key, field in model.get("properties", {}).items():
         default = "required" if key in required else _default(field)
-        lines.append(f"| `{key}` | {_cell(_type(field, defs))} | {_cell(default)} | "
+        kind = _type(field, defs)
+        unit = unit_of(key) if field.get("type") in ("number", "integer") else ""
+        lines.append(f"| `{key}` | {_cell(kind + (f' ({unit})' if unit else ''))} | {_cell(default)} | "
                      f"{_cell(field.get('description', ''))} |")
     return lines + [""]
 

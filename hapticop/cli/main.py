@@ -158,7 +158,9 @@ def compose(
     shutdown_timeout: str = typer.Option("5s", help="how long coordination may take to shut down before it is forced"),
     control: str | None = typer.Option(
         None, help="control socket name or path for patch/status (default: the composition's name)"),
-    check: bool = typer.Option(False, "--check", help="exit 1 when the run's results miss a target (for CI)"),
+    check: bool = typer.Option(False, "--check",
+                               help="exit 1 when the run's results miss a target (for CI; without it the last line "
+                                    "says which were missed and the status stays 0)"),
     group_readable: bool = typer.Option(
         False, "--group-readable", envvar="HAPTICOP_GROUP_READABLE",
         help="let your group read the run's logs and results (directories 0750, files 0640; default: yours alone)"),
@@ -178,7 +180,7 @@ def compose(
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_recording, print_results, print_timing
+    from hapticop.runtime.report import closing_line, missed_targets, print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     live = None if view is None else _live_options(view, view_host, view_rate)
@@ -210,16 +212,11 @@ def compose(
         print_recording(result.recording, console)
     for reason in result.outcome.reasons:
         console.print(f"[red]{reason}[/]")
-    status = int(result.outcome.status)
-    if check and status == 0:
-        from hapticop.runtime.report import missed_targets
-
-        missed = missed_targets(result.outcome.run_dir)
-        for name in missed:
-            console.print(f"[red]target missed: {name}[/]")
-        status = 1 if missed else 0
-    console.print(f"exit: {result.outcome.status.name.lower() if status == int(result.outcome.status) else 'failure'}"
-                  f" ({status})")
+    missed = missed_targets(result.outcome.run_dir)
+    for name in missed:
+        console.print(f"[red]target missed: {name}[/]")
+    status, line = closing_line(int(result.outcome.status), result.outcome.status.name.lower(), missed, check)
+    console.print(f"[red]{line}[/]" if status or missed else line, highlight=False, soft_wrap=True)  # one line
     raise typer.Exit(status)
 
 
@@ -410,10 +407,12 @@ def graph(
                              help="dataflow (threads, activities, streams), nets (every net and its flags), "
                                   "the name of one net, or all"),
     output: Path | None = typer.Option(None, "-o", "--output", metavar="PATH",
-                                       help="where to write (default: FILE-VIEW.FORMAT in the current directory)"),
+                                       help="where to write, '-' for standard output (default: FILE-VIEW.FORMAT in the "
+                                            "current directory)"),
     format: GraphFormat = typer.Option(GraphFormat.svg, "--format", help="svg, png, or dot text"),
 ) -> None:
     """Draw a composition: by default its dataflow; its nets and flag maps with --view nets."""
+    from hapticop.cli.outputs import is_stdout, say_wrote, written
     from hapticop.cli.render import RenderError, drawing, render, to_dot
 
     validated = validate_path(file)
@@ -430,20 +429,22 @@ def graph(
     except RenderError as error:
         typer.echo(f"error: {error}", err=True)
         raise typer.Exit(2) from None
-    if format is GraphFormat.dot and output is None:
+    if format is GraphFormat.dot and (output is None or is_stdout(output)):
         typer.echo(to_dot(picture), nl=False)
         return
     target = output or Path.cwd() / f"{file.stem}-{view}.{format.value}"
     if format is GraphFormat.dot:
         target.write_text(to_dot(picture))
-        typer.echo(f"wrote {target}")
+        typer.echo(say_wrote(target))
         return
     try:
-        used = render(picture, target, format.value)
+        with written(target, f".{format.value}") as path:
+            used = render(picture, path, format.value)
     except RenderError as error:
         typer.echo(f"error: {error}", err=True)
         raise typer.Exit(1) from None
-    typer.echo(f"wrote {target}" + (" (without graphviz: a simple layout)" if used == "layered" else ""))
+    typer.echo(say_wrote(target, " (without graphviz: a layered layout)" if used == "layered" else ""),
+               err=is_stdout(target))
 
 
 @app.command()

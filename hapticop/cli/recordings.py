@@ -47,19 +47,22 @@ def info(
 
 def recover(
     file: Path = typer.Argument(..., help="what a killed run left (RUN.mcap.part)"),
-    output: Path | None = typer.Option(None, "-o", "--output", help="where to write (default: FILE without .part)"),
+    output: Path | None = typer.Option(None, "-o", "--output",
+                                       help="where to write, '-' for standard output (default: FILE without .part)"),
 ) -> None:
     """Rewrite an unfinished recording into a valid file; exit 0 if nothing was lost, 3 if some was."""
+    from hapticop.cli.outputs import is_stdout, written
     from hapticop.recording.recover import recover as rewrite
 
     try:
-        found = rewrite(file, output)
+        with written(output, ".mcap") as target:
+            found = rewrite(file, target)
     except FileExistsError as error:
         raise _fail(str(error), 2) from None
     except OSError as error:
         raise _fail(f"cannot recover {file}: {error.strerror}", 2) from None
     for line in found.describe():
-        typer.echo(line)
+        typer.echo(line, err=is_stdout(output))
     if not found.messages:
         raise typer.Exit(1)
     raise typer.Exit(0 if found.complete else 3)
@@ -69,10 +72,13 @@ def plot(
     file: Path = typer.Argument(..., help="a recording (RUN.mcap)"),
     streams: list[str] = typer.Argument(..., help="streams, or one element of one: handle_force robot_pose[2]"),
     output: Path | None = typer.Option(None, "-o", "--output",
-                                       help="PNG to write (default: on screen, or FILE.png without a display)"),
-    csv: Path | None = typer.Option(None, "--csv", help="write the samples as CSV instead of drawing them"),
+                                       help="PNG to write, '-' for standard output (default: on screen, or "
+                                            "FILE.png without a display)"),
+    csv: Path | None = typer.Option(None, "--csv",
+                                    help="write the samples as CSV instead of drawing them ('-': standard output)"),
 ) -> None:
     """Draw recorded streams against time, or export them as CSV."""
+    from hapticop.cli.outputs import is_stdout, say_wrote, written
     from hapticop.recording import plot as plotting
     from hapticop.recording.reading import RecordingError
 
@@ -81,8 +87,11 @@ def plot(
     except RecordingError as error:
         raise _fail(str(error)) from None
     if csv is not None:
-        rows = plotting.write_csv(chosen, csv)
-        typer.echo(f"wrote {csv} ({rows} samples)")
+        if is_stdout(output):
+            raise _fail("--csv and -o cannot both be standard output", 2)
+        with written(csv, ".csv") as path:
+            rows = plotting.write_csv(chosen, path)
+        typer.echo(say_wrote(csv, f" ({rows} samples)"), err=is_stdout(csv))
         if output is None:
             return
     try:
@@ -92,9 +101,13 @@ def plot(
     import os
 
     target = output if output is not None or os.environ.get("DISPLAY") else file.with_suffix(".png")
-    written = plotting.draw(chosen, target, f"{file.name}: {', '.join(streams)}")
-    if written is not None:
-        typer.echo(f"wrote {written}")
+    title = f"{file.name}: {', '.join(streams)}"
+    if target is None:
+        plotting.draw(chosen, None, title)  # on screen
+        return
+    with written(target, ".png") as path:
+        plotting.draw(chosen, path, title)
+    typer.echo(say_wrote(target), err=is_stdout(target))
 
 
 def replay(
@@ -135,7 +148,8 @@ def _print_replayed(one) -> None:
 def report(
     file: Path = typer.Argument(..., help="a recording (RUN.mcap)"),
     output: Path | None = typer.Option(None, "-o", "--output",
-                                       help="directory to write to (default: RUN.report beside the file)"),
+                                       help="directory to write to (default: RUN.report beside the file); "
+                                            "not '-': a report is several files"),
     from_streams: bool = typer.Option(False, "--from-streams",
                                       help="build the hallway's metrics and picture from the haptic, Falcon and "
                                            "odometry streams even when an activity (a simulated world) leaves them"),
@@ -147,9 +161,12 @@ def report(
     the hallway's metrics and picture from its recorded streams."""
     from rich.console import Console
 
+    from hapticop.cli.outputs import is_stdout
     from hapticop.runtime.replay import ReplayError, leaving_results, open_run, results
     from hapticop.runtime.report import print_results
 
+    if is_stdout(output):
+        raise _fail("-o -: a report is a directory of files (metrics, picture), not one stream; name a directory", 2)
     target = output if output is not None else file.with_suffix(".report")
     try:
         run = open_run(file)

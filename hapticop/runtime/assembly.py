@@ -159,6 +159,8 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
             target.connect(objects[index] if queue else objects[0], queue, spec.max_age or 0)
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
+    for port in inputs.values():
+        port.log = log  # a stream whose every sample arrives stale says so in its reader's log
     timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
     thread = thread_of(composition).get(name)
     period_ns = composition.threads[thread].period if thread else 0

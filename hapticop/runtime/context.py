@@ -21,12 +21,15 @@ from hapticop.blocks.interface import Params, Port
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.streams import ORIGINS
 
+STALE_IN_A_ROW = 3  # stale arrivals in a row before a reader says so (one old sample at start-up is no news)
+STALE_SAID_EVERY_NS = 10_000_000_000  # while it lasts, said again this often
+
 
 class InputPort:
     """The reader's side of a stream: `value`, and how fresh it is."""
 
     __slots__ = ("name", "spec", "value", "meta", "origins", "max_age_ns", "transport", "queue", "fresh", "_clock",
-                 "_seen", "_number")
+                 "_seen", "_number", "log", "_stale_run", "_stale_said_at")
 
     def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
@@ -40,11 +43,15 @@ class InputPort:
         self.fresh = False  # a new sample arrived for this step
         self._seen = 0  # samples the transport had written when `value` was last copied
         self._number = 0  # meta[0] as a Python int: comparing numpy scalars costs more than the copy
+        self.log: Logger | None = None  # where stale arrivals are said (the activity's log; None: nowhere)
+        self._stale_run = 0  # samples in a row already older than max_age when they arrived
+        self._stale_said_at = -STALE_SAID_EVERY_NS
 
     def connect(self, transport, queue: bool, max_age_ns: int) -> None:
         """Read from `transport` from now on (assembly, or a live patch rewiring the stream)."""
         self.transport, self.queue, self.max_age_ns = transport, queue, max_age_ns
         self._seen = -1  # whatever the new transport holds is news
+        self._stale_run = 0
         self._number = int(self.meta[0])
 
     def disconnect(self) -> None:
@@ -70,11 +77,40 @@ class InputPort:
             self._number = number
         if fresh:
             self._seen = number
+            if self.max_age_ns:
+                self._judge_arrival()
         return fresh
+
+    def _judge_arrival(self) -> None:
+        """A stream whose every sample arrives older than its `max_age` (a link slower than the
+        deadline) leaves its reader with no valid sample, ever: that is said, with the age and the
+        deadline, at the third such sample in a row and every 10 s while it lasts. Between those
+        lines this adds two integer operations to a fresh sample; the line itself is queued to
+        the log's writer thread."""
+        now = self._clock()
+        age = now - int(self.meta[1])
+        log = self.log
+        if age <= self.max_age_ns:
+            if self._stale_run >= STALE_IN_A_ROW and log is not None:
+                log.info("input '%s': samples arrive within max_age again, after %d stale", self.name,
+                         self._stale_run)
+            self._stale_run = 0
+            return
+        self._stale_run += 1
+        if (self._stale_run >= STALE_IN_A_ROW and now - self._stale_said_at >= STALE_SAID_EVERY_NS
+                and log is not None):
+            self._stale_said_at = now
+            log.warning("input '%s': every sample arrives stale: %.1f ms old on arrival, max_age %.1f ms "
+                        "(%d in a row); the block sees no valid sample", self.name, age / 1e6,
+                        self.max_age_ns / 1e6, self._stale_run)
 
     def pop(self) -> bool:
         """Take the next queued sample into `value`; False when the queue is empty."""
-        return self.transport is not None and self.transport.pop_into(self.value, self.meta, self.origins)
+        if self.transport is None or not self.transport.pop_into(self.value, self.meta, self.origins):
+            return False
+        if self.max_age_ns:
+            self._judge_arrival()
+        return True
 
     @property
     def seq(self) -> int:

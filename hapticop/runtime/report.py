@@ -186,6 +186,21 @@ def missed_targets(run_dir: Path) -> list[str]:
     return missed
 
 
+def closing_line(status: int, name: str, missed: list[str], check: bool) -> tuple[int, str]:
+    """The run's exit status and the last line that says it (`compose`).
+
+    A run that ran cleanly but missed its own targets is no plain success: the line says which
+    targets were missed; with `--check` the status is 1, without it the run's own 0 stays
+    (docs/running.md, exit statuses).
+    """
+    if status != 0 or not missed:
+        return status, f"exit: {name} ({status})"
+    targets = f"{len(missed)} target{'s' if len(missed) > 1 else ''} missed ({'; '.join(missed)})"
+    if check:
+        return 1, f"exit: failure (1): {targets}"
+    return 0, f"exit: success (0), but {targets}; --check makes that exit 1"
+
+
 def print_recording(recording: dict, console: Console) -> None:
     """What the recorder wrote, and every sample it lost (none is the goal)."""
     streams = recording["streams"]
