@@ -8,10 +8,9 @@ gain / PI / lead-lag / low-pass chain at 1 kHz, with the thesis's Appendix D val
 from __future__ import annotations
 
 import dataclasses
-from typing import Annotated
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.bounds import Bounds
@@ -21,8 +20,7 @@ from hapticop.devices.ropod.linear_bank import LinearControllerParams
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
 from hapticop.devices.ropod.velocity_controller import PlatformControllerParams, PlatformVelocityController
 
-_LIBRARY = PlatformControllerParams()
-Positive = Annotated[float, Field(gt=0)]  # the defaults, written once in the library
+_LIBRARY = PlatformControllerParams()  # the defaults, written once in the library
 
 
 SETPOINT_RANGE = (-10.0, 10.0)  # m/s and rad/s: refused beyond (not clipped); max_velocity clips what is inside
@@ -42,15 +40,23 @@ class RopodControllerParams(Params):
         _LIBRARY.hold_below, gt=0, description="standstill hold: with a zero setpoint and the measured twist "
         "below this (m/s, rad/s), the platform integrators stay at zero, so braking's wind-up cannot drive "
         "the stopped robot back; null: the plain PI")
-    max_velocity: tuple[Positive, Positive, Positive] = Field(
+    max_velocity: tuple[float, float, float] = Field(
         _LIBRARY.max_velocity, description="the robot's own limits on what it executes, whatever the setpoint: "
         "|vx|, |vy| (m/s) and |wz| (rad/s)")
-    max_acceleration: tuple[Positive, Positive, Positive] | None = Field(
+    max_acceleration: tuple[float, float, float] | None = Field(
         _LIBRARY.max_acceleration, description="the robot's own limits on how fast the executed setpoint "
         "changes: m/s², m/s², rad/s² (null: a step is followed at once)")
     pivot_offsets_rad: tuple[float, ...] = Field(
         _LIBRARY.pivot_offsets_rad,
         description="pivot encoder offsets, SW1 first: a unit's angle is its reading minus its offset")
+
+
+    @field_validator("max_velocity", "max_acceleration")
+    @classmethod
+    def _positive(cls, limits: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if limits is not None and min(limits) <= 0:
+            raise ValueError(f"every limit must be above zero, not {list(limits)}")
+        return limits
 
 
 class RopodController(Block):
