@@ -183,3 +183,16 @@ def test_every_haptic_effect_summed_and_limited_allocates_nothing_that_stays(tmp
             for name in names:
                 felt[name] = max(felt[name], float(np.abs(main.runners[name].block.outputs.force.value).max()))
         assert all(felt.values()), felt  # each one rendered something
+
+
+def test_a_commands_range_check_allocates_nothing():
+    """The check a command's reader runs on each new sample (hapticop/blocks/bounds.py), good or refused."""
+    from hapticop.blocks.bounds import Bounds
+    from hapticop.blocks.interface import Port
+    from hapticop.testing import allocation_stats
+
+    bounds = Bounds(Port("float64", (3,), range=(-10.0, 10.0)), "setpoint")
+    good, bad = np.array([0.3, 0.0, -0.2]), np.array([np.nan, 1e300, 0.0])
+    retained, peak = allocation_stats(lambda: (bounds.admits(good), bounds.admits(bad)), 1000)
+    # retained: the counters themselves (Python ints); peak: numpy's transient ufunc scratch, no array
+    assert retained < 256 and peak < 2048
