@@ -192,7 +192,9 @@ def test_a_third_peer_cannot_take_the_stream_over(pair):
     start = pair.robot.clock.now_ns()
     hijack = np.array([-0.44, 0.0, 0.0]).tobytes()
     foreign, ahead = pair.refused("not from its owner's session"), pair.refused("implausibly far ahead")
+    deadline = time.monotonic() + PATIENCE_S
     while pair.robot.clock.now_ns() - start < 1_500_000_000 or pair.refused("implausibly far ahead") <= ahead:
+        assert time.monotonic() < deadline, f"no sample far ahead refused within {PATIENCE_S} s"
         pair.put(pair.keys["sample"], pair.header(10**7, session=12345) + hijack)
         pair.put(pair.keys["sample"], pair.header(10**7) + hijack)
         pair.step([0.2, 0.0, 0.0])
@@ -233,11 +235,37 @@ def test_forged_pongs_do_not_move_the_clock_offset(pair):
     pair.follows([0.2, 0.0, 0.0])
 
 
+def test_a_pong_without_its_pings_nonce_is_refused(pair):
+    """A pong right in every other way (session, slot, send time, plausible times) but for the nonce."""
+    pair.follows([0.1, 0.0, 0.0])
+    forged: list[bytes] = []
+
+    def answer(sample) -> None:
+        data = sample.payload.to_bytes()
+        if len(data) == wire.PING.size:
+            session, slot, nonce, t1 = wire.PING.unpack(data)
+            forged.append(wire.PONG.pack(session, slot, nonce ^ 1, t1, t1, t1, 0, pair.operator.block.session_id)
+                          + b"operator")
+
+    subscriber = pair.intruder.declare_subscriber(wire.ping_key(pair.system, "robot"), answer)
+    try:
+        before = pair.refused("pong to no ping of ours")
+        deadline = time.monotonic() + PATIENCE_S
+        while pair.refused("pong to no ping of ours") < before + 5:
+            assert time.monotonic() < deadline, "no pong without its nonce refused"
+            while forged:
+                pair.put(pair.keys["pong"], forged.pop())
+            pair.step([0.1, 0.0, 0.0])
+    finally:
+        subscriber.undeclare()
+    pair.follows([0.2, 0.0, 0.0])
+
+
 def test_a_restarted_operator_is_a_new_session_announced_and_followed(pair, tmp_path):
     pair.follows([0.1, 0.0, 0.0])
     for _ in range(200):
         pair.step([0.1, 0.0, 0.0])  # its sequence numbers run well ahead of a restarted one's
-    sessions = int(pair.robot.outputs.sessions.value)
+    sessions, late = int(pair.robot.outputs.sessions.value), pair.refused("late or duplicate")
     old = pair.operator
     old.clean()
     pair.operator = BlockHarness("zenoh_bridge", old.params.model_dump(), name="bridge", run_dir=tmp_path)
@@ -245,6 +273,9 @@ def test_a_restarted_operator_is_a_new_session_announced_and_followed(pair, tmp_
     pair.operator.block.create()
     pair.operator.block.configure_resources()
     pair.follows([0.2, 0.0, 0.0])
+    assert pair.refused("late or duplicate") == late  # the new session's first samples are not taken for old
+    for _ in range(30):  # the link's figures are published with each ping
+        pair.step([0.2, 0.0, 0.0])
     assert int(pair.robot.outputs.sessions.value) == sessions + 1
     assert any("started a new session" in line for line in pair.robot.log_lines())
 
@@ -299,3 +330,36 @@ def test_arbitrary_bytes_on_every_key_never_break_the_bridge(fuzzed, key, headed
     fuzzed.follows([step / 1000, 0.0, 0.0])
     fuzzed.assert_safe()
     assert abs(fuzzed.offset_ns - offset) < 50_000_000
+
+
+def test_a_faulty_operator_moves_the_robot_by_nothing_beyond_its_own_limits(pair):
+    """End to end: the operator's bridge sends 1e300, infinity and NaN between good setpoints; the robot's
+    bridge delivers what it accepts to the platform controller (its robot-side limits as in
+    systems/hallway.yaml), which executes nothing beyond them and follows each good setpoint again."""
+    from tests.test_ropod_controller import _ropod
+
+    ropod = _ropod()
+    limit, step_limit = np.array([1.5, 1.0, 1.6]), np.array([8.0, 8.0, 16.0]) * 1e-3
+    seen = pair.seen
+
+    def cycle(value: list[float]) -> None:
+        nonlocal seen
+        pair.step(value)
+        if pair.seen != seen:
+            seen = pair.seen
+            ropod.feed("velocity_setpoint", pair.delivered[-1])
+        before = ropod.block.controller.v_sp
+        ropod.step()
+        executed = ropod.block.controller.v_sp
+        assert np.all(np.abs(executed) <= limit) and np.all(np.abs(executed - before) <= step_limit + 1e-12)
+
+    for bad in ([1e300, 0.0, 0.0], [0.0, 0.0, np.inf], [np.nan, 0.0, 0.0]):
+        for _ in range(100):
+            cycle([0.4, 0.0, 0.2])
+        for _ in range(100):
+            cycle(bad)
+        deadline = time.monotonic() + PATIENCE_S
+        while not np.allclose(ropod.block.controller.v_sp, [0.3, 0.0, -0.2]):
+            assert time.monotonic() < deadline, "the robot did not follow the good setpoint again"
+            cycle([0.3, 0.0, -0.2])
+    pair.assert_safe()
