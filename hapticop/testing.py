@@ -41,7 +41,9 @@ class BlockHarness:
     """
 
     def __init__(self, block: type[Block] | str, params: dict[str, Any] | None = None, *, name: str = "block",
-                 period_ns: int = 1_000_000, run_dir: Path | str = ".", seed: int = 0):
+                 period_ns: int = 1_000_000, run_dir: Path | str = ".", seed: int = 0,
+                 max_age_ns: dict[str, int] | None = None):
+        """`max_age_ns` gives inputs a stream's max_age: a sample older than that reads as not valid."""
         self.block_type = resolve(block) if isinstance(block, str) else block
         self.params = self.block_type.Params.model_validate(params or {})
         self.interface = self.block_type.declare(self.params)
@@ -52,7 +54,8 @@ class BlockHarness:
         for port_name, spec in self.interface.inputs.items():
             inputs[port_name] = InputPort(port_name, spec, self.clock.now_ns)
             self._sources[port_name] = LatestSlot(bytearray(latest_nbytes(spec)), spec, synchronised=False)
-            inputs[port_name].connect(self._sources[port_name], queue=False, max_age_ns=0)
+            inputs[port_name].connect(self._sources[port_name], queue=False,
+                                      max_age_ns=(max_age_ns or {}).get(port_name, 0))
         outputs = {port_name: OutputPort(port_name, spec, self.clock.now_ns)
                    for port_name, spec in self.interface.outputs.items()}
         flag_names = list(self.interface.flags_written) + list(self.interface.flags_read)

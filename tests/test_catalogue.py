@@ -49,7 +49,8 @@ def test_json_lists_every_built_in_block():
     assert set(BUILTIN) <= set(entries)
     assert entries["falcon"]["outputs"]["position"] == {"dtype": "float64", "shape": [3], "unit": "m",
                                                         "doc": entries["falcon"]["outputs"]["position"]["doc"],
-                                                        "required": True}
+                                                        "required": True, "range": None}
+    assert entries["ropod_controller"]["inputs"]["velocity_setpoint"]["range"] == [-10.0, 10.0]
 
 
 def test_a_block_by_import_path_and_an_unknown_one():

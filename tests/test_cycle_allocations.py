@@ -196,3 +196,16 @@ def test_a_stream_stale_on_every_arrival_allocates_nothing_that_stays(tmp_path):
         # said again at 10 s; the emulated link's 70 packets in flight are new ones, not more ones
         _assert_nothing_stays(system, lambda: cycles(2_000, 12_000), aside=("*/network/link.py",))
     assert (tmp_path / "reader.log").read_text().count("every sample arrives stale") == 2
+
+
+def test_a_commands_range_check_allocates_nothing():
+    """The check a command's reader runs on each new sample (hapticop/blocks/bounds.py), good or refused."""
+    from hapticop.blocks.bounds import Bounds
+    from hapticop.blocks.interface import Port
+    from hapticop.testing import allocation_stats
+
+    bounds = Bounds(Port("float64", (3,), range=(-10.0, 10.0)), "setpoint")
+    good, bad = np.array([0.3, 0.0, -0.2]), np.array([np.nan, 1e300, 0.0])
+    retained, peak = allocation_stats(lambda: (bounds.admits(good), bounds.admits(bad)), 1000)
+    # retained: the counters themselves (Python ints); peak: numpy's transient ufunc scratch, no array
+    assert retained < 256 and peak < 2048

@@ -138,3 +138,26 @@ def test_the_braking_fields_beams_serve_the_governor_as_its_own_would():
             field.render(np.array([0.0, 0.0, -0.01]), cmd + [0.0, 1e-9, 0.0], force, 0.02)  # its own shift first
             govern_cycle(cmd, field.beams, shared_gap, shared_out)
             np.testing.assert_array_equal(shared_out, govern_cycle(cmd, own, own_gap, own_out))
+
+
+def test_the_governor_block_refuses_a_bad_command_and_follows_the_next_good_one():
+    """A command not finite or outside its port's range (from the link or a buggy block) is no command:
+    the governor allows no motion until the next good command, which it follows again."""
+    from hapticop.testing import BlockHarness
+
+    governor = BlockHarness("speed_governor", {"scan_points": 9})
+    governor.feed("angles", np.linspace(-2.0, 2.0, 9, dtype=np.float32))
+    governor.feed("ranges", np.full(9, 20.0, dtype=np.float32))  # nothing near
+    governor.configure()
+    governor.feed("command", [0.3, 0.0, 0.1])
+    governor.step()
+    np.testing.assert_allclose(governor.outputs.twist.value, [0.3, 0.0, 0.1])
+    for bad in ([1e300, 0.0, 0.0], [0.0, 0.0, np.inf], [np.nan, 0.0, 0.0], [0.0, -10.5, 0.0]):
+        governor.feed("ranges", np.full(9, 20.0, dtype=np.float32))
+        governor.feed("command", bad)
+        governor.step()
+        np.testing.assert_array_equal(governor.outputs.twist.value, np.zeros(3))
+        governor.feed("command", [0.3, 0.0, 0.1])
+        governor.step()
+        np.testing.assert_allclose(governor.outputs.twist.value, [0.3, 0.0, 0.1])
+    assert governor.block.bounds.refused == 4

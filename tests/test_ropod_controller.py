@@ -21,7 +21,7 @@ from hapticop.devices.ropod.velocity_controller import (
     PlatformControllerParams,
     PlatformVelocityController,
 )
-from hapticop.testing import allocation_stats
+from hapticop.testing import BlockHarness, allocation_stats
 
 from .test_ropod_data import load
 
@@ -237,3 +237,89 @@ def test_model_quantities_of_the_wrong_size_are_refused_by_name():
         ctrl.bank.step(np.zeros(6), np.zeros(6))
     with pytest.raises(ValueError, match="enable"):
         ctrl.kinematics.update(np.zeros(4), [1, 1])
+
+
+# -- the block: what the robot executes, whatever its setpoint says -----------------------------------------
+def _ropod(**params) -> BlockHarness:
+    """The platform controller block with its robot-side limits, its setpoint stale after 100 ms, and
+    healthy wheels at rest."""
+    harness = BlockHarness("ropod_controller", {"max_velocity": [1.5, 1.0, 1.6],
+                                                "max_acceleration": [3.0, 3.0, 6.0], **params},
+                           max_age_ns={"velocity_setpoint": 100_000_000})
+    harness.configure()
+    harness.feed("wheel_sensors", _sensors(np.zeros(4), np.zeros(8)))
+    return harness
+
+
+def _executed(harness: BlockHarness) -> np.ndarray:
+    """The setpoint the controller executes this cycle (after the robot's limits)."""
+    return harness.block.controller.v_sp
+
+
+def test_the_wheel_controller_ignores_a_stale_setpoint():
+    """The setpoint stops arriving (the link, the governor, the operator): older than its max_age it is no
+    setpoint, and the controller itself brings the platform to zero, governor or not."""
+    ropod = _ropod()
+    for _ in range(200):  # up to speed at the robot's own acceleration
+        ropod.feed("velocity_setpoint", [0.5, 0.0, 0.0])
+        ropod.step()
+    assert _executed(ropod)[0] == pytest.approx(0.5)
+    ropod.step(90)  # 90 ms after the last sample: not stale yet, still followed
+    assert _executed(ropod)[0] == pytest.approx(0.5)
+    ropod.step(20)  # 110 ms: stale
+    ropod.step(300)  # the ramp down at the robot's own deceleration
+    np.testing.assert_array_equal(_executed(ropod), np.zeros(3))
+
+
+def test_the_wheel_controller_obeys_its_stop_flag_with_a_fresh_setpoint():
+    ropod = _ropod()
+    for _ in range(200):
+        ropod.feed("velocity_setpoint", [0.5, 0.0, 0.3])
+        ropod.step()
+    assert _executed(ropod)[0] == pytest.approx(0.5)
+    ropod.flags["stop"] = True
+    for _ in range(300):
+        ropod.feed("velocity_setpoint", [0.5, 0.0, 0.3])  # fresh, and still not followed
+        ropod.step()
+    np.testing.assert_array_equal(_executed(ropod), np.zeros(3))
+    assert any("stop raised" in line for line in ropod.log_lines())
+
+
+@pytest.mark.parametrize("bad", [[1e300, 0.0, 0.0], [0.0, 0.0, np.inf], [np.nan, 0.0, 0.0], [0.0, -11.0, 0.0]])
+def test_a_setpoint_not_finite_or_out_of_range_is_not_executed_and_the_next_good_one_is(bad):
+    ropod = _ropod()
+    for _ in range(200):
+        ropod.feed("velocity_setpoint", bad)
+        ropod.step()
+        assert np.all(np.isfinite(_executed(ropod)))
+    np.testing.assert_array_equal(_executed(ropod), np.zeros(3))
+    assert ropod.block.bounds.refused == 200
+    lines = ropod.log_lines()
+    assert sum("refused" in line for line in lines) == 1  # once per burst
+    for _ in range(200):
+        ropod.feed("velocity_setpoint", [0.3, 0.0, 0.0])
+        ropod.step()
+    assert _executed(ropod)[0] == pytest.approx(0.3)
+    assert any("following again after 200" in line for line in ropod.log_lines())
+
+
+def test_the_robots_own_limits_bound_what_it_executes_inside_the_declared_range():
+    """5 m/s is inside the port's range (a plausible command) but beyond the robot: its own speed limit
+    clips it, and its acceleration limit bounds every change of the executed setpoint."""
+    ropod = _ropod()
+    previous = _executed(ropod)
+    for _ in range(1000):
+        ropod.feed("velocity_setpoint", [5.0, -5.0, 9.0])
+        ropod.step()
+        now = _executed(ropod)
+        assert np.all(np.abs(now - previous) <= np.array([3.0, 3.0, 6.0]) * 1e-3 + 1e-12)
+        previous = now
+    np.testing.assert_allclose(_executed(ropod), [1.5, -1.0, 1.6])
+
+
+def test_the_library_controller_executes_no_nan_whatever_it_is_given():
+    ctrl = PlatformVelocityController(PlatformControllerParams())
+    tx, rx, v_meas = _sensors(np.zeros(4), np.zeros(8)), new_rx_image(4), np.zeros(3)
+    ctrl.step(np.array([np.nan, np.inf, -np.inf]), tx, rx, v_meas)
+    np.testing.assert_array_equal(ctrl.v_sp, [0.0, 2.0, -1.6])
+    assert np.all(np.isfinite(rxpdo_view(rx)["setpoint1"]))

@@ -121,6 +121,12 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     # a lost link holds the operator's side as a wheel fault would, until the robot is heard again
     bridge = validated.hosts["operator"].graph.loaded.activities["bridge"].params
     assert bridge.hold_when_lost == ["WHEEL_FAULT"] and "WHEEL_FAULT" in bridge.import_flags
+    # the robot's bridge takes the setpoint from the operator's session only, and refuses it outside the range
+    # its readers declare (the governor's command port)
+    received = {w.stream: w for w in validated.hosts["robot"].graph.loaded.activities["bridge"].params.receive}
+    assert received["velocity_setpoint"].host == "operator"
+    assert received["velocity_setpoint"].range == (-10.0, 10.0)
+    assert received["hand_force"].range is None
 
 
 def test_a_hosts_bridge_cpus_and_period_shape_its_bridge_thread(tmp_path):

@@ -8,20 +8,29 @@ sample is dropped by its sequence number), stamps each with its send time on thi
 (through the estimated clock offset), so a reader's `max_age` counts the network too, and pings
 the other hosts to estimate the offset, round trip, jitter and loss, which it publishes as ordinary
 streams and as the flags `link_up`, `link_lost` and `link_degraded`.
+
+Nothing that arrives is trusted (docs/teleop.md, "What the link refuses"): a sample is delivered
+only whole (its exact length), from the session of the host that owns its stream, in order and not
+implausibly far ahead, sent at a plausible time, and, for a command, finite and inside the receiving
+port's declared range; any other is dropped, counted (the output `refused`), logged once per burst,
+and the next good one is delivered. A pong moves the clock estimate only if it answers a ping this
+bridge sent (slot, send time and nonce) and agrees with the estimate it already has.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import zlib
 from typing import Literal, get_args
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from hapticop import published
 from hapticop.blocks.base import Block
+from hapticop.blocks.bounds import Bounds
 from hapticop.blocks.interface import Interface, Params, Port
 from hapticop.network import wire
 from hapticop.network.arrivals import Arrivals
@@ -36,7 +45,14 @@ LINK_OUTPUTS = {
     "jitter": Port("float64", (), "s", "smoothed change of the round trip between pings"),
     "loss": Port("float64", (), "1", "fraction of the last pings not answered"),
     "offset": Port("float64", (), "s", "the other host's clock minus this one's"),
+    "offset_error": Port("float64", (), "s", "bound on the offset's error (half the shortest round trip)"),
+    "refused": Port("int64", (), "1", "samples, pongs and states refused so far (malformed, foreign, "
+                    "out of order, out of range)"),
+    "sessions": Port("int64", (), "1", "sessions of the other hosts seen so far (a restart is a new one)"),
 }
+FUTURE_NS = 1_000_000_000  # a send time later than this ahead of now (on this clock) is refused
+PAST_NS = 3_600 * 1_000_000_000  # and one older than this (stale anyway; no time arithmetic overflows)
+OFFSET_SLACK_NS = 2_000_000  # a pong's offset may disagree by this beyond both error bounds (drift, stamping)
 
 
 Priority = Literal["real_time", "interactive", "data", "background"]
@@ -56,9 +72,19 @@ class WireStream(BaseModel):
     depth: int | None = Field(None, ge=1, le=65536, description="a queue's depth (NetworkQoS)")
     reliability: Literal["best_effort", "reliable"] = Field("best_effort", description="Zenoh's reliability")
     congestion: Literal["drop", "block"] = Field("drop", description="what Zenoh does with a full queue")
+    host: str | None = Field(None, description="the host that writes it: its samples come from that host's "
+                             "session only (None: the only other host)")
+    range: tuple[float, float] | None = Field(None, description="the receiving ports' declared range: a sample "
+                                              "with an element outside it is refused")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> WireStream:
+        if self.range is not None and not self.range[0] <= self.range[1]:
+            raise ValueError(f"range {list(self.range)}: low above high")
+        return self
 
     def port(self) -> Port:
-        return Port(self.dtype, self.shape, self.unit, f"stream '{self.stream}' across the network")
+        return Port(self.dtype, self.shape, self.unit, f"stream '{self.stream}' across the network", range=self.range)
 
 
 class BridgeParams(Params):
@@ -109,9 +135,16 @@ class ZenohBridge(Block):
         # message straight on the link, this order is the only priority there is
         self.send_order = sorted(p.send, key=lambda w: PRIORITY_ORDER.index(w.priority))
         self.arrivals = {w.stream: Arrivals() for w in p.receive}
-        self.peer_sessions = {w.stream: 0 for w in p.receive}
+        self.owners = {w.stream: w.host or (p.peers[0] if len(p.peers) == 1 else None) for w in p.receive}
+        self.bounds = {w.stream: Bounds(w.port(), f"stream '{w.stream}'") for w in p.receive}
+        self.values = {w.stream: np.zeros(w.shape, w.dtype) for w in p.receive}  # a sample checked before delivery
+        self.refusals = {w.stream: Refusals() for w in p.receive}
+        self.pong_refusals = Refusals()
+        self.peer_session: dict[str, int | None] = {peer: None for peer in p.peers}  # as each host announces it
+        self.sessions_seen = 0
         self.clocks = {peer: OffsetEstimator(WINDOW) for peer in p.peers}
         self.pinged_at = {peer: np.zeros(WINDOW, dtype=np.int64) for peer in p.peers}
+        self.nonces = np.zeros(WINDOW, dtype=np.uint64)  # each ping's nonce, by slot: its pong must return it
         self.heard_ns = {peer: 0 for peer in p.peers}
         self.next_ping_ns = 0
         self.links = ({w.stream: EmulatedLink(p.emulate, wire.SAMPLE.size + w.port().nbytes, np.uint8)
@@ -137,8 +170,9 @@ class ZenohBridge(Block):
         self.senders = {w.stream: transport.Sender(self.net, wire.sample_key(p.system, w.stream), w.priority,
                                                    w.reliability == "reliable", w.congestion == "block")
                         for w in p.send}
+        # newest: a few, so a bad sample arriving after a good one in a cycle does not hide it
         self.receivers = {w.stream: transport.Receiver(self.net, wire.sample_key(p.system, w.stream),
-                                                       w.depth if w.keep == "queue" and w.depth else 1)
+                                                       w.depth if w.keep == "queue" and w.depth else 4)
                           for w in p.receive}
         self.ping_out = transport.Sender(self.net, wire.ping_key(p.system, p.host), "real_time")
         self.pong_out = {peer: transport.Sender(self.net, wire.pong_key(p.system, peer), "real_time")
@@ -207,7 +241,9 @@ class ZenohBridge(Block):
             self.pinged_at[peer][slot] = t1
         if self.clocks:
             self.pinged += 1
-            self.ping_out.put(wire.PING.pack(self.session_id, slot, t1))
+            nonce = int.from_bytes(os.urandom(8), "little")
+            self.nonces[slot] = nonce
+            self.ping_out.put(wire.PING.pack(self.session_id, slot, nonce, t1))
         self.state_out.put(self._state(ended=False))
 
     def _answer_pings(self) -> None:
@@ -216,68 +252,152 @@ class ZenohBridge(Block):
             # look received before it was sent, and pass for the best (shortest) exchange
             while (taken := _take(receiver, self.ping_links.get(peer), self.clock)) is not None:
                 data, t2 = taken
-                if len(data) == wire.PING.size:
-                    _, slot, t1 = wire.PING.unpack(data)
-                    t3 = self.clock.now_ns()  # held since t2 in the emulated link, if any: said apart
-                    held = t3 - t2 if self.ping_links else 0
-                    pong = wire.PONG.pack(slot, t1, t2, t3, held) + self.params.host.encode()
-                    self.pong_out[peer].put(pong)
+                if len(data) != wire.PING.size:
+                    self.pong_refusals.count("malformed ping")
+                    continue
+                session, slot, nonce, t1 = wire.PING.unpack(data)
+                self._announced(peer, session)
+                t3 = self.clock.now_ns()  # held since t2 in the emulated link, if any: said apart
+                held = t3 - t2 if self.ping_links else 0
+                pong = wire.PONG.pack(session, slot, nonce, t1, t2, t3, held, self.session_id)
+                self.pong_out[peer].put(pong + self.params.host.encode())
 
     def _take_pongs(self) -> None:
         while (taken := _take(self.pongs_in, self.pong_link, self.clock)) is not None:
             data, t4 = taken
-            if len(data) < wire.PONG.size:
-                continue
             heard = self.clock.now_ns()
-            slot, t1, t2, t3, held = wire.PONG.unpack_from(data)
-            peer = data[wire.PONG.size:].decode(errors="replace")
-            clock = self.clocks.get(peer)
-            # the pong names its ping by slot and send time: an old pong of a reused slot is ignored
-            if clock is not None and 0 <= slot < WINDOW and self.pinged_at[peer][slot] == t1:
-                clock.answered(slot, t1, t2, t3, t4, held + (heard - t4))
-                self.heard_ns[peer] = heard
-                self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
-                self.answered += 1
-                self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
+            why = self._pong_refused(data, t4)
+            if why is not None:
+                self.pong_refusals.count(why)
+                self.pong_refusals.said(self.log, "pongs", why)
+                continue
+            self.pong_refusals.said(self.log, "pongs", None)
+            _, slot, _, t1, t2, t3, held, _ = wire.PONG.unpack_from(data)
+            peer = data[wire.PONG.size:].decode()
+            clock = self.clocks[peer]
+            clock.answered(slot, t1, t2, t3, t4, held + (heard - t4))
+            self.heard_ns[peer] = heard
+            self.rtts[self.answered % len(self.rtts)] = clock.last_rtt_ns
+            self.answered += 1
+            self.offset_seen = (clock.offset_ns, clock.error_ns)  # the last estimate, for the run's table
+
+    def _pong_refused(self, data: bytes, t4: int) -> str | None:
+        """Why a pong may not move the clock estimate, or None: it must answer a ping this bridge sent
+        (session, slot, send time, nonce), come from the session its host announced, and agree with the
+        estimate so far (both offsets' error bounds overlap); its times must be in order."""
+        if len(data) < wire.PONG.size:
+            return "malformed pong"
+        asker, slot, nonce, t1, t2, t3, _, session = wire.PONG.unpack_from(data)
+        try:
+            peer = data[wire.PONG.size:].decode()
+        except UnicodeDecodeError:
+            return "malformed pong"
+        clock = self.clocks.get(peer)
+        if clock is None or asker != self.session_id:
+            return "pong to no ping of ours"
+        if not (0 <= slot < WINDOW and self.pinged_at[peer][slot] == t1 and int(self.nonces[slot]) == nonce):
+            return "pong to no ping of ours"
+        if self.peer_session[peer] is not None and session != self.peer_session[peer]:
+            return "pong from another session"
+        rtt = (t4 - t1) - (t3 - t2)
+        if not (0 <= t3 - t2 <= t4 - t1 <= WINDOW * self.params.ping_period_ms * 1e6):
+            return "pong with implausible times"
+        if clock.synced:
+            offset = ((t2 - t1) + (t3 - t4)) / 2.0
+            if abs(offset - clock.offset_ns) > rtt / 2.0 + clock.error_ns + OFFSET_SLACK_NS:
+                return "pong contradicting the clock offset"
+        self._announced(peer, session)
+        return None
+
+    def _announced(self, peer: str, session: int) -> None:
+        """The session `peer` says it runs (in its pings, pongs and state): a new one is a restart, announced,
+        and its streams' order starts again."""
+        known = self.peer_session[peer]
+        if session == known:
+            return
+        self.peer_session[peer] = session
+        self.sessions_seen += 1
+        if known is not None:
+            # the clock estimate stays: the host's clock did not restart with its bridge, and a fresh estimate
+            # would take its first pong unchecked
+            self.log.warning("host '%s' started a new session: its streams' sequence numbers begin again", peer)
+        for stream, owner in self.owners.items():
+            if owner == peer:
+                self.arrivals[stream].restart()
+        self.outputs.sessions.value[...] = self.sessions_seen
+        self.outputs.sessions.publish()
 
     def _take_states(self, now: int) -> None:
         for peer, receiver in self.states_in.items():
             data = receiver.take()
             if data is None:
                 continue
-            _, ended = wire.STATE.unpack_from(data)
-            self.remote_holding = frozenset(data[wire.STATE.size:].decode().split(","))
+            try:
+                if len(data) < wire.STATE.size:
+                    raise ValueError
+                session, ended = wire.STATE.unpack_from(data)
+                holding = frozenset(data[wire.STATE.size:].decode().split(","))
+            except (ValueError, UnicodeDecodeError):
+                self.pong_refusals.count("malformed state")
+                self.pong_refusals.said(self.log, "states", "malformed state")
+                continue
+            self._announced(peer, session)
+            self.remote_holding = holding
             if ended and self.params.peer_end:
                 self.flags["peer_ended"] = True
             self.heard_ns[peer] = now
 
     def _take_samples(self, now: int) -> None:
-        clock = next(iter(self.clocks.values()), None)
         for w in self.params.receive:
             receiver, link = self.receivers[w.stream], self.links.get(w.stream)
             while (data := receiver.take()) is not None:
                 if link is None:
-                    self._deliver(w.stream, data, clock, now)
-                else:  # delayed from when it arrived, not from the cycle's start (the bridge may have stalled since)
+                    self._deliver(w.stream, data, now)
+                elif len(data) == wire.SAMPLE.size + self.values[w.stream].nbytes:
+                    # delayed from when it arrived, not from the cycle's start (the bridge may have stalled since)
                     link.send(self.clock.now_ns() / 1e9, np.frombuffer(data, np.uint8))
+                else:
+                    self.refusals[w.stream].count("malformed")
             while link is not None and (slot := link.receive(self.clock.now_ns() / 1e9)) >= 0:
-                self._deliver(w.stream, link.payload(slot).tobytes(), clock, now)
+                self._deliver(w.stream, link.payload(slot).tobytes(), now)
 
-    def _deliver(self, stream: str, data: bytes, clock: OffsetEstimator | None, now: int) -> None:
-        if clock is None or not clock.synced:  # its age cannot be told yet: a sample of unknown age is none
-            return
-        session, sequence, sent = wire.SAMPLE.unpack_from(data)
-        arrivals = self.arrivals[stream]
-        if session != self.peer_sessions[stream]:
-            self.peer_sessions[stream] = session
-            arrivals.restart()
-        if not arrivals.accept(sequence):
+    def _deliver(self, stream: str, data: bytes, now: int) -> None:
+        refusals = self.refusals[stream]
+        why = self._refused(stream, data, now)
+        if why is not None:
+            refusals.count(why)
+        refusals.said(self.log, f"stream '{stream}'", why)
+        if why is not None:
             return
         port = getattr(self.outputs, f"in_{stream}")
-        port.value[...] = np.frombuffer(data, port.value.dtype, offset=wire.SAMPLE.size).reshape(port.value.shape)
+        np.copyto(port.value, self.values[stream])
         # the send time on this host's clock, never in the future: a reader's max_age counts the network
-        port.stamp_ns = min(now, clock.to_local(sent))
+        port.stamp_ns = min(now, self.clocks[self.owners[stream]].to_local(wire.SAMPLE.unpack_from(data)[2]))
         port.publish()
+
+    def _refused(self, stream: str, data: bytes, now: int) -> str | None:
+        """Why a sample is not delivered, or None (its value is then in `self.values[stream]`)."""
+        owner = self.owners[stream]
+        clock = self.clocks.get(owner) if owner is not None else None
+        if clock is None or not clock.synced:  # its age cannot be told yet: a sample of unknown age is none
+            return "before the clocks are compared"
+        value = self.values[stream]
+        if len(data) != wire.SAMPLE.size + value.nbytes:
+            return "malformed"
+        session, sequence, sent = wire.SAMPLE.unpack_from(data)
+        if session != self.peer_session[owner]:
+            return "not from its owner's session"
+        local = clock.to_local(sent)
+        if not now - PAST_NS <= local <= now + FUTURE_NS:
+            return "implausible send time"
+        value.reshape(-1).view(np.uint8)[:] = np.frombuffer(data, np.uint8, offset=wire.SAMPLE.size)
+        bounds = self.bounds[stream]
+        if bounds.checks and not bounds.admits(value):
+            return "not finite or out of range"
+        arrivals = self.arrivals[stream]
+        if not arrivals.accept(sequence, now):
+            return "late or duplicate" if sequence <= arrivals.last else "implausibly far ahead"
+        return None
 
     def _judge_link(self, now: int, publish: bool) -> None:
         p = self.params
@@ -307,8 +427,11 @@ class ZenohBridge(Block):
                 "offset_error_ms": clock.error_ns / 1e6 if clock.synced else None})
         if publish and self.clocks:
             clock = next(iter(self.clocks.values()))
+            refused = self.pong_refusals.total + sum(r.total for r in self.refusals.values())
             for name, value in (("rtt", rtt / 1e9), ("jitter", clock.jitter_ns / 1e9), ("loss", loss),
-                                ("offset", clock.offset_ns / 1e9)):
+                                ("offset", clock.offset_ns / 1e9),
+                                ("offset_error", clock.error_ns / 1e9 if clock.synced else math.inf),
+                                ("refused", refused), ("sessions", self.sessions_seen)):
                 port = getattr(self.outputs, name)
                 port.value[...] = value
                 port.publish()
@@ -317,6 +440,28 @@ class ZenohBridge(Block):
         """This host's session, whether its run ended, and the exported places that hold a token."""
         holding = ",".join(p for p in self.params.export_flags if self.flags[f"out_{p.lower()}"])
         return wire.STATE.pack(self.session_id, ended) + holding.encode()
+
+
+class Refusals:
+    """What a bridge refused of one stream (or of the pongs and states), by reason, said once per burst."""
+
+    def __init__(self) -> None:
+        self.by_reason: dict[str, int] = {}
+        self.total = 0
+        self.burst = 0
+
+    def count(self, why: str) -> None:
+        self.by_reason[why] = self.by_reason.get(why, 0) + 1
+        self.total += 1
+        self.burst += 1
+
+    def said(self, log, what: str, why: str | None) -> None:
+        """The first refusal of a burst logged with its reason; the burst's length when a good one ends it."""
+        if why is not None and self.burst == 1:
+            log.warning("%s: refused a sample (%s); refusals are counted in 'refused' until a good one", what, why)
+        elif why is None and self.burst:
+            log.info("%s: a good one again after %d refused", what, self.burst)
+            self.burst = 0
 
 
 def _impaired(params: LinkParams, name: str) -> MessageLink:
@@ -352,5 +497,9 @@ def write_link_table(run_dir, bridge: ZenohBridge) -> None:
         rows.append(row(f"{stream}: received", arrivals.delivered))
         rows.append(row(f"{stream}: late or duplicate, dropped", arrivals.late))
         rows.append(row(f"{stream}: superseded or lost", arrivals.skipped))
+        for why, count in sorted(bridge.refusals[stream].by_reason.items()):
+            rows.append(row(f"{stream}: refused, {why}", count))
+    for why, count in sorted(bridge.pong_refusals.by_reason.items()):
+        rows.append(row(f"refused, {why}", count))
     data = {"title": f"link of host '{bridge.params.host}' to {', '.join(bridge.params.peers)}", "rows": rows}
     (run_dir / "results-link.json").write_text(json.dumps(data, indent=1))

@@ -97,7 +97,13 @@ def _summary(cls: type[Block]) -> str:
 
 def _port(port: Port) -> dict:
     return {"dtype": port.dtype, "shape": list(port.shape), "unit": port.unit, "doc": port.doc,
-            "required": port.required}
+            "required": port.required, "range": list(port.range) if port.range is not None else None}
+
+
+def _range_text(port: dict) -> str:
+    """A port's declared range, as a reader refuses samples outside it."""
+    bounds = port.get("range")
+    return f" (range [{bounds[0]:g}, {bounds[1]:g}]: a sample outside it is refused)" if bounds else ""
 
 
 def _live(cls: type[Block], top: str) -> str:
@@ -245,7 +251,7 @@ def to_markdown(entries: list[BlockEntry]) -> str:
             if ports:
                 lines += [f"{title}:", "", "| port | dtype | shape | unit | |", "|---|---|---|---|---|"]
                 lines += [f"| `{n}` | {p['dtype']} | {tuple(p['shape'])} | {p['unit']} | {p['doc']}"
-                          f"{'' if p['required'] else ' (optional)'} |" for n, p in ports.items()]
+                          f"{'' if p['required'] else ' (optional)'}{_range_text(p)} |" for n, p in ports.items()]
                 lines.append("")
         for title, flags in (("Flags read", entry.flags_read), ("Flags written", entry.flags_written)):
             if flags:

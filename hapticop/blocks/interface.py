@@ -23,6 +23,10 @@ class Port:
     `dtype` is a numpy dtype name, `shape` the array shape (`()` for a scalar) and `unit`
     an SI unit symbol (`m`, `N`, `m/s`, `rad`, `A`; `1` for dimensionless). An input that
     is not `required` may stay unconnected; the block then sees its initial value.
+
+    `range` (low, high) bounds every element of a port that carries a command: a sample with an
+    element outside it, or not finite, is refused where it is read (`hapticop.blocks.bounds`) and by
+    the bridge that receives it from another host; it is not executed and not passed on.
     """
 
     dtype: str
@@ -30,9 +34,12 @@ class Port:
     unit: str = "1"
     doc: str = ""
     required: bool = True
+    range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         np.dtype(self.dtype)  # fail at import time on a typo, not during validation
+        if self.range is not None and not self.range[0] <= self.range[1]:
+            raise ValueError(f"port range {self.range}: low above high")
 
     def describe(self) -> str:
         return f"{self.dtype}{list(self.shape)} [{self.unit}]"

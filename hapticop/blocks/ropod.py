@@ -10,9 +10,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from hapticop.blocks.base import Block
+from hapticop.blocks.bounds import Bounds
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.devices.ropod.kinematics import Geometry
 from hapticop.devices.ropod.linear_bank import LinearControllerParams
@@ -20,6 +21,9 @@ from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
 from hapticop.devices.ropod.velocity_controller import PlatformControllerParams, PlatformVelocityController
 
 _LIBRARY = PlatformControllerParams()  # the defaults, written once in the library
+
+
+SETPOINT_RANGE = (-10.0, 10.0)  # m/s and rad/s: refused beyond (not clipped); max_velocity clips what is inside
 
 
 class RopodControllerParams(Params):
@@ -36,9 +40,23 @@ class RopodControllerParams(Params):
         _LIBRARY.hold_below, gt=0, description="standstill hold: with a zero setpoint and the measured twist "
         "below this (m/s, rad/s), the platform integrators stay at zero, so braking's wind-up cannot drive "
         "the stopped robot back; null: the plain PI")
+    max_velocity: tuple[float, float, float] = Field(
+        _LIBRARY.max_velocity, description="the robot's own limits on what it executes, whatever the setpoint: "
+        "|vx|, |vy| (m/s) and |wz| (rad/s)")
+    max_acceleration: tuple[float, float, float] | None = Field(
+        _LIBRARY.max_acceleration, description="the robot's own limits on how fast the executed setpoint "
+        "changes: m/s², m/s², rad/s² (null: a step is followed at once)")
     pivot_offsets_rad: tuple[float, ...] = Field(
         _LIBRARY.pivot_offsets_rad,
         description="pivot encoder offsets, SW1 first: a unit's angle is its reading minus its offset")
+
+
+    @field_validator("max_velocity", "max_acceleration")
+    @classmethod
+    def _positive(cls, limits: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if limits is not None and min(limits) <= 0:
+            raise ValueError(f"every limit must be above zero, not {list(limits)}")
+        return limits
 
 
 class RopodController(Block):
@@ -50,7 +68,8 @@ class RopodController(Block):
         wheels = len(params.geometry.pivots_m)
         return Interface(
             inputs={
-                "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "platform twist [vx, vy, wz]"),
+                "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "platform twist [vx, vy, wz]",
+                                          range=SETPOINT_RANGE),
                 "wheel_sensors": Port("uint8", (wheels, TXPDO_BYTES), "1", "TxPDO image per wheel"),
             },
             outputs={
@@ -65,6 +84,9 @@ class RopodController(Block):
         self.controller = PlatformVelocityController(self._controller_params())
         self.zero = np.zeros(3)
         self.stopped = False  # what the stop flag last said, so each change is logged once
+        self.bounds = Bounds(self.interface(self.params).inputs["velocity_setpoint"], f"{self.name}.velocity_setpoint")
+        self.setpoint_seq = -1
+        self.setpoint_good = False
 
     def configure_capabilities(self) -> None:
         """A (re)start: no stale integrator."""
@@ -88,7 +110,11 @@ class RopodController(Block):
                 self.log.info("stop raised: holding the platform at zero velocity")
             else:
                 self.log.info("stop lowered: following the setpoint again")
-        stop = self.stopped or not setpoint.valid  # a stale setpoint is no setpoint
+        if setpoint.seq != self.setpoint_seq:  # each new sample checked once: a bad one is no setpoint
+            self.setpoint_seq = setpoint.seq
+            self.setpoint_good = self.bounds.admits(setpoint.value)
+            self.bounds.said(self.log, self.setpoint_good)
+        stop = self.stopped or not setpoint.valid or not self.setpoint_good  # a stale or bad setpoint is none
         commands, velocity = self.outputs.wheel_commands, self.outputs.platform_velocity
         self.controller.step(self.zero if stop else setpoint.value, sensors.value, commands.value, velocity.value,
                              stop=stop)

@@ -76,7 +76,8 @@ def bridge_flag(direction: str, place_name: str) -> str:
 def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, dict]) -> Any:
     """The composition `host` runs, as a YAML tree (nodes kept from `tree`, so findings stay located).
 
-    `ports` maps each network stream's name to its writer port's `{dtype, shape, unit}`."""
+    `ports` maps each network stream's name to its writer port's `{dtype, shape, unit}` and, when its
+    readers declare one, the `range` they all accept (the receiving bridge refuses samples outside it)."""
     placement = place(composition)
     out = copy.deepcopy(tree)
     out.pop("hosts", None)
@@ -110,7 +111,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                 del out["streams"][name]
             continue
         qos = spec.network.model_dump(mode="json", exclude={"doc"}) if spec.network else {}
-        wire = {"stream": name, **ports[name], **{k: qos.get(k) for k in
+        wire = {"stream": name, "host": net.writer_host, **ports[name], **{k: qos.get(k) for k in
                                                   ("priority", "keep", "depth", "reliability", "congestion")}}
         entry.pop("network", None)
         if net.writer_host == host:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 from hapticop.composition.description import Composition
@@ -69,7 +70,7 @@ def _check_hosts(source: Source, loaded: Loaded, cg: CompositionGraph, report: R
     validated = Validated(report, source, cg)
     if not report.ok:
         return validated
-    ports = hosts.port_specs(loaded)
+    ports = _with_ranges(hosts.port_specs(loaded), loaded)
     for host in loaded.composition.hosts:
         tree = for_host(source.tree, loaded.composition, host, ports)
         part = check_source(hosts.HostSource(file=source.file, tree=tree, text="", origin=source), state_limit)
@@ -78,6 +79,22 @@ def _check_hosts(source: Source, loaded: Loaded, cg: CompositionGraph, report: R
         report.extend(d for d in part.report.diagnostics if d not in report.diagnostics)
         validated.hosts[host] = part
     return validated
+
+
+def _with_ranges(ports: dict[str, dict], loaded: Loaded) -> dict[str, dict]:
+    """Each network stream's spec with the range all its readers declare (the intersection), if any: the
+    receiving bridge refuses a sample outside it before any reader sees it."""
+    for name, spec in ports.items():
+        low, high = -math.inf, math.inf
+        for ref in loaded.composition.streams[name].readers:
+            activity, port = ref.split(".")
+            resolved = loaded.activities.get(activity)
+            declared = resolved.interface.inputs.get(port) if resolved else None
+            if declared is not None and declared.range is not None:
+                low, high = max(low, declared.range[0]), min(high, declared.range[1])
+        if math.isfinite(low) and math.isfinite(high):
+            spec["range"] = [low, high]
+    return ports
 
 
 def _needs_elsewhere(diagnostic, composition, host: str) -> bool:

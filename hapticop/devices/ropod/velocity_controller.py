@@ -279,9 +279,12 @@ class PlatformVelocityController:
             current_hw[j + 1] = ilim if i2 > ilim else -ilim if i2 < -ilim else i2
 
     def _condition(self, vx: float, vy: float, wz: float, stop: bool) -> list[float]:
-        """§7 step 2: the setpoint clipped per axis and, optionally, rate limited; zero while stopping."""
+        """§7 step 2: the setpoint clipped per axis and, optionally, rate limited; zero while stopping.
+        A NaN is zero (infinity is clipped): nothing the setpoint holds makes the robot exceed its limits."""
         v, vmax, dvmax = self._v_sp, self._vmax, self._dvmax
         for axis, wanted in enumerate((0.0, 0.0, 0.0) if stop else (vx, vy, wz)):
+            if wanted != wanted:  # NaN passes every clip below: no setpoint on that axis
+                wanted = 0.0
             if vmax is not None:
                 limit = vmax[axis]
                 wanted = limit if wanted > limit else -limit if wanted < -limit else wanted

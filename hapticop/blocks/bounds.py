@@ -1,0 +1,60 @@
+"""A port's declared range checked on a sample, without allocating: where a command is read or arrives.
+
+A command port declares `range` (`hapticop.blocks.interface.Port`): every element must be finite
+and inside it. The reader that executes the command (the governor, the platform controller) and the
+bridge that receives it from another host check each new sample here, refuse a bad one (it is not
+executed, not passed on) and follow the next good one. Refusals are counted, and said once per
+burst: the first bad sample of a burst is logged, and the burst's length when a good one follows.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from hapticop.blocks.interface import Port
+
+
+class Bounds:
+    """The check of one port's samples (finite, and inside the declared range if any), with its counts."""
+
+    def __init__(self, port: Port, what: str) -> None:
+        self.what = what  # for the log: the port or stream it guards
+        self.range = port.range
+        self.floats = np.dtype(port.dtype).kind in "fc"
+        self._ok = np.zeros(port.shape, dtype=bool)
+        self._also = np.zeros(port.shape, dtype=bool)
+        self.refused = 0  # every sample refused so far
+        self.burst = 0  # refused since the last good one
+
+    @property
+    def checks(self) -> bool:
+        """Whether anything is checked at all (an integer port without a range is taken as it is)."""
+        return self.floats or self.range is not None
+
+    def admits(self, value: np.ndarray) -> bool:
+        """True for a sample to follow; False (counted) for one to refuse. NaN fails every comparison."""
+        ok = self._ok
+        if self.range is not None:
+            np.greater_equal(value, self.range[0], out=ok)
+            np.less_equal(value, self.range[1], out=self._also)
+            np.logical_and(ok, self._also, out=ok)
+        elif self.floats:
+            np.isfinite(value, out=ok)
+        else:
+            return True
+        if ok.all():
+            return True
+        self.refused += 1
+        self.burst += 1
+        return False
+
+    def said(self, log: logging.Logger | logging.LoggerAdapter, good: bool) -> None:
+        """Log a burst of refusals once: at its first sample, and its length when a good sample ends it."""
+        if not good and self.burst == 1:
+            log.warning("%s: a sample not finite or outside %s refused (not executed, not passed on)",
+                        self.what, "its range [{:g}, {:g}]".format(*self.range) if self.range else "the finite numbers")
+        elif good and self.burst:
+            log.info("%s: following again after %d refused sample(s)", self.what, self.burst)
+            self.burst = 0
