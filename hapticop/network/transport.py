@@ -86,7 +86,7 @@ def session(listen: list[str], connect: list[str], low_latency: bool = False,
         config.insert_json5("transport/link/tls", json.dumps({
             "root_ca_certificate": c.ca, "enable_mtls": True, "verify_name_on_connect": True,
             "listen_certificate": c.certificate, "listen_private_key": c.key,
-            "connect_certificate": c.certificate, "connect_private_key": c.key, "close_link_on_expiration": True}))
+            "connect_certificate": c.certificate, "connect_private_key": c.key}))
         config.insert_json5("access_control", json.dumps(access_rules(c.rights)))
     if low_latency:  # Zenoh refuses the low-latency transport with QoS on
         config.insert_json5("transport/unicast/lowlatency", "true")
