@@ -4,6 +4,7 @@
     sudo python bench/zenoh_link.py transport [--runs 3] [--count 3000]
     sudo python bench/zenoh_link.py loops [--runs 3] [--seconds 10] [--pin] [--low-latency]
     python bench/zenoh_link.py linkloss [--runs 3] [--seconds 10]
+    sudo python bench/zenoh_link.py security [--runs 5] [--count 3000] [--seconds 10]
 
 `transport` makes two namespaces joined by a veth and echoes 64-byte messages paced at 1 kHz, first over
 Zenoh as a bridge uses it by default (peer mode, explicit endpoints, no scouting, express, REAL_TIME, a ring
@@ -11,7 +12,9 @@ channel of 1), then the same over Zenoh's low-latency transport (a host's `trans
 over a plain UDP socket. `loops` runs a 1 kHz real-time loop whose samples cross to
 a second host through the bridges, and the same loop and reader on one host without them. `linkloss`
 kills the operator's side of systems/teleop.yaml after it has driven for a while and measures, on the
-robot's recording, how long after the last setpoint's send time the robot stands still. Figures go to
+robot's recording, how long after the last setpoint's send time the robot stands still. `security` measures
+what the secure link costs: in each run the round trip over the low-latency transport on plain TCP and on
+mutual TLS with the access rules, then the 1 kHz loop beside an insecure and a secure bridge. Figures go to
 bench/results/zenoh-link.json and docs/teleop.md; none is judged here.
 """
 
@@ -36,12 +39,24 @@ PORT = 7447
 
 
 # -- the two ends, each run inside its namespace ------------------------------------------------
-def echo_zenoh(listen: str, connect: str, low_latency: bool = False) -> None:
+def _credentials(flags: list[str], me: str, other: str):
+    """With 'tls=DIR': mutual TLS as a bridge uses it, `me` may be sent bench/`other`'s key and put its own."""
+    from hapticop.network import keys, transport
+
+    directory = next((Path(f.split("=", 1)[1]) for f in flags if f.startswith("tls=")), None)
+    if directory is None:
+        return None
+    where = keys.files(directory, me)
+    return transport.Credentials(str(where.ca), str(where.certificate), str(where.key),
+                                 [transport.Rights(other, puts=[f"bench/{other}"], reads=[f"bench/{me}"])])
+
+
+def echo_zenoh(listen: str, connect: str, flags: list[str] = ()) -> None:
     import zenoh
 
     from hapticop.network import transport
 
-    with transport.session([listen], [connect], low_latency) as net:
+    with transport.session([listen], [connect], "low_latency" in flags, _credentials(flags, "pong", "ping")) as net:
         pong = net.declare_publisher("bench/pong", priority=zenoh.Priority.REAL_TIME, express=True)
         ping = net.declare_subscriber("bench/ping", zenoh.handlers.RingChannel(1))
         print("ready", flush=True)
@@ -49,12 +64,12 @@ def echo_zenoh(listen: str, connect: str, low_latency: bool = False) -> None:
             pong.put(ping.recv().payload.to_bytes())
 
 
-def ping_zenoh(listen: str, connect: str, count: int, low_latency: bool = False) -> list[int]:
+def ping_zenoh(listen: str, connect: str, count: int, flags: list[str] = ()) -> list[int]:
     import zenoh
 
     from hapticop.network import transport
 
-    with transport.session([listen], [connect], low_latency) as net:
+    with transport.session([listen], [connect], "low_latency" in flags, _credentials(flags, "ping", "pong")) as net:
         ping = net.declare_publisher("bench/ping", priority=zenoh.Priority.REAL_TIME, express=True)
         pong = net.declare_subscriber("bench/pong", zenoh.handlers.RingChannel(1))
         for _ in range(100):  # until the echo answers (the peers have found each other)
@@ -143,7 +158,7 @@ def percentiles(ns: list[int]) -> dict:
 def transport_runs(runs: int, count: int) -> dict:
     """Each run measures the three in turn, so a busy spell of the machine touches them alike."""
     results = {"zenoh": [], "zenoh_low_latency": [], "udp": []}
-    with Namespaces() as spaces:
+    with Namespaces() as spaces:  # as a bridge measured before its link was secured: plain TCP
         zenoh_a, zenoh_b = f"tcp/{spaces.addr_a}:{PORT}", f"tcp/{spaces.addr_b}:{PORT}"
         for _ in range(runs):
             for kind, echo_args, ping_args in (
@@ -164,9 +179,49 @@ def transport_runs(runs: int, count: int) -> dict:
     return results
 
 
+def security_transport(spaces: Namespaces, directory: Path, count: int) -> dict:
+    """One round-trip run over the low-latency transport, plain TCP then mutual TLS with the access rules."""
+    figures = {}
+    for kind, scheme, flags in (("insecure", "tcp", ["low_latency"]),
+                                ("secure", "tls", ["low_latency", f"tls={directory}"])):
+        end_a, end_b = f"{scheme}/{spaces.addr_a}:{PORT}", f"{scheme}/{spaces.addr_b}:{PORT}"
+        echo = spaces.run(spaces.b, "echo-zenoh", end_b, end_a, *flags)
+        try:
+            assert echo.stdout.readline().strip() == "ready"
+            pinger = spaces.run(spaces.a, "ping-zenoh", end_a, end_b, str(count), *flags)
+            out, _ = pinger.communicate(timeout=120)
+            figures[kind] = percentiles(json.loads(out))
+        finally:
+            echo.kill()
+            echo.wait()
+    return figures
+
+
+def security_runs(runs: int, count: int, seconds: int) -> dict:
+    """Round trip and the loop's wake-up, insecure against secure, alternating within each run."""
+    from hapticop.network import keys
+
+    results: dict = {"round_trip": [], "loops": []}
+    with tempfile.TemporaryDirectory() as tmp, Namespaces() as spaces:
+        directory = Path(tmp)
+        keys.make_ca(directory, "bench")
+        keys.make_host(directory, "ping", [spaces.addr_a])
+        keys.make_host(directory, "pong", [spaces.addr_b])
+        for _ in range(runs):
+            results["round_trip"].append(security_transport(spaces, directory, count))
+            print("round trip", results["round_trip"][-1], flush=True)
+            loops = {}
+            for secure in (False, True):
+                loops["secure" if secure else "insecure"] = loop_runs(1, seconds, low_latency=True,
+                                                                      secure=secure)["with_bridge"][0]
+            results["loops"].append(loops)
+    return results
+
+
 LOOP = """\
     version: 1
     name: zlink{tag}
+    {security}
     {hosts}
     threads:
       main: {{period: 10ms, deploy: main, {host_a} schedules: {{0: [mediator]}}}}
@@ -185,10 +240,14 @@ LOOP = """\
     """
 
 
-def loop_runs(runs: int, seconds: int, pin: bool = False, low_latency: bool = False) -> dict:
+def loop_runs(runs: int, seconds: int, pin: bool = False, low_latency: bool = False, secure: bool = False) -> dict:
     """With `pin`, the loop runs on the last core and the bridges on the first, in both cases; with
-    `low_latency`, the hosts use Zenoh's low-latency transport."""
-    results = {"with_bridge": [], "without": []}
+    `low_latency`, the hosts use Zenoh's low-latency transport; with `secure`, mutual TLS and access
+    rules (else an insecure link, as these figures were first measured), and only with the bridge."""
+    from hapticop.cli.hosts import keys_for
+
+    results = {"with_bridge": [], "without": []} if not secure else {"with_bridge": []}
+    scheme = "tls" if secure else "tcp"
     last = (os.cpu_count() or 1) - 1
     bridge_cpus = (", bridge_cpus: [0]" if pin else "") + (", transport: low_latency" if low_latency else "")
     with tempfile.TemporaryDirectory() as tmp:
@@ -197,8 +256,10 @@ def loop_runs(runs: int, seconds: int, pin: bool = False, low_latency: bool = Fa
                 bridged = kind == "with_bridge"
                 text = textwrap.dedent(LOOP).format(
                     tag=f"{os.getpid()}{run}{int(bridged)}",
-                    hosts=f"hosts: {{a: {{endpoints: [tcp/127.0.0.1:17481]{bridge_cpus}}}, "
-                    f"b: {{endpoints: [tcp/127.0.0.1:17482]{bridge_cpus}}}}}" if bridged else "",
+                    security=("security: {keys: loop.keys}" if secure else "security: {insecure: true}")
+                    if bridged else "",
+                    hosts=f"hosts: {{a: {{endpoints: [{scheme}/127.0.0.1:17481]{bridge_cpus}}}, "
+                    f"b: {{endpoints: [{scheme}/127.0.0.1:17482]{bridge_cpus}}}}}" if bridged else "",
                     loop_cpus=f"cpus: [{last}]," if pin else "",
                     host_a="host: a," if bridged else "", host_b="host: b," if bridged else "",
                     b_main="b_main: {period: 10ms, deploy: main, host: b, schedules: {0: [mediator]}}"
@@ -206,6 +267,8 @@ def loop_runs(runs: int, seconds: int, pin: bool = False, low_latency: bool = Fa
                     network="network: {priority: real_time, deadline: 100ms, stale: zero}" if bridged else "")
                 path = Path(tmp) / f"{kind}{run}.yaml"
                 path.write_text(text)
+                if secure:
+                    keys_for(path)
                 run_dir = Path(tmp) / f"run-{kind}{run}"
                 subprocess.run([sys.executable, "-m", "hapticop.cli", "compose", str(path), "--duration",
                                 f"{seconds}s", "--run-dir", str(run_dir)], cwd=ROOT, capture_output=True,
@@ -275,7 +338,8 @@ def linkloss_runs(runs: int, drive_s: float) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=["transport", "loops", "linkloss", "echo-zenoh", "ping-zenoh", "echo-udp",
+    parser.add_argument("what", choices=["transport", "loops", "linkloss", "security", "echo-zenoh", "ping-zenoh",
+                                         "echo-udp",
                                          "ping-udp"])
     parser.add_argument("args", nargs="*")
     parser.add_argument("--runs", type=int, default=3)
@@ -287,9 +351,9 @@ def main() -> None:
     options = parser.parse_args()
     a = options.args
     if options.what == "echo-zenoh":
-        echo_zenoh(a[0], a[1], a[2:] == ["low_latency"])
+        echo_zenoh(a[0], a[1], a[2:])
     elif options.what == "ping-zenoh":
-        print(json.dumps(ping_zenoh(a[0], a[1], int(a[2]), a[3:] == ["low_latency"])))
+        print(json.dumps(ping_zenoh(a[0], a[1], int(a[2]), a[3:])))
     elif options.what == "echo-udp":
         echo_udp(a[0])
     elif options.what == "ping-udp":
@@ -300,6 +364,8 @@ def main() -> None:
         saved = json.loads(out.read_text()) if out.exists() else {}
         if options.what == "transport":
             saved["transport"] = transport_runs(options.runs, options.count)
+        elif options.what == "security":
+            saved["security"] = security_runs(options.runs, options.count, options.seconds)
         elif options.what == "linkloss":
             saved["linkloss"] = linkloss_runs(options.runs, options.seconds)
         else:

@@ -40,6 +40,9 @@ CASES = [
     ("invalid-latency-unknown-port.yaml", "unknown-port", 17, "has no output port 'cont'", "did you mean 'count'?"),
     ("invalid-record-unknown-stream.yaml", "unknown-stream", 16, "names stream 'cont'", "did you mean 'count'?"),
     ("invalid-phase-too-long.yaml", "bad-value", 6, "phase must be shorter than the period", None),
+    # the hosts' link (docs/security.md); expired, foreign and readable keys: tests/test_link_keys.py
+    ("invalid-security-no-keys.yaml", "security-keys", 3, "the hosts' link names no keys", "hapticop hosts keys"),
+    ("invalid-security-endpoint.yaml", "security-endpoint", 6, "which carries no TLS", "'tls/127.0.0.1:7462'"),
     # YAML level
     ("invalid-yaml-syntax.yaml", "yaml-syntax", 7, "malformed YAML", None),
     ("invalid-duplicate-key.yaml", "duplicate-key", 7, 'duplicate key "period"', None),
@@ -168,6 +171,7 @@ CASES = [
 
 # Files that are sound but for one likely mistake: (file, rule, line, substring of the message)
 WARNING_CASES = [
+    ("invalid-security-insecure.yaml", "security-insecure", 3, "the hosts' link is insecure"),
     ("invalid-schedule-never-selected.yaml", "schedule-never-selected", 12,
      "schedule 1 of thread 'sensors' is never selected"),
 ]

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from hapticop.cli.hosts import keys_for
 from hapticop.composition.placement import place
 from hapticop.network.arrivals import Arrivals
 from hapticop.network.clock import OffsetEstimator
@@ -241,11 +242,16 @@ def _free_port() -> int:
 
 
 def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "two",
-              transport: str = "prioritised") -> Path:
+              transport: str = "prioritised", secure: bool = True, reader: str = "tests.blocks:AgeProbe") -> Path:
+    """Host a's noise read by host b's probe; over mutual TLS with keys made here unless not `secure`."""
     path = tmp_path / f"{name}.yaml"
+    if secure:
+        a, b = (e.replace("tcp/", "tls/", 1) for e in (a, b))
+    security = f"{{keys: {name}.keys}}" if secure else "{insecure: true}"
     path.write_text(textwrap.dedent(f"""\
         version: 1
         name: {name}{os.getpid()}
+        security: {security}
         hosts:
           a: {{endpoints: [{a}], transport: {transport}}}
           b:
@@ -258,13 +264,15 @@ def two_hosts(tmp_path: Path, a: str, b: str, emulate: str = "", name: str = "tw
         activities:
           mediator: {{block: mediator}}
           noise: {{block: "tests.blocks:Noise"}}
-          probe: {{block: "tests.blocks:AgeProbe"}}
+          probe: {{block: "{reader}"}}
         streams:
           sample:
             from: noise.sample
             to: [probe.sample]
             network: {{priority: real_time, deadline: 100ms, stale: zero}}
         """))
+    if secure:
+        keys_for(path)
     return path
 
 
@@ -367,8 +375,11 @@ if ROOT_PROBLEM is None and subprocess.run(["ip", "netns", "list"], capture_outp
     ROOT_PROBLEM = "the 'ip' command cannot list network namespaces"
 
 
-@pytest.mark.skipif(ROOT_PROBLEM is not None, reason=f"Zenoh over a veth: {ROOT_PROBLEM}")
 def test_two_hosts_in_two_network_namespaces_over_a_veth(tmp_path, figure):
+    """Over mutual TLS, as every two-host test runs. Under CI (root, every extra installed) a missing
+    capability fails the test instead of skipping it."""
+    if ROOT_PROBLEM is not None:
+        (pytest.fail if os.environ.get("CI") else pytest.skip)(f"Zenoh over a veth: {ROOT_PROBLEM}")
     tag = f"{os.getpid() % 100000}"
     ns_a, ns_b = f"hopa{tag}", f"hopb{tag}"
     subnet = 10 + os.getpid() % 200
@@ -402,3 +413,111 @@ def test_two_hosts_in_two_network_namespaces_over_a_veth(tmp_path, figure):
     finally:
         subprocess.run(["ip", "netns", "del", ns_a], capture_output=True)
         subprocess.run(["ip", "netns", "del", ns_b], capture_output=True)
+
+
+# -- strangers and leftovers (docs/security.md) -------------------------------------------------
+MARK = 31337.0  # a value host a's noise never writes: what a stranger puts
+
+
+def stranger(endpoints: list[str], directory: Path | None = None, name: str = ""):
+    """A third peer: Zenoh's default configuration, or one with TLS and `name`'s certificate from `directory`."""
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("connect/endpoints", json.dumps(endpoints))
+    if directory is not None:
+        cert, key = str(directory / f"{name}.pem"), str(directory / f"{name}.key")
+        config.insert_json5("transport/link/tls", json.dumps({
+            "root_ca_certificate": str(directory / "ca.pem"), "enable_mtls": True, "connect_certificate": cert,
+            "connect_private_key": key, "listen_certificate": cert, "listen_private_key": key}))
+    return zenoh.open(config)
+
+
+@pytest.mark.parametrize("who", ["default", "unknown host", "the reader's certificate"])
+def test_a_stranger_can_neither_drive_nor_read_nor_end_a_host(tmp_path, who):
+    """A third peer joins the hosts' endpoints as it can: with Zenoh's defaults (plain TCP and TLS tried),
+    with a certificate of the system's CA for a host the composition does not know, or with b's own
+    certificate, at b, posing as a, the host that writes the stream (at a, b's certificate is b: what a
+    certificate says, so its key stays on its host). It subscribes to everything, puts samples of a's
+    stream carrying a value a never writes, and says a ended. Meanwhile a's samples keep reaching b:
+    none of the stranger's does, its subscription hears nothing, and both hosts run on."""
+    from hapticop.network import keys, wire
+
+    ends = [f"127.0.0.1:{_free_port()}", f"127.0.0.1:{_free_port()}"]
+    path = two_hosts(tmp_path, f"tcp/{ends[0]}", f"tcp/{ends[1]}", name="guarded", reader="tests.blocks:Recorder")
+    directory = tmp_path / "guarded.keys"
+    keys.make_host(directory, "intruder", ["127.0.0.1"])
+    system = f"guarded{os.getpid()}"
+    a = start(path, "a", tmp_path / "a")
+    b = start(path, "b", tmp_path / "b")
+    heard: list[tuple[str, bytes]] = []
+    try:
+        wait_for("link up on b", lambda: log_says(tmp_path / "b" / "bridge.log", "running"), [a, b])
+        tls = [f"tls/{e}" for e in ends]
+        if who == "default":
+            peer = stranger([f"tcp/{e}" for e in ends] + tls)
+        else:
+            peer = stranger(tls if who == "unknown host" else tls[1:], directory,
+                            "intruder" if who == "unknown host" else "b")
+        with peer:
+            peer.declare_subscriber("**", lambda s: heard.append((str(s.key_expr), s.payload.to_bytes())))
+            since = time.monotonic_ns()
+            value = np.full(3, MARK).tobytes()
+            sent = 0
+            own = {wire.STATE.pack(7, True)}
+            deadline = time.monotonic() + 3.0  # how long the stranger tries; the check below waits on events
+            while time.monotonic() < deadline:
+                sent += 1
+                own.add(wire.SAMPLE.pack(7, 10**9 + sent, 0) + value)
+                peer.put(wire.sample_key(system, "sample"), wire.SAMPLE.pack(7, 10**9 + sent, 0) + value)
+                peer.put(wire.state_key(system, "a"), wire.STATE.pack(7, True))  # "a ended"
+                time.sleep(0.01)
+        assert a.poll() is None and b.poll() is None, "the stranger ended a host"
+    finally:
+        stop(a)
+        out = stop(b)
+    recorded = np.load(tmp_path / "b" / "probe.npz")
+    samples, stamps = recorded["samples"], recorded["stamps"]
+    assert np.count_nonzero(stamps >= since) > 100, out  # a's samples kept arriving while the stranger tried
+    assert not np.any(samples == MARK), "a stranger's sample reached host b's stream"
+    theirs = [key for key, payload in heard if payload not in own]  # not its own puts, delivered locally
+    assert theirs == [], f"the stranger heard {sorted(set(theirs))}"
+    assert "peer ended" not in (tmp_path / "b" / "bridge.log").read_text()
+
+
+def shared_memory_of(group: int) -> set[str]:
+    """The /dev/shm files mapped or open in the processes of one process group (a host and its children)."""
+    found = set()
+    for proc in Path("/proc").iterdir():
+        try:
+            if not proc.name.isdigit() or int((proc / "stat").read_text().rsplit(")", 1)[1].split()[2]) != group:
+                continue
+            found |= {line.split(None, 5)[5].strip() for line in (proc / "maps").read_text().splitlines()
+                      if len(line.split(None, 5)) == 6 and line.split(None, 5)[5].startswith("/dev/shm/")}
+            found |= {os.readlink(fd) for fd in (proc / "fd").iterdir()
+                      if os.readlink(fd).startswith("/dev/shm/")}
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue
+    return {f.removesuffix(" (deleted)") for f in found}
+
+
+@pytest.mark.parametrize("signals", [(signal.SIGINT, signal.SIGTERM), (signal.SIGTERM, signal.SIGINT)],
+                         ids=["a-ctrl-c-b-sigterm", "a-sigterm-b-ctrl-c"])
+def test_two_hosts_leave_no_shared_memory_behind(tmp_path, signals):
+    """Every /dev/shm file the hosts' processes hold while they run is gone once they end, whichever
+    signal ends which host; and none is Zenoh's (its shared-memory transport is off: two hosts share
+    no memory, and its segments outlived the runs)."""
+    path = two_hosts(tmp_path, f"tcp/127.0.0.1:{_free_port()}", f"tcp/127.0.0.1:{_free_port()}", name="tidy")
+    a = start(path, "a", tmp_path / "a")
+    b = start(path, "b", tmp_path / "b")
+    held: set[str] = set()
+    try:
+        wait_for("link up on b", lambda: log_says(tmp_path / "b" / "bridge.log", "running"), [a, b])
+        wait_for("link up on a", lambda: log_says(tmp_path / "a" / "bridge.log", "running"), [a, b])
+        held = shared_memory_of(a.pid) | shared_memory_of(b.pid)
+    finally:
+        stop(a, signals[0])
+        stop(b, signals[1])
+    assert held, "no shared memory seen: the hosts' own region should be there"
+    assert [f for f in held if os.path.exists(f)] == []
+    assert not [f for f in held if f.endswith(".zenoh")], held

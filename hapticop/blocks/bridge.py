@@ -87,6 +87,15 @@ class WireStream(BaseModel):
         return Port(self.dtype, self.shape, self.unit, f"stream '{self.stream}' across the network", range=self.range)
 
 
+class TlsParams(BaseModel):
+    """This host's credentials for the link (docs/security.md): PEM files, written by the host split."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    ca: str = Field(description="the system's CA certificate: the only one this host trusts")
+    certificate: str = Field(description="this host's certificate, its name as common name")
+    key: str = Field(description="this host's private key (mode 0600)")
+
+
 class BridgeParams(Params):
     host: str = Field(description="the host this bridge serves")
     system: str = Field("hapticop", description="the composition's name: the Zenoh keys' prefix")
@@ -105,6 +114,8 @@ class BridgeParams(Params):
     lost_after_ms: float = Field(250.0, gt=0, description="nothing heard for this long: 'link_lost'")
     degraded_rtt_ms: float = Field(300.0, gt=0, description="a round trip above this: 'link_degraded'")
     degraded_loss: float = Field(0.2, ge=0, le=1, description="a ping loss above this: 'link_degraded'")
+    tls: TlsParams | None = Field(None, description="mutual TLS and access rules by certificate; none: an "
+                                  "insecure link ('security: {insecure: true}')")
     emulate: LinkParams | None = Field(
         None, description="impair what arrives (delay, jitter, loss) with a seeded emulated link, for tests and "
         "experiments on a good network")
@@ -126,6 +137,18 @@ class ZenohBridge(Block):
             outputs={**{f"in_{w.stream}": w.port() for w in params.receive}, **LINK_OUTPUTS},
             flags_written=flags,
             flags_read={f"out_{p.lower()}": f"place {p} of this host's mediator" for p in params.export_flags})
+
+    @classmethod
+    def preflight(cls, params: BridgeParams, timeout_s: float) -> str | None:
+        """This host's keys: there, its own, valid today and private (they may have changed since `validate`)."""
+        if params.tls is None:
+            return None
+        from pathlib import Path
+
+        from hapticop.network.keys import problems_of
+
+        found = problems_of(Path(params.tls.ca), Path(params.tls.certificate), Path(params.tls.key), params.host)
+        return "; ".join(f"{path} {problem}" for path, problem in found) or None
 
     def create(self) -> None:
         p = self.params
@@ -166,7 +189,16 @@ class ZenohBridge(Block):
         from hapticop.network import transport  # Zenoh only where a bridge runs
 
         p = self.params
-        self.net = transport.session(p.listen, p.connect, p.low_latency)
+        credentials = None
+        if p.tls is not None:
+            rights = [transport.Rights(
+                peer, puts=[wire.sample_key(p.system, w.stream) for w in p.receive] + [
+                    wire.ping_key(p.system, peer), wire.pong_key(p.system, p.host), wire.state_key(p.system, peer)],
+                reads=[wire.sample_key(p.system, w.stream) for w in p.send] + [
+                    wire.ping_key(p.system, p.host), wire.pong_key(p.system, peer), wire.state_key(p.system, p.host)])
+                for peer in p.peers]
+            credentials = transport.Credentials(p.tls.ca, p.tls.certificate, p.tls.key, rights)
+        self.net = transport.session(p.listen, p.connect, p.low_latency, credentials)
         self.senders = {w.stream: transport.Sender(self.net, wire.sample_key(p.system, w.stream), w.priority,
                                                    w.reliability == "reliable", w.congestion == "block")
                         for w in p.send}

@@ -47,6 +47,7 @@ from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.docpages import docs as _docs  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
+from hapticop.cli.hosts import hosts as _hosts  # noqa: E402
 from hapticop.cli.new import new as _new  # noqa: E402
 from hapticop.cli.recordings import info as _info  # noqa: E402
 from hapticop.cli.recordings import plot as _plot  # noqa: E402
@@ -58,6 +59,7 @@ app.add_typer(_lidar, name="lidar")
 app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
+app.add_typer(_hosts, name="hosts")
 app.command("blocks")(_blocks)
 app.command("new")(_new)
 app.command("info")(_info)
@@ -185,6 +187,7 @@ def compose(
 
     live = None if view is None else _live_options(view, view_host, view_rate)
     validated = _valid_or_exit(file, "not started")
+    _say_if_insecure(validated, file)
     if validated.hosts:
         validated = _one_host(validated, file, host, clock, run_dir, group_readable, sys.argv)
     # What the run writes (logs, results, recordings) is its owner's alone, or also their group's
@@ -239,6 +242,13 @@ def _one_host(validated, file: Path, host: str | None, clock: ClockKind, run_dir
         typer.echo(f"{file}: no host '{host}' (hosts: {', '.join(validated.hosts)})", err=True)
         raise typer.Exit(2)
     return validated.hosts[host]
+
+
+def _say_if_insecure(validated, file: Path) -> None:
+    """A run on an insecure link says so before anything else (docs/security.md)."""
+    if validated.hosts and validated.graph.loaded.composition.security.insecure:
+        typer.echo(f"{file}: INSECURE LINK ('security: {{insecure: true}}'): anyone who reaches these hosts may "
+                   "join, read every stream and drive the robot", err=True)
 
 
 def _passed_on(argv: list[str]) -> list[str]:

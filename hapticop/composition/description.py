@@ -389,8 +389,8 @@ class Host(Strict):
     over Zenoh in peer mode at these endpoints (no multicast scouting)."""
 
     endpoints: list[Annotated[str, Field(pattern=r"^(tcp|udp|quic|tls)/[^/]+:[0-9]+$")]] = Field(
-        min_length=1, description="where this host's bridge listens, e.g. 'tcp/10.0.0.1:7447'; the other hosts "
-        "connect to them")
+        min_length=1, description="where this host's bridge listens, e.g. 'tls/10.0.0.1:7447' (with keys, 'tls/' "
+        "or 'quic/'); the other hosts connect to them")
     emulate: LinkParams | None = Field(
         None, description="make what this host receives worse on purpose (delay, jitter, loss: a seeded emulated "
         "link in its bridge), to test or measure a good network as a bad one")
@@ -413,6 +413,20 @@ class Host(Strict):
     doc: str = ""
 
 
+class Security(Strict):
+    """How the hosts' bridges prove who they are and hide what they carry (docs/security.md): mutual TLS
+    with a CA of the system's own, and on each host rules that let each other host put only the streams it
+    writes and read only what it is sent."""
+
+    keys: str | None = Field(
+        None, description="the directory of the link's keys, relative to the file that names it: 'ca.pem', and "
+        "'HOST.pem' and 'HOST.key' for each host (`hapticop hosts keys FILE` makes them)")
+    insecure: bool = Field(
+        False, description="no keys: plain links that anyone who reaches a host may join, read and drive; "
+        "for a closed test network only (validate warns, the run says so first)")
+    doc: str = ""
+
+
 class Composition(Strict):
     """A whole hapticop system: what runs, where, how it is wired and coordinated."""
 
@@ -421,6 +435,9 @@ class Composition(Strict):
     doc: str = ""
     hosts: dict[Name, Host] = Field(
         default_factory=dict, description="the machines the composition runs on; each thread names its 'host:'")
+    security: Security = Field(
+        default_factory=Security, description="with 'hosts:', the link's keys (or, on a closed test network, "
+        "'insecure: true')")
     threads: dict[Name, Thread] = Field(min_length=1)
     activities: dict[Name, Activity] = Field(min_length=1)
     streams: dict[Name, Stream] = Field(default_factory=dict)

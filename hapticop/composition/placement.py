@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from hapticop.composition.description import Composition
+from hapticop.network.keys import files
 
 BRIDGE = "bridge"
 BRIDGE_THREAD = "bridge"
@@ -73,11 +75,13 @@ def bridge_flag(direction: str, place_name: str) -> str:
     return f"{direction}_{place_name.lower()}"
 
 
-def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, dict]) -> Any:
+def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, dict],
+             keys: Path | None = None) -> Any:
     """The composition `host` runs, as a YAML tree (nodes kept from `tree`, so findings stay located).
 
     `ports` maps each network stream's name to its writer port's `{dtype, shape, unit}` and, when its
-    readers declare one, the `range` they all accept (the receiving bridge refuses samples outside it)."""
+    readers declare one, the `range` they all accept (the receiving bridge refuses samples outside it);
+    `keys` is the directory of the link's keys (none: an insecure link)."""
     placement = place(composition)
     out = copy.deepcopy(tree)
     out.pop("hosts", None)
@@ -138,6 +142,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                    "send": sends, "receive": receives, "export_flags": exports, "import_flags": imports,
                    "peer_end": ended, "hold_when_lost": list(composition.hosts[host].on_link_lost),
                    "low_latency": composition.hosts[host].transport == "low_latency",
+                   **({"tls": {k: str(v) for k, v in vars(files(keys, host)).items()}} if keys is not None else {}),
                    **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
     }
     out.setdefault("threads", {})[BRIDGE_THREAD] = {

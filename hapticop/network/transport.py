@@ -11,11 +11,18 @@ A session is either Zenoh's default transport, whose per-priority queues and TX 
 overtake a queued scan, or its low-latency one, which writes each message on the link from the
 caller's thread (less per round trip: docs/teleop.md has the figures) and has no priorities: both
 ends must ask for it, or Zenoh falls back to the default without a word.
+
+With credentials the session speaks TLS with mutual authentication: a host proves who it is by a
+certificate its system's CA signed, whose common name is the host's name, and its access rules deny
+everything but what `Rights` allows each other host by that name (put the keys it writes, subscribe to
+the keys it is sent). Zenoh's shared-memory transport is off: two hosts share no memory, and its
+segments in /dev/shm would outlive a run (docs/security.md).
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 
 import zenoh
 
@@ -24,8 +31,47 @@ PRIORITIES = {"real_time": zenoh.Priority.REAL_TIME, "interactive": zenoh.Priori
 LEASE_MS = 1000  # Zenoh's default 10 s would notice a dead peer only after the robot has driven on blind
 
 
-def session(listen: list[str], connect: list[str], low_latency: bool = False) -> zenoh.Session:
-    """A peer session at these endpoints; no scouting."""
+@dataclass(frozen=True)
+class Rights:
+    """What the host whose certificate names `peer` may do here: put these keys, subscribe to those."""
+
+    peer: str
+    puts: list[str]
+    reads: list[str]
+
+
+@dataclass(frozen=True)
+class Credentials:
+    """This host's certificate and key, its CA, and every other host's rights (PEM file paths)."""
+
+    ca: str
+    certificate: str
+    key: str
+    rights: list[Rights] = field(default_factory=list)
+
+
+def access_rules(rights: list[Rights]) -> dict:
+    """Zenoh's access control: deny by default; each peer, told by its certificate's common name, may put
+    the keys it writes and subscribe to the keys it reads, and this host sends it only those."""
+    rules, subjects, policies = [], [], []
+    for n, right in enumerate(rights):
+        allowed = [("put", "ingress", right.puts), ("declare_subscriber", "egress", right.puts),
+                   ("put", "egress", right.reads), ("declare_subscriber", "ingress", right.reads)]
+        ids = []
+        for message, flow, keys in allowed:
+            if keys:
+                ids.append(f"{message}_{flow}_{n}")
+                rules.append({"id": ids[-1], "messages": [message], "flows": [flow], "permission": "allow",
+                              "key_exprs": list(keys)})
+        subjects.append({"id": f"host_{n}", "cert_common_names": [right.peer], "link_protocols": ["tls", "quic"]})
+        policies.append({"id": f"policy_{n}", "rules": ids, "subjects": [f"host_{n}"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
+
+
+def session(listen: list[str], connect: list[str], low_latency: bool = False,
+            credentials: Credentials | None = None) -> zenoh.Session:
+    """A peer session at these endpoints; no scouting; mutual TLS and access rules with `credentials`."""
     config = zenoh.Config()
     config.insert_json5("mode", json.dumps("peer"))
     config.insert_json5("listen/endpoints", json.dumps(listen))
@@ -34,6 +80,14 @@ def session(listen: list[str], connect: list[str], low_latency: bool = False) ->
     config.insert_json5("scouting/gossip/enabled", "false")
     config.insert_json5("transport/link/tx/lease", str(LEASE_MS))
     config.insert_json5("transport/link/tx/keep_alive", "4")
+    config.insert_json5("transport/shared_memory/enabled", "false")
+    if credentials is not None:
+        c = credentials
+        config.insert_json5("transport/link/tls", json.dumps({
+            "root_ca_certificate": c.ca, "enable_mtls": True, "verify_name_on_connect": True,
+            "listen_certificate": c.certificate, "listen_private_key": c.key,
+            "connect_certificate": c.certificate, "connect_private_key": c.key}))
+        config.insert_json5("access_control", json.dumps(access_rules(c.rights)))
     if low_latency:  # Zenoh refuses the low-latency transport with QoS on
         config.insert_json5("transport/unicast/lowlatency", "true")
         config.insert_json5("transport/unicast/qos/enabled", "false")

@@ -11,7 +11,7 @@ from hapticop.composition.graph import CompositionGraph
 from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.placement import for_host, place
 from hapticop.composition.yamlsource import Source
-from hapticop.validation import coordination, hosts, modes, structure
+from hapticop.validation import coordination, hosts, modes, security, structure
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 
 
@@ -67,12 +67,14 @@ def _check_hosts(source: Source, loaded: Loaded, cg: CompositionGraph, report: R
     """The whole file's placement and network streams, then each host's composition with every check."""
     for check in hosts.CHECKS:
         report.extend(source.place(d) for d in check(loaded.composition))
+    report.extend(source.place(d) for d in security.check(source, loaded.composition))
     validated = Validated(report, source, cg)
     if not report.ok:
         return validated
     ports = _with_ranges(hosts.port_specs(loaded), loaded)
+    directory = security.key_directory(source, loaded.composition)
     for host in loaded.composition.hosts:
-        tree = for_host(source.tree, loaded.composition, host, ports)
+        tree = for_host(source.tree, loaded.composition, host, ports, directory)
         part = check_source(hosts.HostSource(file=source.file, tree=tree, text="", origin=source), state_limit)
         part.report.diagnostics = [d for d in part.report.diagnostics
                                    if not _needs_elsewhere(d, loaded.composition, host)]
