@@ -339,7 +339,7 @@ def test_a_faulty_operator_moves_the_robot_by_nothing_beyond_its_own_limits(pair
     from tests.test_ropod_controller import _ropod
 
     ropod = _ropod()
-    limit, step_limit = np.array([1.5, 1.0, 1.6]), np.array([8.0, 8.0, 16.0]) * 1e-3
+    limit, step_limit = np.array([1.5, 1.0, 1.6]), np.array([100.0, 100.0, 200.0]) * 1e-3
     seen = pair.seen
 
     def cycle(value: list[float]) -> None:

@@ -19,7 +19,7 @@ DOCS = Path(__file__).resolve().parents[2] / "docs"
 FORMAT_MODELS = [
     "Thread", "Activity", "Stream", "LatestPolicy", "QueuePolicy", "Coordination", "StandardCoordination",
     "PetriNet", "Place", "Transition", "FlagMap", "Mode", "ScriptedPatch", "Latency", "Record",
-    "Host", "NetworkQoS", "LinkParams",
+    "Host", "Security", "NetworkQoS", "LinkParams",
 ]
 
 
