@@ -45,6 +45,7 @@ from hapticop.runtime.scheduler import Scheduler
 from hapticop.runtime.service import ControlService, control_path
 from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
+from hapticop.runtime.transport import transport_of
 from hapticop.validation import Validated
 
 # ExitStatus is part of what a run returns (`Outcome.status`), so it is offered here too.
@@ -122,7 +123,8 @@ class System:
     def _build(self, validated: Validated, tree, loaded: Loaded, composition: Composition,
                options: RunOptions) -> None:
         self.description = Description.of(tree, loaded)
-        self.layout = layout_of(loaded, validated.flags)
+        self.layout = layout_of(loaded, validated.flags,
+                                {name: r.capacity for name, r in recorded_streams(composition).items()})
         self.region = Region.create(self.layout)
         self.log.info("shared memory %s, %d bytes", self.region.name, self.layout.size)
         self.flag_index = self.layout.flag_index
@@ -223,12 +225,23 @@ class System:
     def new_transports(self, loaded: Loaded, stream: str, owner: dict[str, str]) -> list:
         """An added stream's buffers; if the run records it to a file, its recorder ring too, which the
         recorder follows from now on."""
-        record = recorded_streams(loaded.composition).get(stream) if self.records and self.recorder else None
-        objects = make_transports(loaded, self.region, stream, owner, allocate=True, one_thread=self.virtual,
-                                  record=record)
-        if record is not None:
+        rings = self.rings(loaded)
+        if stream in rings:
+            self.layout.rings[stream] = rings[stream]
+        else:
+            self.layout.rings.pop(stream, None)
+        self.layout.place(transport_of(loaded, stream), self.layout.allocate)
+        objects = make_transports(loaded, self.region, stream, owner, one_thread=self.virtual)
+        if stream in rings:
+            record = recorded_streams(loaded.composition)[stream]
             self.recorder.add(recorded_ring(loaded, self.region.layout.recorded[stream], record))
         return objects
+
+    def rings(self, loaded: Loaded) -> dict[str, int]:
+        """The recorder rings streams added live get: those the run records to a file, while it does."""
+        if not (self.records and self.recorder):
+            return {}
+        return {name: r.capacity for name, r in recorded_streams(loaded.composition).items()}
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:

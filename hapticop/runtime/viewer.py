@@ -20,6 +20,7 @@ from pathlib import Path
 
 from hapticop.composition.loader import load_tree
 from hapticop.recording.live import LiveOptions
+from hapticop.recording.plan import recorded_streams
 from hapticop.recording.scene import views_for
 from hapticop.runtime.assembly import layout_of
 from hapticop.runtime.recorder import RecordedRing, Recorder, RecorderPlan, rings_of, sources_of
@@ -43,7 +44,8 @@ def view(attachment: Attachment, options: LiveOptions, announce: Callable[[str],
          should_stop: Callable[[], bool] = lambda: False) -> dict:
     """Serve the running system live until it ends or `should_stop()`; the summary."""
     loaded = load_tree(attachment.tree)
-    layout = layout_of(loaded, attachment.flags)
+    layout = layout_of(loaded, attachment.flags,
+                       {name: r.capacity for name, r in recorded_streams(loaded.composition).items()})
     memory = shared_memory.SharedMemory(name=attachment.region, create=False)
     resource_tracker.unregister(memory._name, "shared_memory")  # noqa: SLF001 - the system's to unlink, never ours
     rings = [RecordedRing(info, offset, nbytes, 1, "latest") for info, offset, nbytes in tapped_streams(loaded, layout)]
