@@ -264,7 +264,7 @@ def view_running(
 ) -> None:
     """Show a running system live in Foxglove, from a process of its own: every stream's newest
     sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
-    from hapticop.runtime.viewer import Attachment, view
+    from hapticop.observe.viewer import Attachment, view
 
     options = _live_options(str(port), host, rate)
     answer = _ask(system, {"op": "attach"})

@@ -63,10 +63,6 @@ class StreamTransport:
     def ring_capacity(self, nbytes: int) -> int:
         return (nbytes - QUEUE_HEADER.itemsize) // latest_nbytes(self.port)
 
-    def drain(self, view: np.ndarray, capacity: int) -> SpscQueue:
-        """The recorder's side of the ring over `view`."""
-        return SpscQueue(view, self.port, capacity, "drop_oldest")
-
 
 @dataclass(frozen=True)
 class LatestTransport(StreamTransport):
@@ -83,10 +79,6 @@ class LatestTransport(StreamTransport):
     @staticmethod
     def reader_end(objects: list, index: int):
         return objects[0]
-
-    def tap(self, view: np.ndarray) -> LatestSlot:
-        """A reader the writer does not know of (the live view): the slot, read like any reader."""
-        return LatestSlot(view, self.port)
 
 
 @dataclass(frozen=True)

@@ -35,17 +35,18 @@ import numpy as np
 
 from hapticop.blocks.interface import Port
 from hapticop.composition.loader import Loaded
+from hapticop.observe.event_channels import EventPlan, RunEvents
+from hapticop.observe.log_channel import LogChannel
+from hapticop.observe.taps import LatestTap, tapped_streams
+from hapticop.observe.timing_channels import LoopTiming, TimingPlan
 from hapticop.recording.live import LiveOptions, LiveServer, LiveViewUnavailable
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.outputs import Fanout, Output
 from hapticop.recording.plan import RecordedStream, recorded_streams
 from hapticop.recording.scene import views_for
 from hapticop.runtime.link_channel import LinkChannel
-from hapticop.runtime.log_channel import LogChannel
 from hapticop.runtime.region import Layout, Transport
 from hapticop.runtime.streams import SpscQueue, sample_dtype
-from hapticop.runtime.taps import LatestTap, tapped_streams
-from hapticop.runtime.timing_channels import LoopTiming, TimingPlan
 
 DRAIN_INTERVAL_NS = 50_000_000  # the recorder wakes 20 times a second (each pass costs ~30 µs a stream
 # whatever it finds): a ring holds a second or more
@@ -116,6 +117,7 @@ class RecorderPlan:
     timing: TimingPlan | None = None  # the loops' timing counters, for `/timing/THREAD`
     run_dir: Path | None = None  # the run's log files, for `/log`
     name: str = "hapticop"
+    events: EventPlan | None = None  # the region's flags and states, for `/events/flags` and `/events/lifecycle`
 
     @property
     def drain_ns(self) -> int:
@@ -160,6 +162,7 @@ class Recorder:
         for view in self.views:
             view.start(self.out, self.streams)
         self.sources = sources
+        self.events = [source for source in sources if isinstance(source, RunEvents)]
         for source in sources:
             source.start(self.out)
         if self.file is not None:
@@ -231,6 +234,11 @@ class Recorder:
             self.flushed_ns = now
         return taken
 
+    def event(self, kind: str, payload: dict, time_ns: int) -> None:
+        """Something the run told its observer (`runtime.observer.Observer.event`)."""
+        for events in self.events:
+            events.event(kind, payload, time_ns)
+
     def summary(self) -> dict:
         """Per stream: samples its writer published, recorded, and lost (the ring was lapped)."""
         return {"path": str(self.plan.path) if self.file is not None else None, "clock": self.plan.clock,
@@ -295,7 +303,7 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
                         {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]), live,
-                        TimingPlan.of(composition, layout), run_dir, run["composition"])
+                        TimingPlan.of(composition, layout), run_dir, run["composition"], events=EventPlan.of(layout))
 
 
 def recorded_ring(loaded: Loaded, transport: Transport, recorded: RecordedStream) -> RecordedRing:
@@ -318,10 +326,12 @@ def _library() -> str:
 
 
 def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
-    """The loops' timing, the run's log and the network bridges' link figures, as the plan asks."""
+    """The loops' timing, the run's events, its log and the network bridges' link figures, as the plan asks."""
     sources: list[Source] = []
     if plan.timing is not None:
         sources.append(LoopTiming(plan.timing, buffer))
+    if plan.events is not None:
+        sources.append(RunEvents(plan.events, buffer))
     if plan.run_dir is not None:
         sources.append(LogChannel(plan.run_dir))
         sources.append(LinkChannel(plan.run_dir))
@@ -382,6 +392,9 @@ def record_main(plan: RecorderPlan, region_name: str, parent: int, messages) -> 
                     break
                 if message == "stop":
                     break  # its loops are done, the rings hold their last samples
+                if message[0] == "event":  # ("event", kind, payload, time_ns)
+                    recorder.event(*message[1:])
+                    continue
                 _, ring = message  # ("add", RecordedRing): a stream a live patch added
                 recorder.add(ring, ring_of(ring, memory.buf))
         summary = recorder.finish()
@@ -437,6 +450,13 @@ class RecorderProcess:
         except (OSError, EOFError):
             pass  # the recorder is gone: the run says so when it stops it
 
+    def event(self, kind: str, payload: dict, time_ns: int) -> None:
+        """Something the run told its observer: recorded at the recorder's next look at its pipe."""
+        try:
+            self.messages.send(("event", kind, payload, time_ns))
+        except (OSError, EOFError):
+            pass  # the recorder is gone: the run says so when it stops it
+
     def stop(self) -> tuple[dict | None, str | None]:
         """Ask for the last drain and the finished file: (summary, None), or (None, what went wrong)."""
         try:
@@ -481,6 +501,9 @@ class InlineRecorder:
     def add(self, ring: RecordedRing) -> None:
         """Record a stream a live patch added (its ring lies in the region's spare room)."""
         self.recorder.add(ring, ring_of(ring, self.buffer))
+
+    def event(self, kind: str, payload: dict, time_ns: int) -> None:
+        self.recorder.event(kind, payload, time_ns)
 
     def between_cycles(self) -> None:
         now = self.clock()
