@@ -15,7 +15,8 @@ from typing import Any
 
 from hapticop.composition.description import Record
 from hapticop.composition.loader import Loaded
-from hapticop.observe.recorder import InlineRecorder, RecorderProcess, plan_of, recorded_ring
+from hapticop.observe.recorder import plan_of, recorded_ring
+from hapticop.observe.recorder_process import InlineRecorder, RecorderProcess
 from hapticop.recording.live import LiveOptions
 from hapticop.recording.plan import recorded_streams
 from hapticop.runtime.observer import ObservedRun
