@@ -181,7 +181,7 @@ def compose(
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
 
-    from hapticop.runtime.report import print_recording, print_results, print_timing
+    from hapticop.cli.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
     live = None if view is None else live_options(view, view_host, view_rate)
@@ -202,7 +202,7 @@ def compose(
         console.print(f"[bold]{system.composition.name or file}[/]: running ({clock.value} clock); "
                       f"logs in {system.run_dir}")
         if console.is_terminal:
-            from hapticop.runtime.report import progress_line
+            from hapticop.cli.report import progress_line
 
             threading.Thread(target=progress_line, args=(system, console), daemon=True).start()
 
@@ -215,7 +215,7 @@ def compose(
         console.print(f"[red]{reason}[/]")
     status = int(result.outcome.status)
     if check and status == 0:
-        from hapticop.runtime.report import missed_targets
+        from hapticop.cli.report import missed_targets
 
         missed = missed_targets(result.outcome.run_dir)
         for name in missed:

@@ -147,8 +147,8 @@ def report(
     the hallway's metrics and picture from its recorded streams."""
     from rich.console import Console
 
+    from hapticop.cli.report import print_results
     from hapticop.runtime.replay import ReplayError, leaving_results, open_run, results
-    from hapticop.runtime.report import print_results
 
     target = output if output is not None else file.with_suffix(".report")
     try:
