@@ -57,7 +57,7 @@ def test_steady_cycles_allocate_nothing_that_stays(tmp_path, record):
     validated = validate_text(text, "alloc.yaml")
     assert validated.report.ok, validated.report.diagnostics
     system = System(validated, RunOptions(clock="virtual", run_dir=tmp_path, echo=False))
-    recorder, system.recorder = system.recorder, None
+    recorder, system.observer.recorder = system.observer.recorder, None
     assert (recorder is not None) == bool(record)
     try:
         threads = system.built.threads

@@ -73,12 +73,12 @@ def _live_run(tmp_path, text: str, enough, name: str):
     def client(system) -> None:
         def watch() -> None:
             deadline = time.monotonic() + PATIENCE_S
-            while getattr(system.recorder, "address", None) is None and time.monotonic() < deadline:
+            while getattr(system.observer.recorder, "address", None) is None and time.monotonic() < deadline:
                 time.sleep(0.02)
             stopper = threading.Thread(target=_stop_when, args=(system, seen, deadline), daemon=True)
             stopper.start()
             try:
-                asyncio.run(asyncio.wait_for(_watch(system.recorder.address, enough, seen), PATIENCE_S + 10))
+                asyncio.run(asyncio.wait_for(_watch(system.observer.recorder.address, enough, seen), PATIENCE_S + 10))
             except Exception as error:  # noqa: BLE001 - reported by the test
                 seen["error"] = repr(error)
                 system.request_shutdown()
@@ -124,7 +124,7 @@ def test_every_channel_is_advertised_and_sends(hallway_live):
     assert seen["ops"][0] == "serverInfo"
     composition = validate_path(tmp / "hallway.yaml").graph.loaded.composition
     expected = ({f"/streams/{name}" for name in composition.streams} | {f"/timing/{t}" for t in composition.threads}
-                | {SCAN_TOPIC, FRAMES_TOPIC, ARROW_TOPIC, LOG_TOPIC})
+                | {SCAN_TOPIC, FRAMES_TOPIC, ARROW_TOPIC, LOG_TOPIC, "/events/flags", "/events/lifecycle"})
     topics = _topics(seen)
     assert set(topics) == expected
     assert expected - {LOG_TOPIC} <= set(seen["messages"])
@@ -206,8 +206,8 @@ def test_without_the_sdk_view_says_so_in_one_line(tmp_path, monkeypatch):
 def test_a_running_system_is_shown_from_outside_without_being_touched(tmp_path):
     """`hapticop view`: the control socket says where the region is; a viewer of its own reads the
     latest slots, timing and logs, and leaves every queue ring to its reader."""
+    from hapticop.observe.viewer import Attachment, view
     from hapticop.runtime.control import request
-    from hapticop.runtime.viewer import Attachment, view
 
     from .control_helpers import while_running
     from .test_recording import counters

@@ -11,9 +11,9 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
+from hapticop.observe.timing_channels import WINDOW_NS
 from hapticop.recording.mcapfile import LOG_TOPIC
 from hapticop.runtime.logs import Level, format_line, parse_line
-from hapticop.runtime.timing_channels import WINDOW_NS
 
 from .runtime_helpers import compose
 from .test_recording import counters

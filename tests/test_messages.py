@@ -131,7 +131,7 @@ def test_tables_print_fixed_point_and_a_ceiling_as_a_floor(tmp_path):
 
     from rich.console import Console
 
-    from hapticop.runtime.report import print_results, print_timing
+    from hapticop.cli.report import print_results, print_timing
 
     thread = {"period": "1ms", "cycles": 1000, "missed_deadlines": 0, "missed_percent": None, "cpu_percent": 12.5,
               "wakeup_latency_us": {"p50": 12.0, "p99": 19999.0, "p99.9": 19999.0, "max": 1234567.8}}

@@ -20,10 +20,10 @@ from typer.testing import CliRunner
 
 from hapticop.blocks.interface import Port
 from hapticop.cli.main import app, bare_options
+from hapticop.observe.recorder import RecordedRing, Recorder, RecorderPlan, values
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo, part_of
 from hapticop.recording.reading import RecordingError, contents, series
 from hapticop.recording.recover import recover
-from hapticop.runtime.recorder import RecordedRing, Recorder, RecorderPlan, values
 from hapticop.runtime.streams import SpscQueue, queue_nbytes, sample_dtype
 
 from .conftest import ROOT
@@ -127,7 +127,8 @@ def test_chosen_streams_only_and_decimated(tmp_path):
     path = tmp_path / "run-c" / "c.mcap"
     found = contents(path)
     assert [c.topic for c in found.channels if c.stream] == ["/streams/count"]
-    assert {c.topic for c in found.channels if not c.stream} == {"/timing/main", "/timing/slow", "/log"}  # the loops'
+    assert {c.topic for c in found.channels if not c.stream} == {"/timing/main", "/timing/slow", "/log",
+                                                                 "/events/flags", "/events/lifecycle"}  # the loops'
     assert found.channels[0].stream.every == 10
     sequence = [m[0] for m in _messages(path, "/streams/count")]
     written = result.recording["streams"]["count"]["written"]
@@ -357,10 +358,10 @@ def test_a_stalled_recorder_drops_counted_samples_and_never_holds_the_loops(tmp_
     def stall(system):
         def act():
             _running_for(system, 500)
-            os.kill(system.recorder.pid, signal.SIGSTOP)
+            os.kill(system.observer.recorder.pid, signal.SIGSTOP)
             stalled["stopped"] = True
             time.sleep(1.2)
-            os.kill(system.recorder.pid, signal.SIGCONT)
+            os.kill(system.observer.recorder.pid, signal.SIGCONT)
 
         threading.Thread(target=act, daemon=True).start()
 
@@ -383,8 +384,8 @@ def test_a_killed_recorder_leaves_a_part_that_recovers(tmp_path):
     def kill(system):
         def act():
             _running_for(system, 1500)  # cycles: more than a flush's worth of samples are in the file
-            killed["pid"] = system.recorder.pid
-            os.kill(system.recorder.pid, signal.SIGKILL)
+            killed["pid"] = system.observer.recorder.pid
+            os.kill(system.observer.recorder.pid, signal.SIGKILL)
 
         threading.Thread(target=act, daemon=True).start()
 

@@ -136,3 +136,12 @@ def test_the_shipped_layout_is_the_built_one_and_names_channels_the_recording_ha
     assert plotted <= topics
     (log,) = [p["config"] for p in panels if p["panelType"] == "Log"]
     assert log["topicToRender"] in topics
+    (states,) = [p["config"] for p in panels if p["panelType"] == "StateTransitions"]
+    shown = {path["value"].split("{")[0].split(".")[0] for path in states["paths"]}
+    assert shown == {"/events/lifecycle", "/events/mode"}
+    assert shown - {"/events/mode"} <= topics  # the hallway switches no mode: its channel comes with the first
+    with open(hallway_run, "rb") as stream:
+        owners = {json.loads(m.data)["owner"] for _, _, m in make_reader(stream).iter_messages(
+            topics=["/events/lifecycle"])}
+    labelled = {path["label"] for path in states["paths"]} - {"modes"}
+    assert labelled <= owners  # every life cycle the layout shows is one the hallway's recording has

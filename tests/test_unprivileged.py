@@ -48,7 +48,7 @@ from pathlib import Path
 from rich.console import Console
 
 from hapticop.cli import main
-from hapticop.runtime.report import print_results, print_timing
+from hapticop.cli.report import print_results, print_timing
 from hapticop.runtime.system import RunOptions, run_system
 from hapticop.validation import validate_path
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, ClassVar
 
-from hapticop.blocks.interface import Interface, Need, Params, Port, RateRange
+from hapticop.blocks.interface import Display, Interface, Need, Params, Port, RateRange
 
 if TYPE_CHECKING:
     from hapticop.runtime.context import ActivityContext
@@ -101,6 +101,12 @@ class Block:
         """Files an activity that ran leaves in the run directory when it cleans (its results: a
         recording, metrics, a picture). A run that ends without one of them has lost results, and
         its exit status says so."""
+        return ()
+
+    @classmethod
+    def displays(cls, params: Params) -> tuple[Display, ...]:
+        """What observation may draw from this activity's outputs in Foxglove (the scan, the robot's
+        frames, a force arrow), beside the raw streams; drawn only from streams a run records or shows."""
         return ()
 
     @classmethod

@@ -12,7 +12,7 @@ import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Interface, Params, Port, RateRange
+from hapticop.blocks.interface import Display, Interface, Params, Port, RateRange
 from hapticop.haptics.force_models import BrakingFieldParams, ForceModelParams, make_force_model
 from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import (
@@ -65,6 +65,12 @@ class HapticController(Block):
     awaits = frozenset({"resources_ready"})
     optional_flags = frozenset({"robot_held"})  # only a composition with a fieldbus watchdog binds it
     period_params = frozenset({"centring.period_s", "force_model.period_s"})
+
+    @classmethod
+    def displays(cls, params: HapticControllerParams) -> tuple[Display, ...]:
+        """The force on the handle, as an arrow over the robot."""
+        return (Display("force_arrow", {"force": "force"}),)
+
     # Every law retunes between two cycles (`retune`): a live gain change never stops the robot.
     running_params = frozenset({"blind", "centring", "driving", "force_model", "governor", "scan_filter",
                                 "centred_within_m", "correction_feel"})

@@ -69,6 +69,18 @@ class RateRange:
 
 
 @dataclass(frozen=True)
+class Display:
+    """A picture a viewer such as Foxglove can draw from some of this block's outputs: `kind` names
+    it (`laser_scan`, `frames`, `force_arrow`), `ports` gives each of its roles the block's output
+    port that plays it, `options` the figures it needs that only the block knows (a mount, a
+    heading). Observation builds it from the recorded streams of those ports, whatever they are called."""
+
+    kind: str
+    ports: dict[str, str]
+    options: dict[str, float | tuple[float, ...]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Need:
     """Another activity this one works with outside the streams, named by one of its parameters.
 

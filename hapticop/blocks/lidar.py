@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import DeviceParams, Interface, Port, RateRange
+from hapticop.blocks.interface import DeviceParams, Display, Interface, Port, RateRange
 from hapticop.devices.ropod.body import Body
 
 ROPOD_BODY = Body()
@@ -44,6 +44,14 @@ class Lidar(Block):
     Params = LidarParams
     needs = {"simulator": "tim561"}
     flags_written = {"new_scan": "a complete scan was written to the ranges and angles ports"}
+
+    @classmethod
+    def displays(cls, params: LidarParams) -> tuple[Display, ...]:
+        """The scan in the scanner's own frame (`laser`), and where that frame sits on the robot."""
+        yaw = math.radians(params.yaw_deg)
+        mount = ROPOD_BODY.lidar
+        return (Display("laser_scan", {"ranges": "ranges", "angles": "angles"},
+                        {"yaw_rad": yaw, "mount": (mount.x_m, mount.y_m, yaw)}),)
 
     @classmethod
     def interface(cls, params: LidarParams) -> Interface:

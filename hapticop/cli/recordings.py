@@ -162,8 +162,8 @@ def report(
     from rich.console import Console
 
     from hapticop.cli.outputs import is_stdout
+    from hapticop.cli.report import print_results
     from hapticop.runtime.replay import ReplayError, leaving_results, open_run, results
-    from hapticop.runtime.report import print_results
 
     if is_stdout(output):
         raise _fail("-o -: a report is a directory of files (metrics, picture), not one stream; name a directory", 2)

@@ -98,7 +98,7 @@ class LiveServer:
         return len(self._channels)
 
     def stream_channel(self, info: StreamInfo, thinned: bool = True) -> int:
-        """A stream's channel; `thinned=False` for samples already taken at the display rate (`runtime.taps`)."""
+        """A stream's channel; `thinned=False` for samples already taken at the display rate (`observe.taps`)."""
         schema = self.schema(arrays.schema_name(info.dtype), arrays.SCHEMA_ENCODING, arrays.schema_data(info.dtype))
         id_ = self.channel(topic_of(info.name), arrays.MESSAGE_ENCODING, schema, info.metadata())
         self._channels[id_ - 1].prefix = arrays.prefix(info.nbytes)

@@ -42,8 +42,9 @@ MAGIC = b"\x89MCAP0\r\n"
 PART = ".part"
 CHUNK_BYTES = 4 << 20  # larger than a second of a busy run: chunks close at the flushes
 STREAM_TOPIC = "/streams/{}"
-TIMING_TOPIC = "/timing/{}"  # a loop's timing windows (hapticop.runtime.timing_channels)
-LOG_TOPIC = "/log"  # the run's log records (hapticop.runtime.log_channel)
+TIMING_TOPIC = "/timing/{}"  # a loop's timing windows (hapticop.observe.timing_channels)
+LOG_TOPIC = "/log"  # the run's log records (hapticop.observe.log_channel)
+EVENT_TOPIC = "/events/{}"  # what happened to the run: modes, flags, life cycles (hapticop.observe.event_channels)
 LINK_TOPIC = "/link/{}"  # a network bridge's link figures (hapticop.runtime.link_channel)
 
 

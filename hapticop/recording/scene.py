@@ -1,15 +1,15 @@
 """What a Foxglove user expects beside the raw streams: the scan, the robot's frames, the force arrow.
 
-Recorder views (`runtime.recorder.View`) that write Foxglove's well-known protobuf schemas,
+Recorder views (`observe.recorder.View`) that write Foxglove's well-known protobuf schemas,
 encoded by the `foxglove-sdk` package (the optional `[foxglove]` extra), from the recorded
-streams of the blocks that have them, found by the writing block's type and port whatever the
-streams are called:
+streams of the blocks that declare them (`Block.displays`: a kind, the block's ports that play
+its roles, the figures only the block knows), whatever the streams are called:
 
-- `/scan` (`foxglove.LaserScan`, frame `laser`) from the lidar block's `ranges` and `angles`;
-- `/tf` (`foxglove.FrameTransforms`) along REP-105's map -> odom -> base_link -> laser, from the
-  simulated world's `pose_in_hallway` (odom is where the robot started: simulated odometry is
-  perfect, so map -> odom never moves) and the LIDAR's mount on the robot body;
-- `/handle_force/arrow` (`foxglove.SceneUpdate`) the haptic controller's `force` as an arrow over
+- `laser_scan` -> `/scan` (`foxglove.LaserScan`, frame `laser`) from a scan's `ranges` and `angles`;
+- `frames` -> `/tf` (`foxglove.FrameTransforms`) along REP-105's map -> odom -> base_link -> laser,
+  from a robot's `pose` in the map (odom is where the robot started: simulated odometry is
+  perfect, so map -> odom never moves) and the scanner's `mount` its `laser_scan` declares;
+- `force_arrow` -> `/handle_force/arrow` (`foxglove.SceneUpdate`) a `force` as an arrow over
   the robot, in its axes (the Falcon's x right, y up, z towards the operator: hapticop.haptics.handle).
 
 They run in the recorder, never on a real-time loop; frames and arrows are thinned to
@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hapticop.composition.loader import Loaded
-from hapticop.devices.ropod.body import Body
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 
 DISPLAY_PERIOD_NS = 20_000_000  # 50 Hz of frames and arrows
@@ -32,11 +31,6 @@ FORCE_ARROW_M_PER_N = 0.05  # 10 N (the Falcon's most) is half a metre
 ARROW_HEIGHT_M = 0.6  # over the robot's centre
 SCAN_TOPIC, FRAMES_TOPIC, ARROW_TOPIC = "/scan", "/tf", "/handle_force/arrow"
 MAP, ODOM, BASE, LASER = "map", "odom", "base_link", "laser"
-
-# the writers each view reads, as (block type, output port)
-LIDAR_RANGES, LIDAR_ANGLES = ("lidar", "ranges"), ("lidar", "angles")
-WORLD_POSE = ("hallway_world", "pose_in_hallway")
-HANDLE_FORCE = ("haptic_controller", "force")
 
 
 def available() -> bool:
@@ -226,24 +220,27 @@ def arrow(fx: float, fy: float, fz: float, stamp_ns: int):
 
 
 def views_for(loaded: Loaded, recorded: list[str]) -> list:
-    """The views the recorded streams allow: every block of the right type, whatever its streams' names."""
+    """The views the blocks declare (`Block.displays`) whose ports' streams are all recorded or shown."""
     if not available():
         return []
     composition = loaded.composition
-    by_writer: dict[tuple[str, str], list[tuple[str, str]]] = {}  # (block, port) -> [(activity, stream)]
-    for name in recorded:
-        activity, port = composition.streams[name].writer.split(".")
-        by_writer.setdefault((composition.activities[activity].block, port), []).append((activity, name))
+    by_port = {composition.streams[name].writer: name for name in reversed(recorded)}  # a port's first stream
+    declared = []  # (kind, {role: stream}, options), in activity order
+    for activity, resolved in loaded.activities.items():
+        for display in resolved.block.displays(resolved.params):
+            streams = {role: by_port.get(f"{activity}.{port}") for role, port in display.ports.items()}
+            if all(streams.values()):
+                declared.append((display.kind, streams, display.options))
+    scans = [(streams, options) for kind, streams, options in declared if kind == "laser_scan"]
+    mount = scans[-1][1].get("mount", (0.0, 0.0, 0.0)) if scans else (0.0, 0.0, 0.0)  # where `laser` sits
     views: list = []
-    angles = dict(by_writer.get(LIDAR_ANGLES, []))
-    yaw = 0.0
-    for activity, ranges in by_writer.get(LIDAR_RANGES, []):
-        if activity in angles:
-            yaw = math.radians(float(getattr(loaded.activities[activity].params, "yaw_deg", 0.0)))
-            views.append(LaserScanView(ranges, angles[activity], yaw))
-    mount = Body().lidar
-    for _, pose in by_writer.get(WORLD_POSE, []):
-        views.append(FramesView(pose, (mount.x_m, mount.y_m, yaw)))
-    for _, force in by_writer.get(HANDLE_FORCE, []):
-        views.append(ForceArrowView(force))
+    for kind, streams, options in declared:
+        if kind == "laser_scan":
+            views.append(LaserScanView(streams["ranges"], streams["angles"], float(options.get("yaw_rad", 0.0))))
+    for kind, streams, _ in declared:
+        if kind == "frames":
+            views.append(FramesView(streams["pose"], tuple(mount)))
+    for kind, streams, _ in declared:
+        if kind == "force_arrow":
+            views.append(ForceArrowView(streams["force"]))
     return views

@@ -16,18 +16,18 @@ import numpy as np
 
 from hapticop.composition.description import Composition
 from hapticop.composition.loader import Loaded, ResolvedActivity
-from hapticop.recording.plan import RecordedStream
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
-from hapticop.runtime.region import Layout, Region, Transport
-from hapticop.runtime.streams import QUEUE_HEADER, LatestSlot, RecorderRing, SpscQueue, latest_nbytes, queue_nbytes
+from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
+from hapticop.runtime.transport import connect_reader, transport_of
 
 
-def layout_of(loaded: Loaded, flags: list[str]) -> Layout:
-    """The region's layout; `flags` as validation's graph lists them (`Validated.flags`)."""
-    return Layout.build(loaded.composition, loaded.activities, flags)
+def layout_of(loaded: Loaded, flags: list[str], rings: dict[str, int] | None = None) -> Layout:
+    """The region's layout; `flags` as validation's graph lists them (`Validated.flags`), `rings` the
+    recorder rings the run's observer reserves (capacity per stream)."""
+    return Layout.build(loaded.composition, loaded.activities, flags, rings)
 
 
 def thread_of(composition: Composition) -> dict[str, str]:
@@ -79,51 +79,25 @@ def _transports(loaded: Loaded, region: Region, owner: dict[str, str], one_threa
             for name in loaded.composition.streams}
 
 
-def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str], allocate: bool = False,
-                    one_thread: bool = False, record: RecordedStream | None = None) -> list:
-    """The transports of one stream: a latest slot, or one queue ring per reader; then, if the
-    stream is recorded, the recorder's ring (which only the writer sees: readers take theirs by index).
+def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str, str],
+                    one_thread: bool = False) -> list:
+    """The transports of one stream over the buffers the layout placed for it (at start-up, or in
+    the arena when added live): a latest slot, or one queue ring per reader; then, if the run
+    reserved one, the recorder's ring (which only the writer sees: readers take theirs by index).
 
-    `allocate` takes the buffers from the arena (a stream added to a running system) instead of
-    the layout computed at start, the recorder's ring too when `record` says the run records it.
     `one_thread`: every loop of the system runs in this thread, one after the other (the virtual
     clock), so no reader needs the seqlock's retries.
     """
-    spec = loaded.composition.streams[stream]
-    writer_activity, writer_port = spec.writer.split(".")
-    port = loaded.activities[writer_activity].interface.outputs[writer_port]
+    transport = transport_of(loaded, stream)
+    spec = transport.spec
     reader_threads = {owner.get(r.split(".")[0]) for r in spec.readers}
-    same_thread = reader_threads == {owner.get(writer_activity)}
-    if spec.policy.kind == "latest":
-        nbytes = latest_nbytes(port)
-        offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][0].offset
-        synchronised = spec.policy.sync == "lock_free" and not same_thread and not one_thread
-        objects: list = [LatestSlot(region.buffer_at(offset, nbytes), port, synchronised=synchronised)]
-    else:
-        objects = []
-        for index in range(len(spec.readers)):
-            nbytes = queue_nbytes(port, spec.policy.capacity)
-            offset = region.layout.allocate(nbytes) if allocate else region.layout.transports[stream][index].offset
-            objects.append(SpscQueue(region.buffer_at(offset, nbytes), port, spec.policy.capacity,
-                                     spec.policy.overflow))
-    if not allocate:
-        recorded = region.layout.recorded.get(stream)
-    elif record is not None:  # added live to a recorded run: a ring of its own, never an earlier stream's
-        nbytes = queue_nbytes(port, record.capacity)
-        recorded = region.layout.recorded[stream] = Transport(stream, "queue", region.layout.allocate(nbytes),
-                                                              nbytes, "recorder")
-    else:
-        recorded = None
-    if recorded is not None:
-        objects.append(recorder_ring(region, recorded, port))
+    same_thread = reader_threads == {owner.get(spec.writer.split(".")[0])}
+    views = [region.buffer_at(t.offset, t.nbytes) for t in region.layout.transports[stream]]
+    objects = transport.objects(views, synchronised=not same_thread and not one_thread)
+    ring = region.layout.recorded.get(stream)
+    if ring is not None:
+        objects.append(transport.ring(region.buffer_at(ring.offset, ring.nbytes)))
     return objects
-
-
-def recorder_ring(region: Region, transport: Transport, port) -> RecorderRing:
-    """The recorder's ring of a stream: the loop never waits for it, and overwrites the oldest
-    samples when the recorder falls a whole ring behind (the recorder counts them)."""
-    capacity = (transport.nbytes - QUEUE_HEADER.itemsize) // latest_nbytes(port)
-    return RecorderRing(region.buffer_at(transport.offset, transport.nbytes), port, capacity, transport.stream)
 
 
 def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
@@ -152,11 +126,8 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
             outputs[spec.writer.split(".")[1]].transports.extend(objects)
         for index, reader in enumerate(spec.readers):
             activity, port = reader.split(".")
-            if activity != name:
-                continue
-            target = inputs[port]
-            queue = spec.policy.kind == "queue"
-            target.connect(objects[index] if queue else objects[0], queue, spec.max_age or 0)
+            if activity == name:
+                connect_reader(spec, inputs[port], objects, index)
     flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
     log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
     for port in inputs.values():

@@ -32,18 +32,19 @@ ORPHAN_BOUND_S = 1.0  # from the parent's death to this process's end, cleaned o
 PR_SET_PDEATHSIG = 1
 
 
-def process_main(tree: dict, flags: list[str], region_name: str, threads: list[str], run_dir: str, seed: int,
-                 messages) -> None:
+def process_main(tree: dict, flags: list[str], rings: dict[str, int], region_name: str, threads: list[str],
+                 run_dir: str, seed: int, messages) -> None:
     """The parent hands over the validated tree as plain data and the flag list, so this process
     neither parses YAML nor builds the graph again: it starts in a fraction of the time. The
-    first thread runs on this process's main thread; others it shares the process with get
+    first thread runs on this process's main thread (`rings`: the recorder rings the run reserved, laid out
+    as the parent did); others it shares the process with get
     threads of their own."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent while it started us
     parent = os.getppid()
     loaded = load_tree(tree)
     try:
-        region = Region.attach(layout_of(loaded, flags), region_name)
+        region = Region.attach(layout_of(loaded, flags, rings), region_name)
     except FileNotFoundError:
         return  # the run ended (an interrupted start-up) before this process got going: nothing to do
     _leave_with_parent(parent, region, threads)

@@ -34,13 +34,13 @@ from hapticop.composition.description import Composition, Stream
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.composition.units import format_duration
-from hapticop.recording.plan import recorded_streams
 from hapticop.runtime.assembly import thread_of
 from hapticop.runtime.described import Description
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Layout
-from hapticop.runtime.streams import RecorderRing, latest_nbytes, queue_nbytes
+from hapticop.runtime.streams import RecorderRing
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
+from hapticop.runtime.transport import connect_reader, transport_of
 from hapticop.validation.changes import ChangePlan
 from hapticop.validation.patches import PatchError, prepare
 
@@ -71,6 +71,9 @@ class LiveTarget(Protocol):
 
     def new_transports(self, loaded: Loaded, stream: str, owner: dict[str, str]) -> list:
         """An added stream's buffers, taken from the region's spare room."""
+
+    def rings(self, loaded: Loaded) -> dict[str, int]:
+        """The recorder rings the run's observer would give these streams (capacity per stream)."""
 
 
 class StaleBase(Exception):
@@ -201,17 +204,12 @@ def _room_lacking(target: LiveTarget, plan: ChangePlan, loaded: Loaded) -> str |
         iface = loaded.activities[name].interface
         flags[name] = list(flagdefs.activity_flags(name, iface.flags_written, iface.flags_read))
     buffers, rings = [], []
-    recorded = recorded_streams(loaded.composition)  # a recorded run's added streams get a recorder ring each
+    recorded = target.rings(loaded)  # a recorded run's added streams get a recorder ring each
     for name in plan.added_streams:
-        spec = loaded.composition.streams[name]
-        writer_activity, writer_port = spec.writer.split(".")
-        port = loaded.activities[writer_activity].interface.outputs[writer_port]
-        if spec.policy.kind == "latest":
-            buffers.append(latest_nbytes(port))
-        else:
-            buffers.extend(queue_nbytes(port, spec.policy.capacity) for _ in spec.readers)
+        transport = transport_of(loaded, name)
+        buffers.extend(nbytes for nbytes, _ in transport.buffers())
         if name in recorded:
-            rings.append(queue_nbytes(port, recorded[name].capacity))
+            rings.append(transport.ring_nbytes(recorded[name]))
     lacking = target.layout.room_for(flags, buffers + rings)
     if lacking and rings and target.layout.room_for(flags, buffers) is None:
         lacking += ": the recorder's rings of the new streams would not fit ('record.depth' sets their length)"
@@ -301,8 +299,7 @@ def _connect(target: LiveTarget, stream: str, new: Description) -> None:
         runner = target.runners.get(activity)
         if runner is None:
             continue
-        queue = spec.policy.kind == "queue"
-        getattr(runner.block.inputs, port).connect(objects[index] if queue else objects[0], queue, spec.max_age or 0)
+        connect_reader(spec, getattr(runner.block.inputs, port), objects, index)
 
 
 def _disconnect(target: LiveTarget, name: str, spec: Stream) -> None:

@@ -9,6 +9,8 @@ validation made sure they are all parameters the block retunes while running.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from pydantic import ValidationError
 
 from hapticop.runtime.described import Description
@@ -17,8 +19,10 @@ from hapticop.validation.modes import merged
 
 
 class Modes:
-    def __init__(self, target: LiveTarget, flag_index: dict[str, int], flags):
-        self.target, self.flag_index, self.flags = target, flag_index, flags
+    def __init__(self, target: LiveTarget, flag_index: dict[str, int], flags,
+                 tell: Callable[[str, dict], None] = lambda kind, payload: None):
+        """`tell(kind, payload)`: the run's observer hears of each switch (`Observer.event`)."""
+        self.target, self.flag_index, self.flags, self.tell = target, flag_index, flags, tell
         self.description: Description | None = None
         self.watched: list[tuple[str, int]] = []  # (mode, flag index) in declaration order
         self.mask = 0  # bit k: the k-th watched mode holds
@@ -49,6 +53,8 @@ class Modes:
             self.target.log.always("modes: %s", "; ".join(
                 part for part in ("entered " + ", ".join(entered) if entered else "",
                                   "left " + ", ".join(left) if left else "") if part))
+            self.tell("mode", {"entered": entered, "left": left, "holding": list(holding),
+                               "modes": ", ".join(holding) or "none"})
         self.mask, self.holding = mask, holding
         self._give(description, holding)
 

@@ -16,9 +16,9 @@ import numpy as np
 from hapticop.composition import lcsm
 from hapticop.composition.description import ARENA_BYTES, SPARE_ACTIVITIES, SPARE_FLAGS, Composition
 from hapticop.composition.loader import ResolvedActivity
-from hapticop.recording.plan import recorded_streams
 from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
+from hapticop.runtime.transport import StreamTransport, transport_for, writer_port
 
 ALIGN = 64
 WAITING_BYTES = 160  # what an activity's configuration waits for, as UTF-8 text `status` shows
@@ -51,6 +51,7 @@ class Layout:
     sections: dict[str, tuple[int, tuple[int, ...], str]] = field(default_factory=dict)
     transports: dict[str, list[Transport]] = field(default_factory=dict)
     recorded: dict[str, Transport] = field(default_factory=dict)  # the recorder's own ring per recorded stream
+    rings: dict[str, int] = field(default_factory=dict)  # the observer's reservation: ring capacity per stream
     size: int = 0
 
     def __post_init__(self) -> None:
@@ -89,6 +90,17 @@ class Layout:
         del self.flags[flags:]
         self.arena_used = arena_used
 
+    def place(self, transport: StreamTransport, at) -> None:
+        """Place a stream's buffers, each at `at(nbytes)`: the same sizes at start-up (one after
+        the other) as for a stream added live (from the arena)."""
+        self.transports[transport.name] = [Transport(transport.name, transport.kind, at(nbytes), nbytes, reader)
+                                           for nbytes, reader in transport.buffers()]
+        if transport.name in self.rings:
+            nbytes = transport.ring_nbytes(self.rings[transport.name])
+            self.recorded[transport.name] = Transport(transport.name, "queue", at(nbytes), nbytes, "recorder")
+        else:  # a stream added again, now unrecorded: its earlier ring is not its own any more
+            self.recorded.pop(transport.name, None)
+
     def room_for(self, flags_by_activity: dict[str, list[str]], buffers: list[int]) -> str | None:
         """What the spare room lacks for these live additions (None: they fit); changes nothing, so
         a patch that would not fit is refused before any of it is applied."""
@@ -115,8 +127,10 @@ class Layout:
         return offset
 
     @classmethod
-    def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str]) -> Layout:
-        layout = cls(list(composition.threads), list(activities), sorted(flags))
+    def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str],
+              rings: dict[str, int] | None = None) -> Layout:
+        """`rings`: the recorder ring each stream gets, by capacity (what the run's observer reserves)."""
+        layout = cls(list(composition.threads), list(activities), sorted(flags), rings=dict(rings or {}))
         layout.declared_activities, layout.declared_flags = len(layout.activities), len(layout.flags)
         threads = len(layout.threads)
         owners = len(layout.owner_index) + SPARE_ACTIVITIES
@@ -153,26 +167,14 @@ class Layout:
         section("e2e_max", (st.ORIGINS,), "int64")  # end-to-end latencies, one per `latencies` entry
         section("e2e", (st.ORIGINS, BINS), "int64")
         section("arena", (ARENA_BYTES,), "uint8")
+
+        def at(nbytes: int) -> int:
+            nonlocal offset
+            start, offset = offset, _align(offset + nbytes)
+            return start
+
         for name, spec in composition.streams.items():
-            writer_activity, writer_port = spec.writer.split(".")
-            port = activities[writer_activity].interface.outputs[writer_port]
-            if spec.policy.kind == "latest":
-                nbytes = st.latest_nbytes(port)
-                layout.transports[name] = [Transport(name, "latest", offset, nbytes)]
-                offset = _align(offset + nbytes)
-            else:
-                rings = []
-                for reader in spec.readers:
-                    nbytes = st.queue_nbytes(port, spec.policy.capacity)
-                    rings.append(Transport(name, "queue", offset, nbytes, reader))
-                    offset = _align(offset + nbytes)
-                layout.transports[name] = rings
-        for name, recorded in recorded_streams(composition).items():
-            writer_activity, writer_port = composition.streams[name].writer.split(".")
-            port = activities[writer_activity].interface.outputs[writer_port]
-            nbytes = st.queue_nbytes(port, recorded.capacity)
-            layout.recorded[name] = Transport(name, "queue", offset, nbytes, "recorder")
-            offset = _align(offset + nbytes)
+            layout.place(transport_for(name, spec, writer_port(activities, spec)), at)
         layout.size = max(offset, ALIGN)
         return layout
 

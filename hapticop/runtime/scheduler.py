@@ -99,8 +99,8 @@ class Scheduler:
             receiving, sending = context.Pipe(duplex=False)
             process = context.Process(
                 target=process_main,
-                args=(plain(tree), layout.flags[: layout.declared_flags], self.region.name, threads, str(run_dir),
-                      seed, receiving),
+                args=(plain(tree), layout.flags[: layout.declared_flags], dict(layout.rings), self.region.name,
+                      threads, str(run_dir), seed, receiving),
                 name=f"hapticop-{process_name}", daemon=True,
             )
             with _sigint_held():

@@ -11,7 +11,6 @@ own thread (`service.py`).
 from __future__ import annotations
 
 import contextlib
-import copy
 import dataclasses
 import json
 import os
@@ -21,14 +20,13 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from hapticop.composition import flags as flagdefs
-from hapticop.composition.description import Composition, Record
+from hapticop.composition.description import Composition
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
-from hapticop.recording.live import LiveOptions
-from hapticop.recording.plan import recorded_streams
 from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of, make_runner, make_transports
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
@@ -36,8 +34,8 @@ from hapticop.runtime.described import Description
 from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.modes import Modes
+from hapticop.runtime.observer import ObservedRun, Observer, standard_observer
 from hapticop.runtime.preflight import DevicesMissing, missing_devices
-from hapticop.runtime.recorder import InlineRecorder, RecorderProcess, plan_of, recorded_ring
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
 from hapticop.runtime.rundirs import directory_mode, new_run_directory
@@ -45,7 +43,11 @@ from hapticop.runtime.scheduler import Scheduler
 from hapticop.runtime.service import ControlService, control_path
 from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
+from hapticop.runtime.transport import transport_of
 from hapticop.validation import Validated
+
+if TYPE_CHECKING:
+    from hapticop.recording.live import LiveOptions
 
 # ExitStatus is part of what a run returns (`Outcome.status`), so it is offered here too.
 __all__ = ["ExitStatus", "Outcome", "RunOptions", "RunResult", "System", "run_system"]
@@ -63,6 +65,7 @@ class RunOptions:
     group_readable: bool = False  # run directories 0750 (files by the caller's umask, 027 from the CLI)
     record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
     view: LiveOptions | None = None  # serve live to Foxglove the recorded streams (the latest slots if none is)
+    observer: Any = None  # an `Observer` instead of the standard one (which `record` and `view` configure)
 
 
 @dataclass
@@ -87,10 +90,8 @@ class System:
 
     def __init__(self, validated: Validated, options: RunOptions):
         source, loaded = validated.source, validated.graph.loaded
-        tree = source.tree
-        self.records = options.record is not None or loaded.composition.record is not None  # to a file
-        if options.record is not None and loaded.composition.record is None:
-            tree, loaded = _recording_all(tree, loaded)
+        self.observer: Observer = options.observer or standard_observer(options.record, options.view)
+        tree, loaded = self.observer.composition(source.tree, loaded)
         composition = loaded.composition
         if options.duration_ns is None and composition.duration is not None:
             options = dataclasses.replace(options, duration_ns=composition.duration)
@@ -111,8 +112,7 @@ class System:
         self.log = self.writer.logger("system", Level.INFO, self.clock.now_ns)
         self.region = self.scheduler = self.built = None
         self.finished = False
-        self.recorder: RecorderProcess | InlineRecorder | None = None
-        self.recording: dict | None = None  # what the recorder recorded and lost, once it finished
+        self.recording: dict | None = None  # what the observer recorded and lost, once it finished
         try:
             self._build(validated, tree, loaded, composition, options)
         except BaseException:  # Ctrl+C while processes start, a block that cannot be built: nothing stays
@@ -122,7 +122,7 @@ class System:
     def _build(self, validated: Validated, tree, loaded: Loaded, composition: Composition,
                options: RunOptions) -> None:
         self.description = Description.of(tree, loaded)
-        self.layout = layout_of(loaded, validated.flags)
+        self.layout = layout_of(loaded, validated.flags, self.observer.rings(loaded))
         self.region = Region.create(self.layout)
         self.log.info("shared memory %s, %d bytes", self.region.name, self.layout.size)
         self.flag_index = self.layout.flag_index
@@ -137,24 +137,21 @@ class System:
                                      shutdown_timeout_ns=options.shutdown_timeout_ns,
                                      finish=self._finish)
         self.live = LiveChanges(self, Path(self.file).name, self.supervisor.reasons)
-        self.modes = Modes(self, self.flag_index, self.region.flags)
+        self.modes = Modes(self, self.flag_index, self.region.flags,
+                           lambda kind, payload: self.observer.event(kind, payload, self.clock.now_ns()))
         flags = list(validated.flags)
 
         def attach() -> dict:  # what `hapticop view` needs: the region as the children lay it out from the tree
             return {"region": self.region.name, "flags": flags, "tree": json.loads(json.dumps(tree, default=str)),
-                    "run_dir": str(self.run_dir), "pid": os.getpid(), "name": self.name}
+                    "rings": dict(self.layout.rings), "run_dir": str(self.run_dir), "pid": os.getpid(),
+                    "name": self.name}
 
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
                                       lambda: self.description, self.log, self.run_dir, attach,
                                       lambda: dict(self.modes.given))
         self.main.supervisor = self._between_cycles
-        if self.layout.recorded or options.view is not None:
-            path = None if not self.records else Path(options.record) if options.record else \
-                self.run_dir / f"{self.name}.mcap"
-            plan = plan_of(loaded, self.layout, tree, self.file, path, self.virtual, options.seed, self.run_dir,
-                           options.view)
-            self.recorder = (InlineRecorder(plan, self.region.memory.buf, self.clock.now_ns) if self.virtual else
-                             RecorderProcess(plan, self.region.name))
+        self.observer.start(ObservedRun(loaded, tree, self.file, self.name, self.region, self.clock.now_ns,
+                                        self.virtual, options.seed, self.run_dir, self.log))
         if not self.virtual:
             realtime.warn_missing(list(composition.threads.values()), composition.cpu_dma_latency, self.log)
             self.scheduler.spawn_processes(tree, self.run_dir, options.seed)
@@ -197,8 +194,7 @@ class System:
         """The main thread's duty before each of its cycles: live changes, then supervision."""
         self.live.apply_due(self.clock.now_ns() - int(self.region.system[Region.STARTED_NS]))
         self.modes.apply_due()  # after the patches: a mode's values stay over a patched activity's
-        if self.virtual and self.recorder is not None:
-            self.recorder.between_cycles()
+        self.observer.between_cycles()
         self.supervisor.check(self.description)
 
     # -- what a live patch may touch (live.LiveTarget) -----------------------------------
@@ -222,30 +218,25 @@ class System:
         return runner
 
     def new_transports(self, loaded: Loaded, stream: str, owner: dict[str, str]) -> list:
-        """An added stream's buffers; if the run records it to a file, its recorder ring too, which the
-        recorder follows from now on."""
-        record = recorded_streams(loaded.composition).get(stream) if self.records and self.recorder else None
-        objects = make_transports(loaded, self.region, stream, owner, allocate=True, one_thread=self.virtual,
-                                  record=record)
-        if record is not None:
-            self.recorder.add(recorded_ring(loaded, self.region.layout.recorded[stream], record))
+        """An added stream's buffers; if the observer wants it, its recorder ring too, which the
+        observer follows from now on."""
+        rings = self.rings(loaded)
+        if stream in rings:
+            self.layout.rings[stream] = rings[stream]
+        else:
+            self.layout.rings.pop(stream, None)
+        self.layout.place(transport_of(loaded, stream), self.layout.allocate)
+        objects = make_transports(loaded, self.region, stream, owner, one_thread=self.virtual)
+        if stream in rings:
+            self.observer.stream_added(loaded, stream, self.layout.recorded[stream])
         return objects
+
+    def rings(self, loaded: Loaded) -> dict[str, int]:
+        return self.observer.rings(loaded)
 
     # -- running ------------------------------------------------------------------------
     def run(self) -> Outcome:
-        if self.recorder is not None:
-            failed = self.recorder.wait_started()
-            if failed:
-                self.supervisor.reasons.append(failed)
-                self.log.error(failed)
-                self.recorder.stop()
-                self.recorder = None
-            elif self.recorder.view_error:
-                self.supervisor.reasons.append(self.recorder.view_error)
-                self.log.error(self.recorder.view_error)
-            elif self.recorder.address:
-                self.log.always("live view at %s (Foxglove: open a connection, Foxglove WebSocket)",
-                                self.recorder.address)
+        self.supervisor.reasons.extend(self.observer.ready())
         previous = self.supervisor.install_signals()
         if not self.virtual:
             self.service.start(self.control_path)
@@ -260,16 +251,14 @@ class System:
             self.live.close("the system is shutting down")  # a patch still waiting is answered, never applied
             self.service.stop()
             self.scheduler.stop()
-            self._stop_recorder()
+            self._stop_observer()
         return Outcome(self.supervisor.exit_status(self.description, self.run_dir), self.run_dir,
                        self.supervisor.reasons)
 
-    def _stop_recorder(self) -> None:
-        """The loops are done: the recorder takes the last samples and finishes the file."""
-        if self.recorder is None:
-            return
-        self.recording, lost = self.recorder.stop()
-        self.recorder = None
+    def _stop_observer(self) -> None:
+        """The loops are done: the observer takes the last samples and finishes the file."""
+        recording, lost = self.observer.stop()
+        self.recording = recording or self.recording
         if lost:
             self.supervisor.reasons.append(lost)
             self.log.error(lost)
@@ -281,7 +270,7 @@ class System:
             if self.scheduler is not None and not self.finished:
                 self.finished = True
                 self.scheduler.stop()  # processes started but never run leave before the region goes
-            self._stop_recorder()  # a run that never ran still leaves a finished file
+            self._stop_observer()  # a run that never ran still leaves a finished file
             self.writer.stop()
             self.built = None  # drop the views into the region before it is released
             self.main = None
@@ -314,13 +303,6 @@ class RunResult:
     markings: dict[str, dict[str, int]]
     virtual: bool
     recording: dict | None = None  # the recorder's summary: the file, and per stream written, recorded, dropped
-
-
-def _recording_all(tree, loaded: Loaded):
-    """`--record` on a file that records nothing: every stream, as if it said `record: {}`."""
-    tree = copy.copy(tree)
-    tree["record"] = {"streams": "all"}
-    return tree, dataclasses.replace(loaded, composition=loaded.composition.model_copy(update={"record": Record()}))
 
 
 def run_system(validated: Validated, options: RunOptions,

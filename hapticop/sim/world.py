@@ -19,7 +19,7 @@ import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Params, Port
+from hapticop.blocks.interface import Display, Params, Port
 
 
 class HallwayWorldParams(Params):
@@ -64,6 +64,11 @@ class HallwayWorld(Block):
     outputs = {"pose_in_hallway": Port("float64", (3,), "m, m, rad", "the robot's pose in the hallway (x along it, "
                                        "y to the left, theta counter-clockwise)")}
     flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
+
+    @classmethod
+    def displays(cls, params: HallwayWorldParams) -> tuple[Display, ...]:
+        """The robot's frames along REP-105, from its pose in the hallway (the map)."""
+        return (Display("frames", {"pose": "pose_in_hallway"}),)
 
     @classmethod
     def promises(cls, params: HallwayWorldParams) -> tuple[str, ...]:

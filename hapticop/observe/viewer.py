@@ -19,12 +19,13 @@ from multiprocessing import resource_tracker, shared_memory
 from pathlib import Path
 
 from hapticop.composition.loader import load_tree
+from hapticop.observe.event_channels import EventPlan
+from hapticop.observe.recorder import RecordedRing, Recorder, RecorderPlan, rings_of, sources_of
+from hapticop.observe.taps import tapped_streams
+from hapticop.observe.timing_channels import TimingPlan
 from hapticop.recording.live import LiveOptions
 from hapticop.recording.scene import views_for
 from hapticop.runtime.assembly import layout_of
-from hapticop.runtime.recorder import RecordedRing, Recorder, RecorderPlan, rings_of, sources_of
-from hapticop.runtime.taps import tapped_streams
-from hapticop.runtime.timing_channels import TimingPlan
 
 
 @dataclass
@@ -34,6 +35,7 @@ class Attachment:
     region: str
     flags: list[str]
     tree: dict
+    rings: dict[str, int]  # the recorder rings the run reserved, to lay the region out as it did
     run_dir: str
     pid: int
     name: str
@@ -43,13 +45,13 @@ def view(attachment: Attachment, options: LiveOptions, announce: Callable[[str],
          should_stop: Callable[[], bool] = lambda: False) -> dict:
     """Serve the running system live until it ends or `should_stop()`; the summary."""
     loaded = load_tree(attachment.tree)
-    layout = layout_of(loaded, attachment.flags)
+    layout = layout_of(loaded, attachment.flags, attachment.rings)
     memory = shared_memory.SharedMemory(name=attachment.region, create=False)
     resource_tracker.unregister(memory._name, "shared_memory")  # noqa: SLF001 - the system's to unlink, never ours
     rings = [RecordedRing(info, offset, nbytes, 1, "latest") for info, offset, nbytes in tapped_streams(loaded, layout)]
     plan = RecorderPlan(None, rings, "CLOCK_MONOTONIC", views=views_for(loaded, [r.info.name for r in rings]),
                         live=options, timing=TimingPlan.of(loaded.composition, layout),
-                        run_dir=Path(attachment.run_dir), name=attachment.name)
+                        run_dir=Path(attachment.run_dir), name=attachment.name, events=EventPlan.of(layout))
     taps = rings_of(plan, memory.buf)
     sources = recorder = None
     try:

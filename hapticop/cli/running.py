@@ -1,0 +1,138 @@
+"""`hapticop view`, `patch` and `status`: the commands that talk to a running system over its control socket."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from pathlib import Path
+
+import typer
+
+
+def view(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket's path)"),
+    port: int = typer.Option(8765, help="the port Foxglove connects to (Foxglove WebSocket)"),
+    host: str = typer.Option("127.0.0.1", help="where to listen (default: this machine only)"),
+    rate: float = typer.Option(30.0, help="most messages a second per channel"),
+) -> None:
+    """Show a running system live in Foxglove, from a process of its own: every stream's newest
+    sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
+    from hapticop.observe.viewer import Attachment, view
+
+    options = live_options(str(port), host, rate)
+    answer = ask(system, {"op": "attach"})
+    if not answer.get("ok"):
+        typer.echo(f"hapticop: {system}: {answer.get('error')}", err=True)
+        raise typer.Exit(1)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        summary = view(Attachment(**answer["attach"]), options, lambda line: typer.echo(f"{line}; Ctrl+C stops",
+                                                                                        err=True), stop.is_set)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    typer.echo(f"{summary['view']['sent']} messages sent", err=True)
+
+
+def live_options(port: str, host: str, rate_hz: float):
+    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number)."""
+    from hapticop.recording.live import DEFAULT_PORT, LiveOptions, LiveViewUnavailable, require_sdk
+
+    try:
+        require_sdk()
+        return LiveOptions(host, int(port) if port else DEFAULT_PORT, rate_hz)
+    except LiveViewUnavailable as missing:
+        typer.echo(f"hapticop: {missing}", err=True)
+        raise typer.Exit(2) from None
+    except ValueError as error:
+        raise typer.BadParameter(str(error) if port.isdigit() or not port else f"not a port: {port!r}",
+                                 param_hint="--view") from None
+
+
+def ask(system: str, message: dict) -> dict:
+    from hapticop.runtime.control import ControlError, request
+
+    try:
+        return request(system, message, timeout=30.0)
+    except ControlError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(2) from None
+
+
+def patch(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket path)"),
+    file: Path = typer.Argument(..., help="a JSON Patch (a YAML list of operations) or a merge patch (a YAML mapping)"),
+    dry_run: bool = typer.Option(False, "--dry-run", help="validate and show the diff; change nothing"),
+) -> None:
+    """Change a running system: validated whole, applied at a cycle boundary, or refused."""
+    from hapticop.composition.yamlsource import SourceError, read_text
+
+    try:
+        text = read_text(file, "a patch")
+    except SourceError as error:
+        typer.echo(error.diagnostic.to_text(), err=True)
+        raise typer.Exit(2) from None
+    reply = ask(system, {"op": "patch", "text": text, "file": str(file), "dry_run": dry_run})
+    if not reply.get("ok"):
+        from hapticop.composition.diagnostics import Diagnostic, Severity
+
+        for item in reply.get("diagnostics", []):
+            item = {**item, "severity": Severity(item["severity"]), "path": tuple(item["path"])}
+            typer.echo(Diagnostic(**item).to_text(), err=True)
+        typer.echo(f"{file}: {reply.get('error', 'refused')}; the system runs on unchanged", err=True)
+        raise typer.Exit(1)
+    typer.echo(reply["diff"], nl=False)
+    for line in reply["changes"]:
+        typer.echo(f"  {line}")
+    typer.echo("applied" if reply.get("applied") else "dry run: nothing applied")
+
+
+def status(
+    system: str = typer.Argument(..., help="the running system's name (or its control socket path)"),
+    json_output: bool = typer.Option(False, "--json", help="the whole status as JSON"),
+    params: list[str] = typer.Option(None, "--params", help="also each named activity's parameters as it runs "
+                                     "them (a mode's values included); repeat it for more; 'all' for every one"),
+) -> None:
+    """LCSM states, selected schedules, flags, markings, timing and parameters of a running system."""
+    import json
+    import textwrap
+
+    from hapticop.composition.documents import dump
+
+    reply = ask(system, {"op": "status"})
+    if not reply.get("ok"):
+        typer.echo(f"error: {reply.get('error')}", err=True)
+        raise typer.Exit(1)
+    state = reply["status"]
+    if json_output:
+        typer.echo(json.dumps(state, indent=2))
+        return
+    typer.echo(f"{state['name']}: {state['clock']} clock, up {state['uptime_s']:.1f} s, "
+               f"description revision {state.get('revision', 0)}")
+    for name, t in state["threads"].items():
+        timing = state["timing"]["threads"][name]
+        failed = f" FAILED: {t['failed']}" if t["failed"] else ""
+        typer.echo(f"  thread {name}: {t['state']}, schedule {t['schedule']}, {timing['cycles']} cycles, "
+                   f"{timing['missed_deadlines']} missed{failed}")
+    for name, a in state["activities"].items():
+        failed = f" FAILED: {a['failed']}" if a["failed"] else ""
+        waiting = f", waiting for {a['waiting_for']}" if a.get("waiting_for") else ""
+        typer.echo(f"  activity {name}: {a['state']}{waiting}{failed}")
+        if params and ("all" in params or name in params):
+            typer.echo(textwrap.indent(dump(a.get("params") or {}), "      "), nl=False)
+    unknown = sorted(set(params or ()) - set(state["activities"]) - {"all"})
+    if unknown:
+        typer.echo(f"error: no activity {', '.join(repr(u) for u in unknown)} in '{state['name']}'", err=True)
+        raise typer.Exit(1)
+    for net, marking in state["markings"].items():
+        typer.echo(f"  net {net}: {marking}")
+    if state.get("modes") is not None:
+        typer.echo(f"  modes holding: {', '.join(state['modes']) or 'none'}")
+    typer.echo(f"  flags set: {', '.join(state['flags'])}")
+    for name, link in state.get("links", {}).items():
+        health = "lost" if link["lost"] else "degraded" if link["degraded"] else "up" if link["up"] else "waiting"
+        error = link["offset_error_ms"]
+        within = f" (within {error:.3f})" if error is not None else " (not yet measured)"
+        typer.echo(f"  link {name} to {', '.join(link['peers'])}: {health}, round trip {link['rtt_ms']:.2f} ms, "
+                   f"jitter {link['jitter_ms']:.2f} ms, loss {link['loss']:.1%}, clock offset "
+                   f"{link['offset_ms']:+.3f} ms{within}")
