@@ -17,7 +17,9 @@ import numpy as np
 from hapticop.composition.description import Composition
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.recording.plan import RecordedStream
+from hapticop.runtime import cycle_log
 from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
+from hapticop.runtime.cycle_log import CycleLog
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region, Transport
@@ -166,4 +168,12 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
                               clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination, period_ns,
                               region.waiting[region.layout.activity_index[name]])
     block = resolved.block(context)
-    return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)
+    runner = ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)
+    cycles = region.layout.cycles.get(name)
+    if cycles is not None:
+        flushes = runner.flushes
+        ring = recorder_ring(region, cycles, cycle_log.port_of(iface, flushes))
+        runner.cycle_log = CycleLog(name, iface, flushes, ring, region.flags, region.state,
+                                    region.layout.owner_index[name], region.layout.flag_index,
+                                    list(inputs.values()), clock)
+    return runner

@@ -40,6 +40,7 @@ from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.outputs import Fanout, Output
 from hapticop.recording.plan import RecordedStream, recorded_streams
 from hapticop.recording.scene import views_for
+from hapticop.runtime import cycle_log
 from hapticop.runtime.link_channel import LinkChannel
 from hapticop.runtime.log_channel import LogChannel
 from hapticop.runtime.region import Layout, Transport
@@ -291,11 +292,13 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
            "host": platform.node(), "kernel": platform.release(), "python": platform.python_version(),
            "times": "publish_time: the writing loop's stamp at publication; log_time: when the recorder took the "
                     "sample; sequence: the sample's number (from 1), modulo 2^32"}
-    return RecorderPlan(path, rings, clock,
+    plan = RecorderPlan(path, rings, clock,
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
                         {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]), live,
                         TimingPlan.of(composition, layout), run_dir, run["composition"])
+    plan.rings += [RecordedRing(*ring) for ring in cycle_log.recorded(loaded, layout)] if path is not None else []
+    return plan
 
 
 def recorded_ring(loaded: Loaded, transport: Transport, recorded: RecordedStream) -> RecordedRing:

@@ -16,7 +16,8 @@ import numpy as np
 from hapticop.composition import lcsm
 from hapticop.composition.description import ARENA_BYTES, SPARE_ACTIVITIES, SPARE_FLAGS, Composition
 from hapticop.composition.loader import ResolvedActivity
-from hapticop.recording.plan import recorded_streams
+from hapticop.recording.plan import recorded_cycles, recorded_streams
+from hapticop.runtime import cycle_log
 from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
 
@@ -51,6 +52,7 @@ class Layout:
     sections: dict[str, tuple[int, tuple[int, ...], str]] = field(default_factory=dict)
     transports: dict[str, list[Transport]] = field(default_factory=dict)
     recorded: dict[str, Transport] = field(default_factory=dict)  # the recorder's own ring per recorded stream
+    cycles: dict[str, Transport] = field(default_factory=dict)  # the ring of each activity's cycles (`cycle_log`)
     size: int = 0
 
     def __post_init__(self) -> None:
@@ -101,8 +103,48 @@ class Layout:
         return offset
 
     @classmethod
+    def alone(cls, activity: str, flags: list[str]) -> Layout:
+        """The layout of one activity on no thread, with no streams (a block harness, a replay)."""
+        layout = cls([], [activity], sorted(flags))
+        layout.size = max(layout._sections(), ALIGN)
+        return layout
+
+    @classmethod
     def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str]) -> Layout:
         layout = cls(list(composition.threads), list(activities), sorted(flags))
+        offset = layout._sections()
+        for name, spec in composition.streams.items():
+            writer_activity, writer_port = spec.writer.split(".")
+            port = activities[writer_activity].interface.outputs[writer_port]
+            if spec.policy.kind == "latest":
+                nbytes = st.latest_nbytes(port)
+                layout.transports[name] = [Transport(name, "latest", offset, nbytes)]
+                offset = _align(offset + nbytes)
+            else:
+                rings = []
+                for reader in spec.readers:
+                    nbytes = st.queue_nbytes(port, spec.policy.capacity)
+                    rings.append(Transport(name, "queue", offset, nbytes, reader))
+                    offset = _align(offset + nbytes)
+                layout.transports[name] = rings
+        for name, recorded in recorded_streams(composition).items():
+            writer_activity, writer_port = composition.streams[name].writer.split(".")
+            port = activities[writer_activity].interface.outputs[writer_port]
+            nbytes = st.queue_nbytes(port, recorded.capacity)
+            layout.recorded[name] = Transport(name, "queue", offset, nbytes, "recorder")
+            offset = _align(offset + nbytes)
+        for name, recorded in recorded_cycles(composition).items():
+            resolved = activities[name]
+            nbytes = st.queue_nbytes(cycle_log.port_of(resolved.interface, resolved.block.implements_flush()),
+                                     recorded.capacity)
+            layout.cycles[name] = Transport(recorded.name, "queue", offset, nbytes, "recorder")
+            offset = _align(offset + nbytes)
+        layout.size = max(offset, ALIGN)
+        return layout
+
+    def _sections(self) -> int:
+        """Place the fixed sections; returns where the streams' buffers begin."""
+        layout = self
         layout.declared_activities, layout.declared_flags = len(layout.activities), len(layout.flags)
         threads = len(layout.threads)
         owners = len(layout.owner_index) + SPARE_ACTIVITIES
@@ -139,28 +181,7 @@ class Layout:
         section("e2e_max", (st.ORIGINS,), "int64")  # end-to-end latencies, one per `latencies` entry
         section("e2e", (st.ORIGINS, BINS), "int64")
         section("arena", (ARENA_BYTES,), "uint8")
-        for name, spec in composition.streams.items():
-            writer_activity, writer_port = spec.writer.split(".")
-            port = activities[writer_activity].interface.outputs[writer_port]
-            if spec.policy.kind == "latest":
-                nbytes = st.latest_nbytes(port)
-                layout.transports[name] = [Transport(name, "latest", offset, nbytes)]
-                offset = _align(offset + nbytes)
-            else:
-                rings = []
-                for reader in spec.readers:
-                    nbytes = st.queue_nbytes(port, spec.policy.capacity)
-                    rings.append(Transport(name, "queue", offset, nbytes, reader))
-                    offset = _align(offset + nbytes)
-                layout.transports[name] = rings
-        for name, recorded in recorded_streams(composition).items():
-            writer_activity, writer_port = composition.streams[name].writer.split(".")
-            port = activities[writer_activity].interface.outputs[writer_port]
-            nbytes = st.queue_nbytes(port, recorded.capacity)
-            layout.recorded[name] = Transport(name, "queue", offset, nbytes, "recorder")
-            offset = _align(offset + nbytes)
-        layout.size = max(offset, ALIGN)
-        return layout
+        return offset
 
 
 class Region:

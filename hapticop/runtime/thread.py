@@ -19,6 +19,7 @@ from hapticop.blocks.base import Block
 from hapticop.composition.description import Thread
 from hapticop.composition.lcsm import State
 from hapticop.runtime import realtime
+from hapticop.runtime.cycle_log import CycleLog
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle
 from hapticop.runtime.logs import Logger
@@ -42,6 +43,7 @@ class ActivityRunner:
         self.took = 0  # this cycle's compute time so far (compute, then flush)
         self.computing = False  # this cycle ran the block's compute (a life-cycle hook is no compute)
         self.retuned: tuple[object, frozenset[str]] | None = None  # new running parameters, not yet taken
+        self.cycle_log: CycleLog | None = None  # a recorded run's row per cycle (`cycle_log`)
         self._retuning = threading.Lock()
         layout = region.layout
         self.index = layout.activity_index[name]
@@ -87,10 +89,15 @@ class ActivityRunner:
         relay = self.relay
         if relay is not None and changed:  # the origins merged last step still stand otherwise
             relay.before_step()
+        cycle_log = self.cycle_log
+        if cycle_log is not None:
+            cycle_log.before()
         cpu = time.thread_time_ns() if self.simulator_cpu else 0
         started = time.perf_counter_ns()
         self.computing = self.lifecycle.step()
         took = self.took = time.perf_counter_ns() - started
+        if cycle_log is not None:
+            cycle_log.stepped()
         if self.simulator:
             self.region.sim_ns[self.index] += time.thread_time_ns() - cpu if self.simulator_cpu else took
         if not self.flushes:
@@ -103,6 +110,8 @@ class ActivityRunner:
         started = time.perf_counter_ns()
         self.lifecycle.flush(self.block.flush)
         self.took += time.perf_counter_ns() - started
+        if self.cycle_log is not None:
+            self.cycle_log.flushed()
         self._finish()
 
     def _finish(self) -> None:
@@ -112,6 +121,8 @@ class ActivityRunner:
             record(self.region.compute, self.region.compute_max, self.index, self.took)
         if self.relay is not None:
             self.relay.after_step()
+        if self.cycle_log is not None:
+            self.cycle_log.push()
 
 
 class CyclicThread:
