@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import os
 import threading
+import time
 from typing import Literal
 
 import numpy as np
@@ -379,3 +380,30 @@ class AgeProbe(Block):
     def clean(self):
         np.savez(self.run_dir / f"{self.name}.npz", arrived=self.arrived[: self.n_arrived],
                  cycles=self.cycles[: self.n_cycles])
+
+
+class SlowSumParams(Params):
+    every: int = Field(20, ge=1, description="every Nth cycle is slow")
+    sleep_ms: float = Field(5.0, ge=0, description="how long a slow cycle sleeps between reading and publishing")
+
+
+class SlowSum(Block):
+    """Sums the samples it sees, one a cycle, and publishes the sum and its cycles; every Nth cycle
+    sleeps after reading, so its thread overruns and misses cycles while the input's writer goes on:
+    on the wall clock, what a cycle saw is known only from what the run recorded of it."""
+
+    Params = SlowSumParams
+    inputs = {"value": Port("int64", (), "1")}
+    outputs = {"total": Port("int64", (2,), "1", "[the sum of the samples seen, cycles run]")}
+
+    def create(self):
+        self.cycles = 0
+        self.total = 0
+
+    def compute(self):
+        self.cycles += 1
+        self.total += int(self.inputs.value.value)
+        if self.cycles % self.params.every == 0:
+            time.sleep(self.params.sleep_ms / 1e3)
+        self.outputs.total.value[:] = (self.total, self.cycles)
+        self.outputs.total.publish()

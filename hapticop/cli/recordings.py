@@ -108,8 +108,8 @@ def replay(
 ) -> None:
     """Feed the recorded inputs of activities back to their blocks, cycle by cycle under the virtual
     clock, and compare their outputs with the recorded ones; exit 1 on a mismatch, 2 if it cannot."""
-    from hapticop.runtime.replay import ReplayError
-    from hapticop.runtime.replay import replay as run_replay
+    from hapticop.observe.replay import ReplayError
+    from hapticop.observe.replay import replay as run_replay
 
     try:
         replayed = run_replay(file, activities, tolerance)
@@ -125,6 +125,8 @@ def replay(
 def _print_replayed(one) -> None:
     typer.echo(f"{one.activity} ({one.block}, thread {one.thread}): {one.cycles} cycles from {one.start_s:.3f} s "
                f"to {one.end_s:.3f} s; inputs {', '.join(one.inputs) or 'none'}")
+    if one.diverged:
+        typer.echo(f"  DIVERGED: {one.diverged}")
     for c in one.compared:
         verdict = "equal" if c.ok and c.max_diff == 0 else ("within tolerance" if c.ok else f"MISMATCH {c.first}")
         typer.echo(f"  {c.stream:<24} {c.samples:>8} samples  max |diff| {c.max_diff:<10.3g} {verdict}")
@@ -147,7 +149,7 @@ def report(
     the hallway's metrics and picture from its recorded streams."""
     from rich.console import Console
 
-    from hapticop.runtime.replay import ReplayError, leaving_results, open_run, results
+    from hapticop.observe.replay import ReplayError, leaving_results, open_run, results
     from hapticop.runtime.report import print_results
 
     target = output if output is not None else file.with_suffix(".report")
