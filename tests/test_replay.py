@@ -15,11 +15,13 @@ from typer.testing import CliRunner
 from hapticop.cli.main import app
 from hapticop.observe.replay import ReplayError, replay, results
 from hapticop.recording import arrays
+from hapticop.recording.parameters import events
 from hapticop.recording.reading import series
 from hapticop.sim.recorded_run import integrate
 
 from .conftest import ROOT
 from .runtime_helpers import compose
+from .test_modes import MODES
 
 cli = CliRunner()
 
@@ -276,3 +278,21 @@ def test_a_wall_clock_run_that_misses_cycles_replays_to_the_bit(tmp_path):
     [totals] = replayed.compared
     assert totals.samples > 500 and totals.ok and totals.max_diff == 0.0, totals.first
     assert not replayed.diverged
+
+
+@pytest.mark.parametrize("clock", ["virtual", "realtime"])
+def test_a_recording_with_live_retunes_replays_through_them(tmp_path, clock):
+    """A mode retunes the gain while the grip is held: the recording has each parameter event with its
+    diff, and the gain's replay hands its block the same parameters in the same cycles."""
+    text = (MODES.replace("grip, gain]", "grip, gain, echo]")
+            .replace("activities:\n", "activities:\n  echo: {block: echo, params: {dtype: float64}}\n")
+            + "streams:\n  gains: {from: gain.gain, to: [echo.input]}\nrecord: {}\n")
+    compose(tmp_path, text, clock=clock, duration="400ms", name="modes")
+    path = tmp_path / "run-modes" / "modes.mcap"
+    gains = [(e.revision, e.changed, e.parameters["gain"]) for e in events(path) if e.activity == "gain"]
+    assert gains == [(1, ("gain",), 5.0), (2, ("gain",), 1.0)]
+    [replayed] = replay(path, ["gain"])
+    [published] = replayed.compared
+    recorded = series(path, "gains").values
+    assert set(recorded.tolist()) == {1.0, 5.0}  # the run published with both gains: the replay must too
+    assert published.ok and published.samples == len(recorded) and not replayed.diverged, published.first

@@ -33,6 +33,9 @@ from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.yamlsource import SourceError, parse_text
 from hapticop.recording.compare import Compared, compare
 from hapticop.recording.mcapfile import StreamInfo
+from hapticop.recording.parameters import TOPIC as parameter_events_topic
+from hapticop.recording.parameters import ParameterEvent
+from hapticop.recording.parameters import events as parameter_events
 from hapticop.recording.reading import Contents, RecordingError, Series, contents, series_of
 from hapticop.runtime import cycle_log
 from hapticop.runtime.alone import alone
@@ -61,6 +64,7 @@ class Run:
     seed: int
     finished: bool  # the run ended in order: its activities were cleaned
     _series: dict[str, Series] = field(default_factory=dict)
+    _events: list[ParameterEvent] | None = None
 
     @property
     def streams(self) -> dict[str, StreamInfo]:
@@ -75,6 +79,15 @@ class Run:
                 self._series.update(series_of(self.path, missing))
             except RecordingError as error:
                 raise ReplayError(str(error)) from None
+
+    def parameter_events(self) -> list[ParameterEvent]:
+        """The parameters handed to running activities, in order (`recording.parameters`)."""
+        if self._events is None:
+            try:
+                self._events = parameter_events(self.path)
+            except (OSError, ValueError, KeyError) as error:
+                raise ReplayError(f"{self.path}: its {parameter_events_topic} do not read: {error}") from None
+        return self._events
 
     def series(self, stream: str) -> Series:
         self.load([stream])
@@ -315,9 +328,10 @@ class ActivityReplay:
         if not len(times):
             raise ReplayError(f"{self.run.path}: activity '{self.name}' recorded no cycle: there is nothing to replay")
         runner, flags, states = self.alone.runner, self.alone.region.flags, self.alone.region.state
-        first_flag = 1
+        first_flag = 2
         diverged = ""
         computed: list[int] = []  # the cycles that ran the block's compute
+        handed = 0  # the parameter events handed to the runner so far
         self.beside = [_beside(self.run, name, self.clock, self.run_dir) for name in self.needs]
         try:
             for t, row in zip(times, rows, strict=True):
@@ -325,6 +339,8 @@ class ActivityReplay:
                 if int(states[0]) != int(row[0]) and not diverged:
                     diverged = (f"at {self._at(int(t)):.6f} s the run's life cycle was "
                                 f"{State(int(row[0])).flag_name}, the replay's {State(int(states[0])).flag_name}")
+                if int(row[1]) != handed:
+                    handed = self._hand(int(row[1]), handed, int(t))
                 for k, index in enumerate(self.flag_indices):
                     flags[index] = row[first_flag + k]
                 self._feed(row, "step")
@@ -346,6 +362,26 @@ class ActivityReplay:
         return Replayed(self.name, self.run.loaded.activities[self.name].spec.block, self.thread, len(times),
                         (start - origin) / 1e9, (end - origin) / 1e9,
                         [feed.stream for feed in self.feeds], compared, diverged, len(computed))
+
+    def _hand(self, revision: int, handed: int, t_ns: int) -> int:
+        """The parameters the run's block held from this cycle on handed to the runner, as the run handed
+        them (events the run handed between two steps arrive as one, the names changed by any)."""
+        events = {event.revision: event for event in self.run.parameter_events() if event.activity == self.name}
+        wanted = range(handed + 1, revision + 1)
+        missing = [n for n in wanted if n not in events]
+        if missing or revision < handed:
+            raise ReplayError(f"{self.run.path}: activity '{self.name}' held parameter set {revision} from "
+                              f"{self._at(t_ns):.6f} s, but the recording's {parameter_events_topic} has no event "
+                              f"{missing[0] if missing else revision} for it")
+        event = events[revision]
+        try:
+            params = self.block_type.Params.model_validate(event.parameters)
+        except ValidationError as error:
+            raise ReplayError(f"{self.run.path}: {parameter_events_topic}, activity '{self.name}', revision "
+                              f"{revision}: {error.errors()[0]['msg']}") from None
+        changed = frozenset(name for n in wanted for name in events[n].changed)
+        self.alone.runner.retune(params, changed)
+        return revision
 
     def _at(self, t_ns: int) -> float:
         origin = min([int(f.samples.publish_ns[0]) for f in self.feeds if len(f.samples.publish_ns)]

@@ -175,5 +175,5 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
         ring = recorder_ring(region, cycles, cycle_log.port_of(iface, flushes))
         runner.cycle_log = CycleLog(name, iface, flushes, ring, region.flags, region.state,
                                     region.layout.owner_index[name], region.layout.flag_index,
-                                    list(inputs.values()), clock)
+                                    list(inputs.values()), clock, runner.parameters)
     return runner

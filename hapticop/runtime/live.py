@@ -23,6 +23,7 @@ from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.composition.units import format_duration
 from hapticop.recording.plan import recorded_streams
+from hapticop.runtime import parameter_events
 from hapticop.runtime.assembly import thread_of
 from hapticop.runtime.described import Description
 from hapticop.runtime.logs import Logger
@@ -193,6 +194,7 @@ def _new_params(target: LiveTarget, old: Description, name: str, resolved: Resol
 def retune(target: LiveTarget, description: Description, name: str, params, changed: frozenset[str]) -> None:
     """Give an activity new parameters, wherever it runs; it takes them before its next step and
     retunes what depends on the `changed` ones."""
+    parameter_events.landed(target.log, name, params, changed)
     runner = target.runners.get(name)
     if runner is not None:
         runner.retune(params, changed)

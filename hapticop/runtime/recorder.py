@@ -43,6 +43,7 @@ from hapticop.recording.scene import views_for
 from hapticop.runtime import cycle_log
 from hapticop.runtime.link_channel import LinkChannel
 from hapticop.runtime.log_channel import LogChannel
+from hapticop.runtime.parameter_events import ParameterEvents
 from hapticop.runtime.region import Layout, Transport
 from hapticop.runtime.streams import SpscQueue, sample_dtype
 from hapticop.runtime.taps import LatestTap, tapped_streams
@@ -328,6 +329,7 @@ def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
     if plan.run_dir is not None:
         sources.append(LogChannel(plan.run_dir))
         sources.append(LinkChannel(plan.run_dir))
+        sources.append(ParameterEvents(plan.run_dir))
     return sources
 
 

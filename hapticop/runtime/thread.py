@@ -15,6 +15,8 @@ import threading
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from hapticop.blocks.base import Block
 from hapticop.composition.description import Thread
 from hapticop.composition.lcsm import State
@@ -44,6 +46,10 @@ class ActivityRunner:
         self.computing = False  # this cycle ran the block's compute (a life-cycle hook is no compute)
         self.retuned: tuple[object, frozenset[str]] | None = None  # new running parameters, not yet taken
         self.cycle_log: CycleLog | None = None  # a recorded run's row per cycle (`cycle_log`)
+        # Which of the parameter sets handed to it (counted from 1) the block holds: 0 for its first
+        # ones; what a recording's parameter events are matched to (`parameter_events`).
+        self.parameters = np.zeros(1, np.int64)
+        self._handed = 0
         self._retuning = threading.Lock()
         layout = region.layout
         self.index = layout.activity_index[name]
@@ -66,11 +72,13 @@ class ActivityRunner:
             if self.retuned is not None:
                 changed = changed | self.retuned[1]
             self.retuned = (params, changed)
+            self._handed += 1
 
     def _take_parameters(self) -> None:
         with self._retuning:  # the main thread may hand over more meanwhile
             params, changed = self.retuned  # type: ignore[misc]
             self.retuned = None
+            self.parameters[0] = self._handed
         block = self.block
         block.params = block.context.params = params
         if changed and self.lifecycle.configured:  # one still configuring builds from the new ones
