@@ -13,6 +13,7 @@ from mcap.writer import CompressionType, Writer
 from typer.testing import CliRunner
 
 from hapticop.cli.main import app
+from hapticop.composition.lcsm import State
 from hapticop.observe.replay import ReplayError, replay, results
 from hapticop.recording import arrays
 from hapticop.recording.parameters import events
@@ -130,6 +131,8 @@ def test_a_changed_parameter_is_a_mismatch(recorded, tmp_path):
     ({"without_topic": "/streams/scan_ranges"},
      "activity 'haptic' cannot be replayed: its input stream 'scan_ranges' was not recorded"),
     ({"attachments": False}, "no composition.yaml attached"),
+    ({"without_topic": "/streams/cycles/haptic"},  # a recording made before cycles were recorded
+     "activity 'haptic' cannot be replayed: its cycles ('cycles/haptic') were not recorded"),
     ({"parameters": lambda p: p["haptic"].__setitem__("scan_points", "many")},
      "parameters.json, activity 'haptic', scan_points: "),
 ])
@@ -140,6 +143,24 @@ def test_a_recording_that_cannot_be_replayed_is_a_located_error(recorded, tmp_pa
     assert expected in str(raised.value)
     result = cli.invoke(app, ["replay", str(broken), "-a", "haptic"])
     assert result.exit_code == 2 and expected in result.output and "Traceback" not in result.output
+
+
+def test_a_replayed_life_cycle_that_leaves_the_recorded_one_is_reported(recorded, tmp_path):
+    """The recorded cycles say the controller was paused in one cycle where it ran: the replay says
+    where its life cycle and the run's part, and the command exits 1."""
+    number = 2000
+
+    def paused(row):
+        assert row[0] == State.RUNNING  # the controller runs at 2 s
+        row[0] = State.PAUSING
+
+    tampered = _rewrite(recorded / "hallway.mcap", tmp_path / "p.mcap",
+                        sample=("/streams/cycles/haptic", number, paused))
+    [haptic] = replay(tampered, ["haptic"])
+    assert not haptic.ok and all(c.ok for c in haptic.compared)
+    assert "the run's life cycle was pausing, the replay's running" in haptic.diverged
+    result = cli.invoke(app, ["replay", str(tampered), "-a", "haptic"])
+    assert result.exit_code == 1 and "DIVERGED: at " in result.output
 
 
 def test_bad_files_and_activities_are_located_errors(recorded, tmp_path):

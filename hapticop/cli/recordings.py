@@ -118,7 +118,9 @@ def replay(
     for one in replayed:
         _print_replayed(one)
     if not all(one.ok for one in replayed):
-        typer.echo(f"mismatch beyond the tolerance ({tolerance:g})", err=True)
+        diverged = any(one.diverged for one in replayed)
+        typer.echo("the replayed life cycle left the recorded one" if diverged else
+                   f"mismatch beyond the tolerance ({tolerance:g})", err=True)
         raise typer.Exit(1)
 
 
