@@ -18,7 +18,7 @@ import numpy as np
 from hapticop.blocks.base import Block
 from hapticop.composition import flags as flagdefs
 from hapticop.composition.lcsm import State
-from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
+from hapticop.runtime.context import ActivityContext, CycleClock, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.thread import ActivityRunner
@@ -69,10 +69,11 @@ def alone(name: str, block_type: type[Block], params, clock, run_dir: Path, rng:
     layout = Layout.alone(name, list(flagdefs.activity_flags(name, interface.flags_written, interface.flags_read)))
     region = Region(layout, _Private(layout.size), owner=False)  # type: ignore[arg-type]
     region.state[:] = State.CREATION
-    inputs = {p: InputPort(p, spec, clock.now_ns) for p, spec in interface.inputs.items()}
+    cycle = CycleClock()
+    inputs = {p: InputPort(p, spec, cycle.now_ns) for p, spec in interface.inputs.items()}
     outputs = {p: OutputPort(p, spec, clock.now_ns) for p, spec in interface.outputs.items()}
     context = ActivityContext(name, params, SimpleNamespace(**inputs), SimpleNamespace(**outputs),
                               FlagView(region.flags, layout.flag_index, name, names), clock, log, rng, Path(run_dir),
                               SimulationTimer(region.sim_ns, 0), None, period_ns, region.waiting[0])
     block = block_type(context)
-    return Alone(ActivityRunner(name, block, region, start_on_request, runtime_log), region, context)
+    return Alone(ActivityRunner(name, block, region, start_on_request, runtime_log, cycle=cycle), region, context)

@@ -6,8 +6,9 @@ an activity writes one row: the LCSM state it stepped from, which of the paramet
 to it the block held (`parameter_events`), its LCSM requests and its own flags as they were
 before the step, and the number of the sample each input held after the step (a
 queue's: the last popped) and, for a block that flushes, after the flush. The row's stamp is the
-clock when the step began. Writing it is a few copies between preallocated arrays, pushed into a
-recorder ring like any stream's sample: nothing allocates on the cycle path.
+step's time (`context.CycleClock`), which its input ports judge `valid` and `age_ns()` by.
+Writing it is a few copies between preallocated arrays, pushed into a recorder ring like any
+stream's sample: nothing allocates on the cycle path.
 """
 
 from __future__ import annotations
@@ -46,9 +47,9 @@ class CycleLog:
     """One activity's row, filled as its runner steps and pushed when the cycle is done."""
 
     def __init__(self, activity: str, interface: Interface, flushes: bool, ring, flags: np.ndarray,
-                 states: np.ndarray, owner_index: int, flag_index: dict[str, int], inputs: list, clock,
+                 states: np.ndarray, owner_index: int, flag_index: dict[str, int], inputs: list, cycle,
                  parameters: np.ndarray) -> None:
-        self.ring, self.flags, self.clock = ring, flags, clock
+        self.ring, self.flags, self.cycle = ring, flags, cycle
         self.row = np.zeros(len(columns(interface, flushes)), np.int64)
         names = [f"{activity}.lcsm.{r}" for r in lcsm.REQUEST_FLAGS] + [
             f"{activity}.{f}" for f in list(interface.flags_written) + list(interface.flags_read)]
@@ -67,7 +68,7 @@ class CycleLog:
 
     def before(self) -> None:
         """The state, requests and flags the step starts from, and its time."""
-        self.stamp = self.clock.now_ns()
+        self.stamp = self.cycle.now
         np.copyto(self.state_row, self.state)
         np.take(self.flags, self.flag_indices, out=self.flag_values)
         np.copyto(self.flag_row, self.flag_values)

@@ -21,6 +21,7 @@ from hapticop.blocks.base import Block
 from hapticop.composition.description import Thread
 from hapticop.composition.lcsm import State
 from hapticop.runtime import realtime
+from hapticop.runtime.context import CycleClock
 from hapticop.runtime.cycle_log import CycleLog
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle
@@ -33,8 +34,10 @@ class ActivityRunner:
     """One activity on its thread: the block, its LCSM and its ports."""
 
     def __init__(self, name: str, block: Block, region: Region, start_on_request: bool, log: Logger,
-                 relay: OriginRelay | None = None):
+                 relay: OriginRelay | None = None, cycle: CycleClock | None = None):
         self.name, self.block, self.region, self.log = name, block, region, log
+        self.cycle = cycle if cycle is not None else CycleClock()  # the step's time its input ports judge by
+        self.now_ns = block.context.clock.now_ns
         self.relay = relay
         self.simulator = block.simulator
         # A simulator's time counts as simulation. On the wall clock that is its thread's CPU time
@@ -88,6 +91,7 @@ class ActivityRunner:
                 self.lifecycle.fail_running(error)
 
     def step(self) -> None:
+        self.cycle.now = self.now_ns()
         if self.retuned is not None:
             self._take_parameters()
         changed = False
