@@ -388,13 +388,13 @@ class SlowSumParams(Params):
 
 
 class SlowSum(Block):
-    """Sums the samples it sees, one a cycle, and publishes the sum and its cycles; every Nth cycle
-    sleeps after reading, so its thread overruns and misses cycles while the input's writer goes on:
-    on the wall clock, what a cycle saw is known only from what the run recorded of it."""
+    """Sums the samples it sees, one a cycle, counting only those its input says are `valid`; every Nth
+    cycle sleeps before looking, so its thread overruns and misses cycles while the input's writer
+    goes on: on the wall clock, what a cycle saw is known only from what the run recorded of it."""
 
     Params = SlowSumParams
     inputs = {"value": Port("int64", (), "1")}
-    outputs = {"total": Port("int64", (2,), "1", "[the sum of the samples seen, cycles run]")}
+    outputs = {"total": Port("int64", (3,), "1", "[the sum of the valid samples seen, cycles run, valid now]")}
 
     def create(self):
         self.cycles = 0
@@ -402,8 +402,9 @@ class SlowSum(Block):
 
     def compute(self):
         self.cycles += 1
-        self.total += int(self.inputs.value.value)
         if self.cycles % self.params.every == 0:
             time.sleep(self.params.sleep_ms / 1e3)
-        self.outputs.total.value[:] = (self.total, self.cycles)
+        valid = self.inputs.value.valid  # as old as when the step began, however long it slept
+        self.total += int(self.inputs.value.value) if valid else 0
+        self.outputs.total.value[:] = (self.total, self.cycles, valid)
         self.outputs.total.publish()

@@ -268,7 +268,8 @@ def test_without_a_haptic_controller_every_activity_with_recorded_inputs_replays
 
 
 # A counter on a 1 kHz thread of its own feeds a sum on another, whose every 10th cycle sleeps 5 ms
-# after reading: its thread overruns and misses cycles while the counter goes on publishing.
+# before looking at its input: its thread overruns and misses cycles while the counter goes on
+# publishing, and the input, 3 ms old at most, is judged by the time the step began.
 STALLING = """
 version: 1
 threads:
@@ -279,17 +280,18 @@ activities:
   mediator: {block: mediator}
   count: {block: counter}
   sum: {block: "tests.blocks:SlowSum", params: {every: 10, sleep_ms: 5}}
-  echo: {block: echo, params: {shape: [2]}}
+  echo: {block: echo, params: {shape: [3]}}
 streams:
-  counts: {from: count.count, to: [sum.value]}
+  counts: {from: count.count, to: [sum.value], max_age: 3ms}
   totals: {from: sum.total, to: [echo.input]}
 record: {}
 """
 
 
 def test_a_wall_clock_run_that_misses_cycles_replays_to_the_bit(tmp_path):
-    """The cycles a slow cycle made the thread miss are not replayed, and the samples the counter
-    published while the sum slept are seen by the cycle that saw them: every sum comes back equal."""
+    """The cycles a slow cycle made the thread miss are not replayed, the samples the counter published
+    while the sum slept are seen by the cycle that saw them, and `valid` is judged at the step's time
+    in the run as in the replay: every sum comes back equal."""
     result = compose(tmp_path, STALLING, clock="realtime", duration="2s", name="stalling")
     assert not any(s["dropped"] for s in result.recording["streams"].values())
     path = tmp_path / "run-stalling" / "stalling.mcap"
