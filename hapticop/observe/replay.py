@@ -38,7 +38,7 @@ from hapticop.recording.parameters import ParameterEvent
 from hapticop.recording.parameters import events as parameter_events
 from hapticop.recording.reading import Contents, RecordingError, Series, contents, series_of
 from hapticop.runtime import cycle_log
-from hapticop.runtime.alone import alone
+from hapticop.runtime.alone import Alone, alone
 from hapticop.runtime.assembly import activity_rng, thread_of
 from hapticop.runtime.clock import VirtualClock
 from hapticop.runtime.logs import Level, Logger
@@ -277,7 +277,7 @@ class ActivityReplay:
                               f"block declares with the recorded parameters ({', '.join(expected)})")
         self.needs = [need.activity for need in self.block_type.needs_of(params)
                       if need.activity in run.loaded.activities]
-        self.beside: list[Block] = []
+        self.beside: list[Alone] = []
         log = Logger(activity, Level.ERROR, _Discard(), self.clock.now_ns)  # type: ignore[arg-type]
         try:
             self.alone = alone(activity, self.block_type, params, self.clock, run_dir, activity_rng(run.seed, activity),
@@ -351,8 +351,10 @@ class ActivityReplay:
                     self._feed(row, "flush")
                     runner.flush()
         finally:
-            for other in self.beside:
-                other.clean()
+            for other in self.beside:  # cleaned by its life cycle, as a run's shutdown cleans it
+                other.runner.lifecycle.request_cleaning()
+                other.runner.step()
+                other.close()
             self.alone.close()
         start, end = int(times[0]), int(times[-1])
         origin = min([int(f.samples.publish_ns[0]) for f in self.feeds if len(f.samples.publish_ns)] + [start])
@@ -389,7 +391,7 @@ class ActivityReplay:
         return (t_ns - origin) / 1e9
 
 
-def _beside(run: Run, activity: str, clock: VirtualClock, run_dir: Path) -> Block:
+def _beside(run: Run, activity: str, clock: VirtualClock, run_dir: Path) -> Alone:
     """An activity the replayed one needs (an operator a world judges, say), on a runner of its own
     stepped through creation and resource configuration with no ports connected, so that what it
     tells its run (`hapticop.published`) is there as it was; it is never run."""
@@ -403,7 +405,7 @@ def _beside(run: Run, activity: str, clock: VirtualClock, run_dir: Path) -> Bloc
                           f"{type(error).__name__}: {error}") from None
     for _ in range(BESIDE_CYCLES):
         if one.state is State.CAPABILITY_CONFIGURATION:
-            return one.block
+            return one
         one.runner.step()
         error = one.failure()
         if error is not None:
