@@ -1,9 +1,10 @@
 """For block authors' tests and benchmarks: a block alone in a harness, and small calls measured.
 
 `BlockHarness` runs one block without a composition, the way dora's mock node does: its ports
-are real ports fed and read by the test, its clock is virtual, its life-cycle hooks are called
-as its activity's state machine would call them. The measuring functions report microseconds
-per call and what a call leaves allocated (bench/ reports figures; tests check allocations only).
+are real ports fed and read by the test, its clock is virtual, and its hooks are called by the
+runtime's own runner and life-cycle state machine (`runtime.alone`), as in a run. The measuring
+functions report microseconds per call and what a call leaves allocated (bench/ reports figures;
+tests check allocations only).
 """
 
 from __future__ import annotations
@@ -14,15 +15,15 @@ import time
 import tracemalloc
 from collections.abc import Callable
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.registry import resolve
+from hapticop.composition.lcsm import State
+from hapticop.runtime.alone import alone
 from hapticop.runtime.clock import VirtualClock
-from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort
 from hapticop.runtime.logs import Level, Logger
 from hapticop.runtime.streams import LatestSlot, latest_nbytes
 
@@ -31,8 +32,12 @@ class HookDidNotComplete(AssertionError):
     pass
 
 
+_HOOK_OF = {State.CREATION: "create", State.RESOURCE_CONFIGURATION: "configure_resources",
+            State.CAPABILITY_CONFIGURATION: "configure_capabilities"}
+
+
 class BlockHarness:
-    """One block, its ports and flags, stepped by hand on a virtual clock.
+    """One block, its ports and flags, on the runtime's own runner, stepped by hand on a virtual clock.
 
     >>> harness = BlockHarness("echo", {"dtype": "float64", "shape": [3]})
     >>> harness.configure()
@@ -49,66 +54,58 @@ class BlockHarness:
         self.interface = self.block_type.declare(self.params)
         self.clock = VirtualClock()
         self.period_ns = period_ns
-        self._sources: dict[str, LatestSlot] = {}
-        inputs = {}
-        for port_name, spec in self.interface.inputs.items():
-            inputs[port_name] = InputPort(port_name, spec, self.clock.now_ns)
-            self._sources[port_name] = LatestSlot(bytearray(latest_nbytes(spec)), spec, synchronised=False)
-            inputs[port_name].connect(self._sources[port_name], queue=False,
-                                      max_age_ns=(max_age_ns or {}).get(port_name, 0))
-        outputs = {port_name: OutputPort(port_name, spec, self.clock.now_ns)
-                   for port_name, spec in self.interface.outputs.items()}
-        flag_names = list(self.interface.flags_written) + list(self.interface.flags_read)
-        self.flag_values = np.zeros(max(len(flag_names), 1), dtype=np.uint8)
-        flags = FlagView(self.flag_values, {f"{name}.{flag}": i for i, flag in enumerate(flag_names)}, name, flag_names)
         self._log_queue: queue.SimpleQueue = queue.SimpleQueue()
         log = Logger(name, Level.DEBUG, self._log_queue, self.clock.now_ns)
-        self.context = ActivityContext(name, self.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                                       self.clock, log, np.random.default_rng(seed), Path(run_dir))
-        self.block = self.block_type(self.context)
-        self.inputs, self.outputs, self.flags = self.context.inputs, self.context.outputs, flags
+        runtime_log = Logger(name, Level.WARNING, self._log_queue, self.clock.now_ns)  # failures, not state changes
+        self.alone = alone(name, self.block_type, self.params, self.clock, Path(run_dir), np.random.default_rng(seed),
+                           log, runtime_log, period_ns=period_ns)
+        self.context, self.block, self.runner = self.alone.context, self.alone.block, self.alone.runner
+        self._sources: dict[str, LatestSlot] = {}
+        for port_name, port in vars(self.context.inputs).items():
+            self._sources[port_name] = LatestSlot(bytearray(latest_nbytes(port.spec)), port.spec, synchronised=False)
+            port.connect(self._sources[port_name], queue=False, max_age_ns=(max_age_ns or {}).get(port_name, 0))
+        self.flag_values = self.alone.region.flags
+        self.inputs, self.outputs, self.flags = self.context.inputs, self.context.outputs, self.context.flags
 
     def feed(self, port: str, value) -> None:
         """Write a sample to input `port`, as the stream that feeds it would (seen at the next step)."""
         self._sources[port].write(np.asarray(value), self.clock.now_ns())
 
     def configure(self, max_cycles: int = 100_000) -> None:
-        """create, then each configuration hook until it completes, one period apart, with the
-        inputs refreshed before each call as the runtime does."""
-        for hook in (self.block.create, self.block.configure_resources, self.block.configure_capabilities):
-            for _ in range(max_cycles):
-                self._refresh()
-                if hook() is not False:
-                    break
-                self.advance()
-            else:
-                raise HookDidNotComplete(f"{hook.__name__} did not complete in {max_cycles} cycles")
+        """Cycles, one period apart, until the life cycle runs the block: creation, then each
+        configuration hook again each cycle until it completes, as its activity's LCSM does."""
+        tries = 0
+        while self.runner.state is not State.RUNNING:
+            state = self.runner.state
+            if state not in _HOOK_OF:
+                raise HookDidNotComplete(f"the block is {state.flag_name}, not configuring")
+            self._cycle()
+            tries = 0 if self.runner.state is not state else tries + 1
+            if tries >= max_cycles:
+                raise HookDidNotComplete(f"{_HOOK_OF[state]} did not complete in {max_cycles} cycles")
 
     def step(self, cycles: int = 1) -> None:
         """Cycles while running: inputs refreshed, compute, then flush (with inputs refreshed again)."""
-        flushes = self.block_type.implements_flush()
         for _ in range(cycles):
-            self._refresh()
-            self.block.compute()
-            if flushes:
-                self._refresh()
-                self.block.flush()
-            self.advance()
+            self._cycle()
 
     def retune(self, params: dict[str, Any]) -> frozenset[str]:
-        """A live patch of running parameters as the runtime delivers it between two cycles: the
-        top-level keys of `params` replace the block's, then `retune` hears which ones changed."""
+        """A live patch of running parameters as the runtime delivers it: the top-level keys of
+        `params` replace the block's, and the block takes them (`retune` hears which ones changed)
+        at its next step."""
         merged = self.block_type.Params.model_validate({**self.params.model_dump(), **params})
         changed = frozenset(k for k in type(merged).model_fields if getattr(merged, k) != getattr(self.params, k))
         if not changed <= self.block_type.running_params:
             raise ValueError(f"{sorted(changed - self.block_type.running_params)} are not running parameters: "
                              "a live patch would re-configure the block instead")
-        self.params = self.block.params = self.context.params = merged
-        self.block.retune(changed)
+        self.params = merged
+        self.runner.retune(merged, changed)
         return changed
 
     def clean(self) -> None:
-        self.block.clean()
+        """The life cycle's cleaning, as a shutdown asks for it."""
+        self.runner.lifecycle.request_cleaning()
+        self._cycle()
 
     def advance(self, ns: int | None = None) -> None:
         self.clock.advance_to(self.clock.now_ns() + (self.period_ns if ns is None else ns))
@@ -121,10 +118,16 @@ class BlockHarness:
             lines.append(f"{Level(level).name.lower()}: {message % args if args else message}")
         return lines
 
-    def _refresh(self) -> None:
-        for port in vars(self.inputs).values():
-            port.refresh()
-
+    def _cycle(self) -> None:
+        """One cycle of the runner, then the clock a period on; a hook that raised raises here."""
+        runner = self.runner
+        runner.step()
+        if runner.flushes:
+            runner.flush()
+        error = self.alone.failure()
+        if error is not None:
+            raise error
+        self.advance()
 
 
 def allocation_stats(fn: Callable[[], object], calls: int = 1000, warmup: int = 10) -> tuple[int, int]:

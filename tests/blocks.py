@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import os
 import threading
+import time
 from typing import Literal
 
 import numpy as np
@@ -388,3 +389,31 @@ class Unbuildable(Block):
 
     def __init__(self, context):
         raise OSError("the device is not there")
+
+
+class SlowSumParams(Params):
+    every: int = Field(20, ge=1, description="every Nth cycle is slow")
+    sleep_ms: float = Field(5.0, ge=0, description="how long a slow cycle sleeps between reading and publishing")
+
+
+class SlowSum(Block):
+    """Sums the samples it sees, one a cycle, counting only those its input says are `valid`; every Nth
+    cycle sleeps before looking, so its thread overruns and misses cycles while the input's writer
+    goes on: on the wall clock, what a cycle saw is known only from what the run recorded of it."""
+
+    Params = SlowSumParams
+    inputs = {"value": Port("int64", (), "1")}
+    outputs = {"total": Port("int64", (3,), "1", "[the sum of the valid samples seen, cycles run, valid now]")}
+
+    def create(self):
+        self.cycles = 0
+        self.total = 0
+
+    def compute(self):
+        self.cycles += 1
+        if self.cycles % self.params.every == 0:
+            time.sleep(self.params.sleep_ms / 1e3)
+        valid = self.inputs.value.valid  # as old as when the step began, however long it slept
+        self.total += int(self.inputs.value.value) if valid else 0
+        self.outputs.total.value[:] = (self.total, self.cycles, valid)
+        self.outputs.total.publish()

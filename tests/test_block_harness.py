@@ -7,6 +7,7 @@ import pytest
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Params, Port
+from hapticop.composition.lcsm import State
 from hapticop.testing import BlockHarness, HookDidNotComplete
 
 
@@ -50,10 +51,13 @@ class _Waits(Block):
 
 
 def test_configuration_hooks_are_called_again_one_period_apart_until_they_complete():
+    """As the activity's LCSM does in a run: one hook a cycle (creation in the first, the resources
+    in the next four, the capabilities in the sixth), and the first compute in the cycle after."""
     harness = BlockHarness(_Waits, {"cycles": 4})
     harness.configure()
     assert harness.block.tries == 4 and harness.flags["ready"]
-    assert harness.clock.now_ns() == 3 * harness.period_ns
+    assert harness.clock.now_ns() == 6 * harness.period_ns
+    assert harness.runner.state is State.RUNNING
     assert harness.log_lines() == ["info: try 1", "info: try 2", "info: try 3", "info: try 4"]
     harness.feed("setpoint", 0.25)
     harness.step()
@@ -77,3 +81,24 @@ def test_the_harness_ports_are_the_runtimes_own():
     harness.feed("input", np.int64(7))
     harness.step()
     assert int(harness.outputs.output.value) == 7 and harness.inputs.input.seq == 1
+
+
+class _Fails(Block):
+    inputs = {"x": Port("float64", (), "m")}
+
+    def compute(self):
+        if self.inputs.x.value > 1.0:
+            raise ValueError("too far")
+
+
+def test_a_failing_compute_raises_and_the_life_cycle_pauses_the_block_as_in_a_run():
+    harness = BlockHarness(_Fails)
+    harness.configure()
+    harness.feed("x", 2.0)
+    with pytest.raises(ValueError, match="too far"):
+        harness.step()
+    assert harness.runner.state is State.PAUSING
+    assert harness.log_lines() == ["error: running failed: ValueError: too far"]
+    harness.step()  # paused: compute is not called again until the mediator asks for running
+    harness.clean()
+    assert harness.runner.state is State.DONE

@@ -87,8 +87,11 @@ def test_every_sample_is_recorded_with_its_number_stamp_and_value(tmp_path):
     _check_stream(path, "count", 1, exactly=n)  # the counter ran n cycles, one sample each
     _check_stream(path, "slow", 2, exactly=slow)
     found = contents(path)
-    assert found.drops() == {"count": 0, "slow": 0}
-    assert found.metadata["hapticop.written"] == {"count": str(n), "slow": str(slow)}
+    cycles_of = {f"cycles/{a}" for a in ("mediator", "counter", "echo", "slow_counter", "slow_echo")}
+    assert found.drops() == {"count": 0, "slow": 0, **dict.fromkeys(cycles_of, 0)}  # each activity's cycles too
+    written = found.metadata["hapticop.written"]
+    assert {k: written[k] for k in ("count", "slow")} == {"count": str(n), "slow": str(slow)}
+    assert int(written["cycles/counter"]) >= n  # a row each step, configuring and cleaning too
     assert found.metadata["hapticop.run"]["clock"] == "virtual"
     channel = {c.topic: c for c in found.channels}["/streams/count"]
     assert channel.count == n and channel.schema == "hapticop.Int64Array"
@@ -126,7 +129,9 @@ def test_chosen_streams_only_and_decimated(tmp_path):
     result = compose(tmp_path, counters("record: {streams: [count], decimate: {count: 10}}"), duration="1s")
     path = tmp_path / "run-c" / "c.mcap"
     found = contents(path)
-    assert [c.topic for c in found.channels if c.stream] == ["/streams/count"]
+    assert [c.topic for c in found.channels if c.stream and "cycles/" not in c.topic] == ["/streams/count"]
+    assert {c.topic for c in found.channels if c.stream and "cycles/" in c.topic} == {  # what replay lines up by
+        f"/streams/cycles/{a}" for a in ("mediator", "counter", "echo", "slow_counter", "slow_echo")}
     assert {c.topic for c in found.channels if not c.stream} == {"/timing/main", "/timing/slow", "/log",
                                                                  "/events/flags", "/events/lifecycle"}  # the loops'
     assert found.channels[0].stream.every == 10
@@ -248,7 +253,8 @@ def test_recovering_a_finished_file_loses_nothing(tmp_path):
     original = {c.topic: c.count for c in contents(tmp_path / "run-c" / "c.mcap").channels}
     assert original["/streams/count"] == n and original["/streams/slow"] == slow
     assert found.complete and found.messages == original  # the streams', the loops' timing and the log's
-    assert contents(tmp_path / "copy.mcap").drops() == {"count": 0, "slow": 0}
+    drops = contents(tmp_path / "copy.mcap").drops()
+    assert drops["count"] == drops["slow"] == 0 and not any(drops.values())  # the activities' cycles' too
 
 
 # -- the rings and views, without a system ---------------------------------------------------

@@ -121,8 +121,8 @@ def replay(
 ) -> None:
     """Feed the recorded inputs of activities back to their blocks, cycle by cycle under the virtual
     clock, and compare their outputs with the recorded ones; exit 1 on a mismatch, 2 if it cannot."""
-    from hapticop.runtime.replay import ReplayError
-    from hapticop.runtime.replay import replay as run_replay
+    from hapticop.observe.replay import ReplayError
+    from hapticop.observe.replay import replay as run_replay
 
     try:
         replayed = run_replay(file, activities, tolerance)
@@ -131,13 +131,17 @@ def replay(
     for one in replayed:
         _print_replayed(one)
     if not all(one.ok for one in replayed):
-        typer.echo(f"mismatch beyond the tolerance ({tolerance:g})", err=True)
+        diverged = any(one.diverged for one in replayed)
+        typer.echo("the replayed life cycle left the recorded one" if diverged else
+                   f"mismatch beyond the tolerance ({tolerance:g})", err=True)
         raise typer.Exit(1)
 
 
 def _print_replayed(one) -> None:
     typer.echo(f"{one.activity} ({one.block}, thread {one.thread}): {one.cycles} cycles from {one.start_s:.3f} s "
                f"to {one.end_s:.3f} s; inputs {', '.join(one.inputs) or 'none'}")
+    if one.diverged:
+        typer.echo(f"  DIVERGED: {one.diverged}")
     for c in one.compared:
         verdict = "equal" if c.ok and c.max_diff == 0 else ("within tolerance" if c.ok else f"MISMATCH {c.first}")
         typer.echo(f"  {c.stream:<24} {c.samples:>8} samples  max |diff| {c.max_diff:<10.3g} {verdict}")
@@ -163,7 +167,7 @@ def report(
 
     from hapticop.cli.outputs import is_stdout
     from hapticop.cli.report import print_results
-    from hapticop.runtime.replay import ReplayError, leaving_results, open_run, results
+    from hapticop.observe.replay import ReplayError, leaving_results, open_run, results
 
     if is_stdout(output):
         raise _fail("-o -: a report is a directory of files (metrics, picture), not one stream; name a directory", 2)

@@ -15,6 +15,7 @@ from typing import Any
 
 from hapticop.composition.description import Record
 from hapticop.composition.loader import Loaded
+from hapticop.observe import cycle_rings
 from hapticop.observe.recorder import plan_of, recorded_ring
 from hapticop.observe.recorder_process import InlineRecorder, RecorderProcess
 from hapticop.recording.live import LiveOptions
@@ -44,7 +45,10 @@ class Observation:
     def rings(self, loaded: Loaded) -> dict[str, int]:
         if self.run is not None and not (self.records and self.recorder):  # added live, nothing recording
             return {}
-        return {name: recorded.capacity for name, recorded in recorded_streams(loaded.composition).items()}
+        if self.run is not None:  # added live: streams only (an added activity gets no cycle ring)
+            return {name: recorded.capacity for name, recorded in recorded_streams(loaded.composition).items()}
+        return {**{name: recorded.capacity for name, recorded in recorded_streams(loaded.composition).items()},
+                **cycle_rings.capacities(loaded)}
 
     def start(self, run: ObservedRun) -> None:
         self.run = run

@@ -29,8 +29,10 @@ import numpy as np
 
 from hapticop.blocks.interface import Port
 from hapticop.composition.loader import Loaded
+from hapticop.observe import cycle_rings
 from hapticop.observe.event_channels import EventPlan, RunEvents
 from hapticop.observe.log_channel import LogChannel
+from hapticop.observe.parameter_events import ParameterEvents
 from hapticop.observe.taps import LatestTap, tapped_streams
 from hapticop.observe.timing_channels import LoopTiming, TimingPlan
 from hapticop.recording.live import LiveOptions, LiveServer, LiveViewUnavailable
@@ -289,11 +291,13 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
            "host": platform.node(), "kernel": platform.release(), "python": platform.python_version(),
            "times": "publish_time: the writing loop's stamp at publication; log_time: when the recorder took the "
                     "sample; sequence: the sample's number (from 1), modulo 2^32"}
-    return RecorderPlan(path, rings, clock,
+    plan = RecorderPlan(path, rings, clock,
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
                         {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]), live,
                         TimingPlan.of(composition, layout), run_dir, run["composition"], events=EventPlan.of(layout))
+    plan.rings += [RecordedRing(*ring) for ring in cycle_rings.recorded(loaded, layout)] if path is not None else []
+    return plan
 
 
 def recorded_ring(loaded: Loaded, transport: Transport, recorded: RecordedStream) -> RecordedRing:
@@ -325,6 +329,7 @@ def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
     if plan.run_dir is not None:
         sources.append(LogChannel(plan.run_dir))
         sources.append(LinkChannel(plan.run_dir))
+        sources.append(ParameterEvents(plan.run_dir))
     return sources
 
 

@@ -46,12 +46,13 @@ def compare(stream: str, port: str, values: list[np.ndarray], stamps_ns: list[in
     differ. Times in words are from `origin_ns`."""
     info = recorded.info
     n = len(values)
-    replayed = (np.stack(values) if n else np.zeros((0, *info.shape), info.dtype)).reshape(n, -1)
+    size = int(np.prod(info.shape, dtype=np.int64))  # not -1: an empty replay has no length to infer it from
+    replayed = (np.stack(values) if n else np.zeros((0, *info.shape), info.dtype)).reshape(n, size)
     replayed_stamps = np.asarray(stamps_ns, np.int64)
     index = recorded.sequence - 1  # the replayed sample with the recorded one's number
     have = (index >= 0) & (index < n)
     mine = replayed[index[have]].astype(np.float64)
-    theirs = recorded.values.reshape(len(recorded.values), -1)[have].astype(np.float64)
+    theirs = recorded.values.reshape(len(recorded.values), size)[have].astype(np.float64)
     both_nan = np.isnan(mine) & np.isnan(theirs)
     diff = np.where(both_nan, 0.0, np.abs(mine - theirs))
     diff[np.isnan(diff)] = math.inf  # one NaN, the other not

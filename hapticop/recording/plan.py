@@ -39,13 +39,35 @@ def recorded_streams(composition: Composition) -> dict[str, RecordedStream]:
         return {}
     names = list(composition.streams) if record.streams == "all" else [
         s for s in record.streams if s in composition.streams]
-    # the main thread's period bounds how often a virtual-clock run drains the rings
-    main_period = min((t.period for t in composition.threads.values() if t.deploy == "main"), default=0)
-    depth_s = max(record.depth, 2 * main_period) / 1e9
+    depth_s = _depth_s(composition)
     plan = {}
     for name in names:
         thread = writer_thread(composition, name)
-        rate_hz = 1e9 / composition.threads[thread].period if thread else 0.0
-        capacity = max(MIN_CAPACITY, math.ceil(rate_hz * depth_s))
-        plan[name] = RecordedStream(name, rate_hz, record.decimate.get(name, 1), capacity)
+        plan[name] = _ring(composition, name, thread, depth_s, record.decimate.get(name, 1))
+    return plan
+
+
+def _depth_s(composition: Composition) -> float:
+    # the main thread's period bounds how often a virtual-clock run drains the rings
+    main_period = min((t.period for t in composition.threads.values() if t.deploy == "main"), default=0)
+    return max(composition.record.depth, 2 * main_period) / 1e9
+
+
+def _ring(composition: Composition, name: str, thread: str | None, depth_s: float, every: int) -> RecordedStream:
+    rate_hz = 1e9 / composition.threads[thread].period if thread else 0.0
+    return RecordedStream(name, rate_hz, every, max(MIN_CAPACITY, math.ceil(rate_hz * depth_s)))
+
+
+def recorded_cycles(composition: Composition) -> dict[str, RecordedStream]:
+    """Each scheduled activity's cycles (`runtime.cycle_log`), by activity, when the run records:
+    what a replay lines the recorded samples up with."""
+    if composition.record is None:
+        return {}
+    depth_s = _depth_s(composition)
+    plan = {}
+    for thread, spec in composition.threads.items():
+        for members in spec.schedules.values():
+            for activity in members:
+                if activity in composition.activities and activity not in plan:
+                    plan[activity] = _ring(composition, "cycles/" + activity, thread, depth_s, 1)
     return plan

@@ -16,10 +16,13 @@ import numpy as np
 
 from hapticop.composition.description import Composition
 from hapticop.composition.loader import Loaded, ResolvedActivity
-from hapticop.runtime.context import ActivityContext, FlagView, InputPort, OutputPort, SimulationTimer
+from hapticop.runtime import cycle_log
+from hapticop.runtime.context import ActivityContext, CycleClock, FlagView, InputPort, OutputPort, SimulationTimer
+from hapticop.runtime.cycle_log import CycleLog
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.region import Layout, Region
+from hapticop.runtime.streams import QUEUE_HEADER, RecorderRing, latest_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
 from hapticop.runtime.transport import connect_reader, transport_of
 
@@ -106,7 +109,8 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
     """The block instance of one activity, its ports wired to the given transports."""
     iface = resolved.interface
     track = bool(composition.latencies)
-    inputs = {p: InputPort(p, spec, clock.now_ns, track) for p, spec in iface.inputs.items()}
+    cycle = CycleClock()
+    inputs = {p: InputPort(p, spec, cycle.now_ns, track) for p, spec in iface.inputs.items()}
     outputs = {p: OutputPort(p, spec, clock.now_ns, track) for p, spec in iface.outputs.items()}
     sinks = []
     for slot, latency in enumerate(composition.latencies.values()):
@@ -139,4 +143,14 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
                               clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination, period_ns,
                               region.waiting[region.layout.activity_index[name]])
     block = resolved.block(context)
-    return ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay)
+    runner = ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay, cycle)
+    cycles = region.layout.cycles.get(name)
+    if cycles is not None:
+        flushes = runner.flushes
+        port = cycle_log.port_of(iface, flushes)
+        capacity = (cycles.nbytes - QUEUE_HEADER.itemsize) // latest_nbytes(port)
+        ring = RecorderRing(region.buffer_at(cycles.offset, cycles.nbytes), port, capacity, cycles.stream)
+        runner.cycle_log = CycleLog(name, iface, flushes, ring, region.flags, region.state,
+                                    region.layout.owner_index[name], region.layout.flag_index,
+                                    list(inputs.values()), cycle, runner.parameters)
+    return runner

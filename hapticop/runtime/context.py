@@ -25,6 +25,20 @@ STALE_IN_A_ROW = 3  # stale arrivals in a row before a reader says so (one old s
 STALE_SAID_EVERY_NS = 10_000_000_000  # while it lasts, said again this often
 
 
+class CycleClock:
+    """The time the activity's current step began, set by its runner: what its input ports judge
+    `valid` and `age_ns()` by, so that one cycle sees one time however long it is preempted, and a
+    replay stepping the recorded cycles' times sees what the run saw."""
+
+    __slots__ = ("now",)
+
+    def __init__(self) -> None:
+        self.now = 0
+
+    def now_ns(self) -> int:
+        return self.now
+
+
 class InputPort:
     """The reader's side of a stream: `value`, and how fresh it is."""
 
@@ -121,11 +135,12 @@ class InputPort:
         return int(self.meta[1])
 
     def age_ns(self) -> int:
+        """How old the sample was when this step began (-1: none yet)."""
         return self._clock() - int(self.meta[1]) if self.meta[0] else -1
 
     @property
     def valid(self) -> bool:
-        """A sample exists and is no older than the stream's `max_age`."""
+        """A sample exists and was no older than the stream's `max_age` when this step began."""
         if not self.meta[0]:
             return False
         return self.max_age_ns == 0 or self._clock() - int(self.meta[1]) <= self.max_age_ns

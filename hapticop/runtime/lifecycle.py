@@ -67,6 +67,7 @@ class Lifecycle:
         self.capabilities_ready = False
         self.resume_running = False
         self.created = False  # an owner never created has nothing to clean
+        self.error: BaseException | None = None  # the last failure, for a harness that drives it by hand
         self.flags[self.state_flag[self.state]] = 1
 
     @property
@@ -101,6 +102,7 @@ class Lifecycle:
 
     def _fail(self, code: int, event: str | None, error: BaseException) -> None:
         self.failed[self.index] = code
+        self.error = error
         if event:
             self._raise(event)
         self.log.error("%s: %s", FAILURE_TEXT[code], "".join(traceback.format_exception_only(error)).strip())

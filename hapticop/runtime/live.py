@@ -34,6 +34,7 @@ from hapticop.composition.description import Composition, Stream
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.composition.units import format_duration
+from hapticop.runtime import parameter_events
 from hapticop.runtime.assembly import thread_of
 from hapticop.runtime.described import Description
 from hapticop.runtime.logs import Logger
@@ -280,6 +281,7 @@ def _build_added(target: LiveTarget, plan: ChangePlan, pending: PendingPatch,
 def retune(target: LiveTarget, description: Description, name: str, params, changed: frozenset[str]) -> None:
     """Give an activity new parameters, wherever it runs; it takes them before its next step and
     retunes what depends on the `changed` ones."""
+    parameter_events.landed(target.log, name, params, changed)
     runner = target.runners.get(name)
     if runner is not None:
         runner.retune(params, changed)

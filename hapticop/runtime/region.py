@@ -16,6 +16,7 @@ import numpy as np
 from hapticop.composition import lcsm
 from hapticop.composition.description import ARENA_BYTES, SPARE_ACTIVITIES, SPARE_FLAGS, Composition
 from hapticop.composition.loader import ResolvedActivity
+from hapticop.runtime import cycle_log
 from hapticop.runtime import streams as st
 from hapticop.runtime.timing import BINS
 from hapticop.runtime.transport import StreamTransport, transport_for, writer_port
@@ -52,6 +53,7 @@ class Layout:
     transports: dict[str, list[Transport]] = field(default_factory=dict)
     recorded: dict[str, Transport] = field(default_factory=dict)  # the recorder's own ring per recorded stream
     rings: dict[str, int] = field(default_factory=dict)  # the observer's reservation: ring capacity per stream
+    cycles: dict[str, Transport] = field(default_factory=dict)  # the ring of each activity's cycles (`cycle_log`)
     size: int = 0
 
     def __post_init__(self) -> None:
@@ -127,10 +129,38 @@ class Layout:
         return offset
 
     @classmethod
+    def alone(cls, activity: str, flags: list[str]) -> Layout:
+        """The layout of one activity on no thread, with no streams (a block harness, a replay)."""
+        layout = cls([], [activity], sorted(flags))
+        layout.size = max(layout._sections(), ALIGN)
+        return layout
+
+    @classmethod
     def build(cls, composition: Composition, activities: dict[str, ResolvedActivity], flags: list[str],
               rings: dict[str, int] | None = None) -> Layout:
         """`rings`: the recorder ring each stream gets, by capacity (what the run's observer reserves)."""
         layout = cls(list(composition.threads), list(activities), sorted(flags), rings=dict(rings or {}))
+        offset = layout._sections()
+
+        def at(nbytes: int) -> int:
+            nonlocal offset
+            start, offset = offset, _align(offset + nbytes)
+            return start
+
+        for name, spec in composition.streams.items():
+            layout.place(transport_for(name, spec, writer_port(activities, spec)), at)
+        for name, resolved in activities.items():  # each activity's cycles, where the observer reserved a ring
+            capacity = layout.rings.get(cycle_log.stream_of(name))
+            if capacity:
+                nbytes = st.queue_nbytes(cycle_log.port_of(resolved.interface, resolved.block.implements_flush()),
+                                         capacity)
+                layout.cycles[name] = Transport(cycle_log.stream_of(name), "queue", at(nbytes), nbytes, "recorder")
+        layout.size = max(offset, ALIGN)
+        return layout
+
+    def _sections(self) -> int:
+        """Place the fixed sections; returns where the streams' buffers begin."""
+        layout = self
         layout.declared_activities, layout.declared_flags = len(layout.activities), len(layout.flags)
         threads = len(layout.threads)
         owners = len(layout.owner_index) + SPARE_ACTIVITIES
@@ -167,16 +197,7 @@ class Layout:
         section("e2e_max", (st.ORIGINS,), "int64")  # end-to-end latencies, one per `latencies` entry
         section("e2e", (st.ORIGINS, BINS), "int64")
         section("arena", (ARENA_BYTES,), "uint8")
-
-        def at(nbytes: int) -> int:
-            nonlocal offset
-            start, offset = offset, _align(offset + nbytes)
-            return start
-
-        for name, spec in composition.streams.items():
-            layout.place(transport_for(name, spec, writer_port(activities, spec)), at)
-        layout.size = max(offset, ALIGN)
-        return layout
+        return offset
 
 
 class Region:

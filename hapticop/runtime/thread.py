@@ -15,10 +15,14 @@ import threading
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from hapticop.blocks.base import Block
 from hapticop.composition.description import Thread
 from hapticop.composition.lcsm import State
 from hapticop.runtime import realtime
+from hapticop.runtime.context import CycleClock
+from hapticop.runtime.cycle_log import CycleLog
 from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle
 from hapticop.runtime.logs import Logger
@@ -30,8 +34,10 @@ class ActivityRunner:
     """One activity on its thread: the block, its LCSM and its ports."""
 
     def __init__(self, name: str, block: Block, region: Region, start_on_request: bool, log: Logger,
-                 relay: OriginRelay | None = None):
+                 relay: OriginRelay | None = None, cycle: CycleClock | None = None):
         self.name, self.block, self.region, self.log = name, block, region, log
+        self.cycle = cycle if cycle is not None else CycleClock()  # the step's time its input ports judge by
+        self.now_ns = block.context.clock.now_ns
         self.relay = relay
         self.simulator = block.simulator
         # A simulator's time counts as simulation. On the wall clock that is its thread's CPU time
@@ -42,6 +48,11 @@ class ActivityRunner:
         self.took = 0  # this cycle's compute time so far (compute, then flush)
         self.computing = False  # this cycle ran the block's compute (a life-cycle hook is no compute)
         self.retuned: tuple[object, frozenset[str]] | None = None  # new running parameters, not yet taken
+        self.cycle_log: CycleLog | None = None  # a recorded run's row per cycle (`cycle_log`)
+        # Which of the parameter sets handed to it (counted from 1) the block holds: 0 for its first
+        # ones; what a recording's parameter events are matched to (`parameter_events`).
+        self.parameters = np.zeros(1, np.int64)
+        self._handed = 0
         self._retuning = threading.Lock()
         layout = region.layout
         self.index = layout.activity_index[name]
@@ -64,11 +75,13 @@ class ActivityRunner:
             if self.retuned is not None:
                 changed = changed | self.retuned[1]
             self.retuned = (params, changed)
+            self._handed += 1
 
     def _take_parameters(self) -> None:
         with self._retuning:  # the main thread may hand over more meanwhile
             params, changed = self.retuned  # type: ignore[misc]
             self.retuned = None
+            self.parameters[0] = self._handed
         block = self.block
         block.params = block.context.params = params
         if changed and self.lifecycle.configured:  # one still configuring builds from the new ones
@@ -78,6 +91,7 @@ class ActivityRunner:
                 self.lifecycle.fail_running(error)
 
     def step(self) -> None:
+        self.cycle.now = self.now_ns()
         if self.retuned is not None:
             self._take_parameters()
         changed = False
@@ -87,10 +101,15 @@ class ActivityRunner:
         relay = self.relay
         if relay is not None and changed:  # the origins merged last step still stand otherwise
             relay.before_step()
+        cycle_log = self.cycle_log
+        if cycle_log is not None:
+            cycle_log.before()
         cpu = time.thread_time_ns() if self.simulator_cpu else 0
         started = time.perf_counter_ns()
         self.computing = self.lifecycle.step()
         took = self.took = time.perf_counter_ns() - started
+        if cycle_log is not None:
+            cycle_log.stepped()
         if self.simulator:
             self.region.sim_ns[self.index] += time.thread_time_ns() - cpu if self.simulator_cpu else took
         if not self.flushes:
@@ -103,6 +122,8 @@ class ActivityRunner:
         started = time.perf_counter_ns()
         self.lifecycle.flush(self.block.flush)
         self.took += time.perf_counter_ns() - started
+        if self.cycle_log is not None:
+            self.cycle_log.flushed()
         self._finish()
 
     def _finish(self) -> None:
@@ -112,6 +133,8 @@ class ActivityRunner:
             record(self.region.compute, self.region.compute_max, self.index, self.took)
         if self.relay is not None:
             self.relay.after_step()
+        if self.cycle_log is not None:
+            self.cycle_log.push()
 
 
 class CyclicThread:
