@@ -2,9 +2,9 @@
 
 Where new parameters land (`live.retune`, for a patch and a mode alike) says so in the system's
 log, off the real-time path (`logs.LogWriter`); the recorder follows that file
-(`observe/parameter_events.py`) and writes each event, numbered per activity in the order they were handed, as the runner numbers them
-(`ActivityRunner.parameters`), so a replay knows from an activity's recorded cycles which set
-its block held in each one.
+(`observe/parameter_events.py`) and writes each event, numbered per activity in the order they
+were handed, as the runner numbers them (`ActivityRunner.parameters`), so a replay knows from an
+activity's recorded cycles which set its block held in each one.
 """
 
 from __future__ import annotations
