@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 
 import typer
@@ -50,10 +51,13 @@ def recover(
     output: Path | None = typer.Option(None, "-o", "--output", help="where to write (default: FILE without .part)"),
 ) -> None:
     """Rewrite an unfinished recording into a valid file; exit 0 if nothing was lost, 3 if some was."""
+    from hapticop.recording.reading import RecordingError
     from hapticop.recording.recover import recover as rewrite
 
     try:
         found = rewrite(file, output)
+    except RecordingError as error:
+        raise _fail(str(error), 2) from None
     except FileExistsError as error:
         raise _fail(str(error), 2) from None
     except OSError as error:
@@ -81,7 +85,11 @@ def plot(
     except RecordingError as error:
         raise _fail(str(error)) from None
     if csv is not None:
-        rows = plotting.write_csv(chosen, csv)
+        try:
+            rows = plotting.write_csv(chosen, csv)
+        except OSError as error:
+            why = "a FIFO nobody reads" if error.errno == errno.ENXIO else (error.strerror or str(error))
+            raise _fail(f"{csv}: cannot write the CSV: {why}") from None
         typer.echo(f"wrote {csv} ({rows} samples)")
         if output is None:
             return
@@ -105,6 +113,10 @@ def replay(
     tolerance: float = typer.Option(0.0, "--tolerance", min=0.0,
                                     help="the largest difference still a match, in the output's unit (default: "
                                          "equal to the bit, as a virtual-clock run replays)"),
+    trust_blocks: bool = typer.Option(False, "--trust-blocks",
+                                      help="import the modules this recording's composition names for its blocks "
+                                           "(installed packages and PYTHONPATH only, never the recording's folder); "
+                                           "without it only built-in blocks replay: a recording is data, not code"),
 ) -> None:
     """Feed the recorded inputs of activities back to their blocks, cycle by cycle under the virtual
     clock, and compare their outputs with the recorded ones; exit 1 on a mismatch, 2 if it cannot."""
@@ -112,7 +124,7 @@ def replay(
     from hapticop.runtime.replay import replay as run_replay
 
     try:
-        replayed = run_replay(file, activities, tolerance)
+        replayed = run_replay(file, activities, tolerance, trusted=trust_blocks)
     except ReplayError as error:
         raise _fail(str(error), 2) from None
     for one in replayed:
@@ -141,6 +153,10 @@ def report(
                                            "odometry streams even when an activity (a simulated world) leaves them"),
     hallway: str | None = typer.Option(None, "--hallway",
                                        help="the hallway the run drove (H1..H6; default: the world's, else H1)"),
+    trust_blocks: bool = typer.Option(False, "--trust-blocks",
+                                      help="import the modules this recording's composition names for its blocks "
+                                           "(installed packages and PYTHONPATH only, never the recording's folder); "
+                                           "without it only built-in blocks replay: a recording is data, not code"),
 ) -> None:
     """The results a run leaves (the hallway world's trajectory, metrics and picture), made again from
     its recording by replaying the activities that leave them; a run with none (the real robot) gets
@@ -152,7 +168,7 @@ def report(
 
     target = output if output is not None else file.with_suffix(".report")
     try:
-        run = open_run(file)
+        run = open_run(file, trust_blocks)
         if from_streams or not leaving_results(run):
             _from_streams(run, target, hallway)
             return
