@@ -73,7 +73,7 @@ def contents(path: Path) -> Contents:
             attachments = {record.name: bytes(record.data) for record in reader.iter_attachments()}
         except RecordingError:
             raise
-        except (*BROKEN, OSError, MemoryError) as error:
+        except (*BROKEN, OSError) as error:
             raise _broken(path, error) from None
     if summary is None or summary.statistics is None:
         raise RecordingError(f"{path} has no summary: try `hapticop recover`")
@@ -142,7 +142,7 @@ def series_of(path: Path, streams: list[str]) -> dict[str, Series]:
                         data.append(record.data)
             except RecordingError:
                 raise
-            except (*BROKEN, OSError, MemoryError) as error:
+            except (*BROKEN, OSError) as error:
                 raise _broken(path, error) from None
     result = {}
     for topic, (stream, info) in channels.items():
