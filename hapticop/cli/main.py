@@ -174,6 +174,9 @@ def compose(
              "recorded streams, or every stream, with the scan, frames, force arrow, logs and loop timing"),
     view_host: str = typer.Option("127.0.0.1", help="where --view listens (default: this machine only)"),
     view_rate: float = typer.Option(30.0, help="most messages a second --view sends per channel"),
+    view_tls_cert: Path | None = typer.Option(None, help="a PEM certificate: --view speaks wss:// only (with "
+                                                         "--view-tls-key)"),
+    view_tls_key: Path | None = typer.Option(None, help="the certificate's PEM PKCS#8 private key"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -181,7 +184,7 @@ def compose(
     from hapticop.runtime.report import print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
-    live = None if view is None else _live_options(view, view_host, view_rate)
+    live = None if view is None else _live_options(view, view_host, view_rate, view_tls_cert, view_tls_key)
     validated = _valid_or_exit(file, "not started")
     if validated.hosts:
         validated = _one_host(validated, file, host, clock, run_dir, group_readable, sys.argv)
@@ -261,12 +264,14 @@ def view_running(
     port: int = typer.Option(8765, help="the port Foxglove connects to (Foxglove WebSocket)"),
     host: str = typer.Option("127.0.0.1", help="where to listen (default: this machine only)"),
     rate: float = typer.Option(30.0, help="most messages a second per channel"),
+    tls_cert: Path | None = typer.Option(None, help="a PEM certificate: speak wss:// only (with --tls-key)"),
+    tls_key: Path | None = typer.Option(None, help="the certificate's PEM PKCS#8 private key"),
 ) -> None:
     """Show a running system live in Foxglove, from a process of its own: every stream's newest
     sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
     from hapticop.runtime.viewer import Attachment, view
 
-    options = _live_options(str(port), host, rate)
+    options = _live_options(str(port), host, rate, tls_cert, tls_key)
     answer = _ask(system, {"op": "attach"})
     if not answer.get("ok"):
         typer.echo(f"hapticop: {system}: {answer.get('error')}", err=True)
@@ -281,19 +286,42 @@ def view_running(
     typer.echo(f"{summary['view']['sent']} messages sent", err=True)
 
 
-def _live_options(port: str, host: str, rate_hz: float):
-    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number)."""
-    from hapticop.recording.live import DEFAULT_PORT, LiveOptions, LiveViewUnavailable, require_sdk
+def _live_options(port: str, host: str, rate_hz: float, tls_cert: Path | None = None, tls_key: Path | None = None):
+    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number, an
+    unreadable TLS identity); says at start who can watch when it is more than this machine."""
+    from hapticop.recording.live import (
+        DEFAULT_PORT,
+        LiveOptions,
+        LiveViewUnavailable,
+        exposure,
+        read_identity,
+        require_sdk,
+    )
 
+    if (tls_cert is None) != (tls_key is None):
+        raise typer.BadParameter("give both a TLS certificate and its key, or neither", param_hint="TLS")
     try:
         require_sdk()
-        return LiveOptions(host, int(port) if port else DEFAULT_PORT, rate_hz)
+        number = int(port) if port else DEFAULT_PORT
     except LiveViewUnavailable as missing:
         typer.echo(f"hapticop: {missing}", err=True)
         raise typer.Exit(2) from None
     except ValueError as error:
         raise typer.BadParameter(str(error) if port.isdigit() or not port else f"not a port: {port!r}",
                                  param_hint="--view") from None
+    try:
+        options = LiveOptions(host, number, rate_hz, str(tls_cert) if tls_cert else None,
+                              str(tls_key) if tls_key else None)
+        read_identity(options)
+    except LiveViewUnavailable as missing:
+        typer.echo(f"hapticop: {missing}", err=True)
+        raise typer.Exit(2) from None
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint="--view") from None
+    warning = exposure(options)
+    if warning:
+        typer.echo(f"hapticop: {warning}", err=True)
+    return options
 
 
 def _ask(system: str, message: dict) -> dict:
