@@ -48,14 +48,14 @@ ADDRESS_SPACE = 1536 << 20  # the child's whole address space: Python, numpy, mc
 PATIENCE_S = 120  # a bound on a hang, never a speed requirement
 COMMANDS = ("info", "plot", "replay", "report", "recover")
 
-# Runs each command line of argv[1] (JSON) through the CLI in this one process and prints, per
+# Runs each command line of its standard input (JSON) through the CLI in this one process and prints, per
 # line, its exit code, its output and the type of any exception it ended in.
 DRIVER = textwrap.dedent("""
     import json, sys
     from typer.testing import CliRunner
     from hapticop.cli.main import app
     runner = CliRunner()
-    for argv in json.loads(sys.argv[1]):
+    for argv in json.loads(sys.stdin.read()):
         result = runner.invoke(app, argv)
         crash = None if result.exception is None or isinstance(result.exception, SystemExit) else \\
             type(result.exception).__name__
@@ -80,7 +80,7 @@ def run_cli(lines: list[list[str]], cwd: Path = ROOT, env: dict | None = None) -
     environment = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
                    "MPLBACKEND": "Agg", **(env or {})}
     environment.pop("DISPLAY", None)
-    done = subprocess.run([sys.executable, "-c", DRIVER, json.dumps(lines)], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", DRIVER], input=json.dumps(lines), capture_output=True, text=True,
                           timeout=PATIENCE_S, cwd=cwd, env=environment, preexec_fn=_limits)
     assert done.returncode == 0, done.stderr[-3000:]
     return [json.loads(line) for line in done.stdout.splitlines()]
