@@ -247,3 +247,65 @@ def test_a_running_system_is_shown_from_outside_without_being_touched(tmp_path):
     assert "/streams/slow" not in topics  # a queue stream's rings have their own readers
     shown = [int.from_bytes(data[-8:], "little") for _, data in seen["messages"]["/streams/count"]]
     assert shown == sorted(set(shown)) and shown[0] > 0
+
+
+def _identity(tmp_path):
+    """A self-signed certificate for 127.0.0.1 and its PKCS#8 key, made here."""
+    import subprocess
+
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
+                    "-keyout", str(key), "-out", str(cert), "-days", "1", "-subj", "/CN=127.0.0.1",
+                    "-addext", "subjectAltName=IP:127.0.0.1"], check=True, capture_output=True, timeout=60)
+    return cert, key
+
+
+async def _first_op(address: str, **options) -> str:
+    async with websockets.connect(address, subprotocols=[SUBPROTOCOL], open_timeout=PATIENCE_S, **options) as socket:
+        return json.loads(await asyncio.wait_for(socket.recv(), PATIENCE_S))["op"]
+
+
+def test_with_a_certificate_the_view_speaks_tls_only(tmp_path):
+    import ssl
+
+    from hapticop.recording.live import LiveServer
+
+    cert, key = _identity(tmp_path)
+    server = LiveServer(LiveOptions(port=0, tls_cert=str(cert), tls_key=str(key)))
+    try:
+        assert server.address.startswith("wss://127.0.0.1:")
+        trusting = ssl.create_default_context(cafile=str(cert))
+        assert asyncio.run(_first_op(server.address, ssl=trusting)) == "serverInfo"
+        with pytest.raises(Exception):  # noqa: B017, PT011 - any refusal: the handshake never completes in the clear
+            asyncio.run(_first_op(server.address.replace("wss://", "ws://"), open_timeout=10))
+    finally:
+        server.stop()
+
+
+def test_a_view_beyond_loopback_says_at_start_who_can_watch(tmp_path):
+    from typer.testing import CliRunner
+
+    from hapticop.cli.main import app
+    from hapticop.recording.live import exposure
+
+    assert exposure(LiveOptions(host="127.0.0.1")) is None and exposure(LiveOptions(host="::1")) is None
+    assert exposure(LiveOptions(host="localhost")) is None
+    said = exposure(LiveOptions(host="0.0.0.0", port=9000))
+    assert "anyone who can reach this machine on any of its networks, at port 9000" in said
+    assert "without authentication" in said and "in the clear" in said
+    cert, key = _identity(tmp_path)
+    assert "over TLS" in exposure(LiveOptions(host="192.0.2.7", tls_cert=str(cert), tls_key=str(key)))
+
+    runner = CliRunner()
+    result = runner.invoke(app, ["view", str(tmp_path / "no-such-system"), "--host", "0.0.0.0", "--port", "0"])
+    assert result.exit_code in (1, 2) and "no-such-system" in result.output  # then it finds no system
+    lines = result.output.splitlines()
+    assert lines[0].startswith("hapticop: warning: the live view serves every stream to anyone who can reach this "
+                               "machine"), result.output
+    result = runner.invoke(app, ["view", str(tmp_path / "no-such-system"), "--port", "0"])
+    assert "warning" not in result.output
+    result = runner.invoke(app, ["view", "x", "--tls-cert", str(cert)])
+    assert result.exit_code == 2 and "both a TLS certificate and its key" in result.output
+    result = runner.invoke(app, ["view", "x", "--tls-cert", str(cert), "--tls-key", str(tmp_path / "absent.pem")])
+    assert result.exit_code == 2 and "cannot read its TLS identity" in result.output
+    assert "Traceback" not in result.output

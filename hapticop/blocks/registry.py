@@ -7,6 +7,11 @@ hapticop; an installed package may also give its blocks short names through the
 composition file is found too (`search_beside`). Modules are imported
 only when a composition names them, and not at all while `blocks_not_imported()` is in
 effect: checking an untrusted file must not run its code.
+
+A composition read from a recording is data: within `blocks_of_a_recording(trusted=False)`
+only built-in names resolve, and every other name is refused without looking for its module;
+with `trusted=True` (the user said so for that file) modules are imported from installed
+packages and PYTHONPATH, never from the recording's folder nor, implicitly, the current one.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import importlib
 import importlib.machinery
 import importlib.metadata
 import importlib.util
+import os
 import re
 import sys
 from collections.abc import Iterator
@@ -63,6 +69,8 @@ _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 
 
 _importing = ContextVar("importing_blocks", default=True)
+_untrusted = ContextVar("untrusted_blocks", default=False)  # only built-in names resolve
+_not_from: ContextVar[tuple[str, ...]] = ContextVar("blocks_not_from", default=())  # folders never imported from
 
 
 @contextlib.contextmanager
@@ -73,6 +81,37 @@ def blocks_not_imported() -> Iterator[None]:
         yield
     finally:
         _importing.reset(token)
+
+
+@contextlib.contextmanager
+def blocks_of_a_recording(trusted: bool, folder: str | Path) -> Iterator[None]:
+    """Within this block, `resolve` reads a recording's composition as data: built-in names only,
+    unless `trusted`; then never a module from `folder` (the recording's) nor the current directory
+    unless PYTHONPATH names it."""
+    explicit = {str(Path(p).resolve()) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p}
+    implicit = {"", ".", str(Path.cwd().resolve())} - explicit
+    barred = (*implicit, str(Path(folder).resolve()))
+    tokens = _untrusted.set(not trusted), _not_from.set(barred)
+    try:
+        yield
+    finally:
+        _untrusted.reset(tokens[0])
+        _not_from.reset(tokens[1])
+
+
+@contextlib.contextmanager
+def _path_without(folders: tuple[str, ...]) -> Iterator[None]:
+    """`sys.path` without these folders while a module is imported (the importer reads it then)."""
+    if not folders:
+        yield
+        return
+    kept = sys.path[:]
+    sys.path[:] = [p for p in kept if p not in folders and str(Path(p or ".").resolve()) not in folders]
+    importlib.invalidate_caches()
+    try:
+        yield
+    finally:
+        sys.path[:] = kept
 
 
 class UnknownBlock(LookupError):
@@ -108,6 +147,10 @@ def resolve(name: str) -> type[Block] | None:
     `blocks_not_imported()`, was not imported.
     """
     target = BUILTIN.get(name)
+    if target is None and _untrusted.get():
+        raise UnknownBlock(name, f"block '{name}' is not built in, and a recording's composition imports no module "
+                                 "unless told to", "if you trust this file and the module it names, say so with "
+                                 "--trust-blocks (installed packages and PYTHONPATH only)")
     if target is None and not _IMPORT_PATH.match(name):
         target = installed().get(name)
     if target is None:
@@ -124,7 +167,8 @@ def resolve(name: str) -> type[Block] | None:
                                _where_python_looks(module_name))
         return None
     try:
-        module = importlib.import_module(module_name)
+        with _path_without(() if own else _not_from.get()):
+            module = importlib.import_module(module_name)
     except ImportError as error:
         missing = getattr(error, "name", None)
         hint = (_where_python_looks(module_name) if missing and module_name.startswith(missing)

@@ -181,6 +181,9 @@ def compose(
              "recorded streams, or every stream, with the scan, frames, force arrow, logs and loop timing"),
     view_host: str = typer.Option("127.0.0.1", help="where --view listens (default: this machine only)"),
     view_rate: float = typer.Option(30.0, help="most messages a second --view sends per channel"),
+    view_tls_cert: Path | None = typer.Option(None, help="a PEM certificate: --view speaks wss:// only (with "
+                                                         "--view-tls-key)"),
+    view_tls_key: Path | None = typer.Option(None, help="the certificate's PEM PKCS#8 private key"),
 ) -> None:
     """Validate a composition, then run it; Ctrl+C shuts it down (twice forces)."""
     from rich.console import Console
@@ -188,7 +191,7 @@ def compose(
     from hapticop.cli.report import closing_line, missed_targets, print_recording, print_results, print_timing
     from hapticop.runtime.system import RunOptions, run_system
 
-    live = None if view is None else live_options(view, view_host, view_rate)
+    live = None if view is None else live_options(view, view_host, view_rate, view_tls_cert, view_tls_key)
     validated = _valid_or_exit(file, "not started")
     _say_if_insecure(validated, file)
     if validated.hosts:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 
 import typer
@@ -52,11 +53,14 @@ def recover(
 ) -> None:
     """Rewrite an unfinished recording into a valid file; exit 0 if nothing was lost, 3 if some was."""
     from hapticop.cli.outputs import is_stdout, written
+    from hapticop.recording.reading import RecordingError
     from hapticop.recording.recover import recover as rewrite
 
     try:
         with written(output, ".mcap") as target:
             found = rewrite(file, target)
+    except RecordingError as error:
+        raise _fail(str(error), 2) from None
     except FileExistsError as error:
         raise _fail(str(error), 2) from None
     except OSError as error:
@@ -89,8 +93,12 @@ def plot(
     if csv is not None:
         if is_stdout(output):
             raise _fail("--csv and -o cannot both be standard output", 2)
-        with written(csv, ".csv") as path:
-            rows = plotting.write_csv(chosen, path)
+        try:
+            with written(csv, ".csv") as path:
+                rows = plotting.write_csv(chosen, path)
+        except OSError as error:
+            why = "a FIFO nobody reads" if error.errno == errno.ENXIO else (error.strerror or str(error))
+            raise _fail(f"{csv}: cannot write the CSV: {why}") from None
         typer.echo(say_wrote(csv, f" ({rows} samples)"), err=is_stdout(csv))
         if output is None:
             return
@@ -118,6 +126,10 @@ def replay(
     tolerance: float = typer.Option(0.0, "--tolerance", min=0.0,
                                     help="the largest difference still a match, in the output's unit (default: "
                                          "equal to the bit, as a virtual-clock run replays)"),
+    trust_blocks: bool = typer.Option(False, "--trust-blocks",
+                                      help="import the modules this recording's composition names for its blocks "
+                                           "(installed packages and PYTHONPATH only, never the recording's folder); "
+                                           "without it only built-in blocks replay: a recording is data, not code"),
 ) -> None:
     """Feed the recorded inputs of activities back to their blocks, cycle by cycle under the virtual
     clock, and compare their outputs with the recorded ones; exit 1 on a mismatch, 2 if it cannot."""
@@ -125,7 +137,7 @@ def replay(
     from hapticop.observe.replay import replay as run_replay
 
     try:
-        replayed = run_replay(file, activities, tolerance)
+        replayed = run_replay(file, activities, tolerance, trusted=trust_blocks)
     except ReplayError as error:
         raise _fail(str(error), 2) from None
     for one in replayed:
@@ -159,6 +171,10 @@ def report(
                                            "odometry streams even when an activity (a simulated world) leaves them"),
     hallway: str | None = typer.Option(None, "--hallway",
                                        help="the hallway the run drove (H1..H6; default: the world's, else H1)"),
+    trust_blocks: bool = typer.Option(False, "--trust-blocks",
+                                      help="import the modules this recording's composition names for its blocks "
+                                           "(installed packages and PYTHONPATH only, never the recording's folder); "
+                                           "without it only built-in blocks replay: a recording is data, not code"),
 ) -> None:
     """The results a run leaves (the hallway world's trajectory, metrics and picture), made again from
     its recording by replaying the activities that leave them; a run with none (the real robot) gets
@@ -173,7 +189,7 @@ def report(
         raise _fail("-o -: a report is a directory of files (metrics, picture), not one stream; name a directory", 2)
     target = output if output is not None else file.with_suffix(".report")
     try:
-        run = open_run(file)
+        run = open_run(file, trust_blocks)
         if from_streams or not leaving_results(run):
             _from_streams(run, target, hallway)
             return

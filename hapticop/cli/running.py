@@ -14,12 +14,14 @@ def view(
     port: int = typer.Option(8765, help="the port Foxglove connects to (Foxglove WebSocket)"),
     host: str = typer.Option("127.0.0.1", help="where to listen (default: this machine only)"),
     rate: float = typer.Option(30.0, help="most messages a second per channel"),
+    tls_cert: Path | None = typer.Option(None, help="a PEM certificate: speak wss:// only (with --tls-key)"),
+    tls_key: Path | None = typer.Option(None, help="the certificate's PEM PKCS#8 private key"),
 ) -> None:
     """Show a running system live in Foxglove, from a process of its own: every stream's newest
     sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
     from hapticop.observe.viewer import Attachment, view
 
-    options = live_options(str(port), host, rate)
+    options = live_options(str(port), host, rate, tls_cert, tls_key)
     answer = ask(system, {"op": "attach"})
     if not answer.get("ok"):
         typer.echo(f"hapticop: {system}: {answer.get('error')}", err=True)
@@ -34,19 +36,42 @@ def view(
     typer.echo(f"{summary['view']['sent']} messages sent", err=True)
 
 
-def live_options(port: str, host: str, rate_hz: float):
-    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number)."""
-    from hapticop.recording.live import DEFAULT_PORT, LiveOptions, LiveViewUnavailable, require_sdk
+def live_options(port: str, host: str, rate_hz: float, tls_cert: Path | None = None, tls_key: Path | None = None):
+    """`--view`'s options, or a one-line error (no foxglove-sdk, a port that is no number, an
+    unreadable TLS identity); says at start who can watch when it is more than this machine."""
+    from hapticop.recording.live import (
+        DEFAULT_PORT,
+        LiveOptions,
+        LiveViewUnavailable,
+        exposure,
+        read_identity,
+        require_sdk,
+    )
 
+    if (tls_cert is None) != (tls_key is None):
+        raise typer.BadParameter("give both a TLS certificate and its key, or neither", param_hint="TLS")
     try:
         require_sdk()
-        return LiveOptions(host, int(port) if port else DEFAULT_PORT, rate_hz)
+        number = int(port) if port else DEFAULT_PORT
     except LiveViewUnavailable as missing:
         typer.echo(f"hapticop: {missing}", err=True)
         raise typer.Exit(2) from None
     except ValueError as error:
         raise typer.BadParameter(str(error) if port.isdigit() or not port else f"not a port: {port!r}",
                                  param_hint="--view") from None
+    try:
+        options = LiveOptions(host, number, rate_hz, str(tls_cert) if tls_cert else None,
+                              str(tls_key) if tls_key else None)
+        read_identity(options)
+    except LiveViewUnavailable as missing:
+        typer.echo(f"hapticop: {missing}", err=True)
+        raise typer.Exit(2) from None
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint="--view") from None
+    warning = exposure(options)
+    if warning:
+        typer.echo(f"hapticop: {warning}", err=True)
+    return options
 
 
 def ask(system: str, message: dict) -> dict:

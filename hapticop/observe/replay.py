@@ -27,6 +27,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from hapticop.blocks.base import Block
+from hapticop.blocks.registry import blocks_of_a_recording
 from hapticop.composition.diagnostics import Severity
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, load_tree
@@ -94,8 +95,29 @@ class Run:
         return self._series[stream]
 
 
-def open_run(path: Path) -> Run:
-    """A recording read for replay; a `ReplayError` says what it lacks."""
+MAX_NESTING = 64  # an attachment nesting deeper is not one hapticop wrote (as `yamlsource.MAX_NESTING`)
+
+
+def _nesting(text: str) -> int:
+    """How deep the text's brackets and braces nest, quoted strings left out, without parsing it:
+    the JSON and YAML parsers recurse, so a 100,000-deep file must be turned away before them."""
+    import re
+
+    depth = deepest = 0
+    for mark in re.sub(r'"(?:[^"\\]|\\.)*"|\'(?:[^\']|\'\')*\'', "", text):
+        if mark in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif mark in "]}":
+            depth -= 1
+    return deepest
+
+
+def open_run(path: Path, trusted: bool = False) -> Run:
+    """A recording read for replay; a `ReplayError` says what it lacks.
+
+    Its composition is data: only built-in blocks resolve unless `trusted` (`--trust-blocks`),
+    and even then no module comes from the recording's folder (`blocks_of_a_recording`)."""
     path = Path(path)
     try:
         found = contents(path)
@@ -107,16 +129,24 @@ def open_run(path: Path) -> Run:
             raise ReplayError(f"{path}: no {name} attached: the recording does not say what ran, so there is "
                               "nothing to replay against")
     try:
-        source = parse_text(attached["composition.yaml"].decode(), f"{path}:composition.yaml")
+        text = attached["composition.yaml"].decode()
+        if _nesting(text) > MAX_NESTING:
+            raise ReplayError(f"{path}: its attached composition.yaml nests deeper than {MAX_NESTING} levels")
+        source = parse_text(text, f"{path}:composition.yaml")
     except (SourceError, UnicodeDecodeError) as error:
         raise ReplayError(f"{path}: its attached composition does not read: {error}") from None
-    loaded = load_tree(source.tree)
+    with blocks_of_a_recording(trusted, path.parent):
+        loaded = load_tree(source.tree)
     errors = [d for d in loaded.diagnostics if d.severity is Severity.ERROR]
     if loaded.composition is None or errors:
         what = errors[0].message if errors else "no composition"
-        raise ReplayError(f"{path}: its attached composition does not load here: {what}")
+        hint = next((d.hint for d in errors if "--trust-blocks" in (d.hint or "")), "")
+        raise ReplayError(f"{path}: its attached composition does not load here: {what}{'; ' + hint if hint else ''}")
     try:
-        parameters = json.loads(attached["parameters.json"])
+        text = attached["parameters.json"].decode()
+        if _nesting(text) > MAX_NESTING:
+            raise ReplayError(f"{path}: its attached parameters.json nests deeper than {MAX_NESTING} levels")
+        parameters = json.loads(text)
     except ValueError as error:
         raise ReplayError(f"{path}: its attached parameters.json is not JSON ({error})") from None
     if not isinstance(parameters, dict):
@@ -443,11 +473,11 @@ def _same_kind(run: Run, stream: str, what: str, port, info: StreamInfo) -> None
 
 
 def replay(path: Path, activities: list[str] | None = None, tolerance: float = 0.0,
-           run_dir: Path | None = None) -> list[Replayed]:
+           run_dir: Path | None = None, trusted: bool = False) -> list[Replayed]:
     """Replay the chosen activities of a recording, each from its own recorded inputs."""
     import tempfile
 
-    run = open_run(path)
+    run = open_run(path, trusted)
     chosen = choose(run, list(activities or []))
     with tempfile.TemporaryDirectory(prefix="hapticop-replay-") as scratch:
         base = Path(run_dir) if run_dir is not None else Path(scratch)

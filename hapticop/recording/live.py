@@ -6,11 +6,19 @@ the WebSocket server of `foxglove-sdk` (the optional `[foxglove]` extra), which 
 SDK's own threads in the recorder's process, never on a real-time loop. Each message goes out
 with the loop's own stamp as its time, so plots and frames line up as in a recording; a client
 that falls behind loses the oldest messages (the SDK's backlog), never the recording.
+
+The protocol has no authentication, and the SDK's server offers no hook to add one (no
+connection callback, no per-client sink, no way to close a client), so whoever can reach the
+address sees every stream: `exposure` says who that is, at start, for any address other than
+loopback. With a certificate and key (`tls_cert`, `tls_key`) the server speaks only `wss://`,
+the SDK's own TLS, so the streams are not readable on the way.
 """
 
 from __future__ import annotations
 
+import ipaddress
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -35,12 +43,52 @@ class LiveOptions:
     host: str = DEFAULT_HOST
     port: int = DEFAULT_PORT  # 0: any free port (the summary says which)
     rate_hz: float = DEFAULT_RATE_HZ
+    tls_cert: str | None = None  # a PEM certificate's file: the server speaks wss:// only
+    tls_key: str | None = None  # its PEM PKCS#8 private key's file
 
     def __post_init__(self) -> None:
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError("the live view's TLS needs both a certificate and its key")
         if not 0 < self.rate_hz <= 1000:
             raise ValueError(f"the live view's rate must be above 0 and at most 1000 Hz, not {self.rate_hz:g}")
         if not 0 <= self.port <= 65535:
             raise ValueError(f"the live view's port must be 0 to 65535, not {self.port}")
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def exposure(options: LiveOptions) -> str | None:
+    """Who can watch, said at start when it is more than this machine's users; None on loopback."""
+    if is_loopback(options.host):
+        return None
+    try:
+        anywhere = ipaddress.ip_address(options.host).is_unspecified
+    except ValueError:
+        anywhere = False
+    who = (f"anyone who can reach this machine on any of its networks, at port {options.port}" if anywhere
+           else f"anyone who can reach {options.host}:{options.port}")
+    wire = ("over TLS (wss://)" if options.tls_cert else
+            "in the clear (ws://: anyone on the path reads it too; a TLS certificate and key give wss://)")
+    return (f"warning: the live view serves every stream to {who}, without authentication (Foxglove's "
+            f"WebSocket protocol has none), {wire}")
+
+
+def read_identity(options: LiveOptions) -> tuple[bytes, bytes] | tuple[None, None]:
+    """The TLS certificate and key's bytes, or a one-line `LiveViewUnavailable`."""
+    if options.tls_cert is None or options.tls_key is None:
+        return None, None
+    try:
+        return Path(options.tls_cert).read_bytes(), Path(options.tls_key).read_bytes()
+    except OSError as error:
+        raise LiveViewUnavailable(f"the live view cannot read its TLS identity {error.filename}: "
+                                  f"{error.strerror}") from None
 
 
 def require_sdk() -> None:
@@ -72,12 +120,15 @@ class LiveServer:
         self.options = options
         self.period_ns = int(1e9 / options.rate_hz)
         self.context = foxglove.Context()  # this server's channels alone (not the SDK's global context)
+        cert, key = read_identity(options)
         try:
-            self.server = foxglove.start_server(name=name, host=options.host, port=options.port, context=self.context)
+            self.server = foxglove.start_server(name=name, host=options.host, port=options.port, context=self.context,
+                                                tls_cert=cert, tls_key=key)
         except Exception as error:  # noqa: BLE001 - the SDK raises its own error types for a port in use
             where = f"{options.host}:{options.port}"
             raise LiveViewUnavailable(f"the live view cannot listen on {where}: {error}") from error
-        self.address = f"ws://{options.host}:{self.server.port}"  # the port chosen when asked for any (0)
+        scheme = "wss" if cert else "ws"
+        self.address = f"{scheme}://{options.host}:{self.server.port}"  # the port chosen when asked for any (0)
         self._schemas: list[object] = []
         self._channels: list[_Live] = []
         self.sent = 0

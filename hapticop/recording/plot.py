@@ -59,12 +59,24 @@ def _origin(chosen: list[Selected]) -> int:
     return min(starts) if starts else 0
 
 
+def _open_for_writing(target: Path):
+    """`target` opened to write text without waiting: a FIFO nobody reads is refused (ENXIO), not
+    waited on; a directory too; a pipe with a reader, a file or a device is written as usual."""
+    import fcntl
+
+    descriptor = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NONBLOCK | os.O_NOCTTY, 0o666)
+    flags = fcntl.fcntl(descriptor, fcntl.F_GETFL)
+    fcntl.fcntl(descriptor, fcntl.F_SETFL, flags & ~os.O_NONBLOCK)  # a slow reader is waited for
+    return os.fdopen(descriptor, "w", newline="")
+
+
 def write_csv(chosen: list[Selected], target: Path) -> int:
-    """One row per sample: stream, sequence, publish and log time (s), then its values; returns rows."""
+    """One row per sample: stream, sequence, publish and log time (s), then its values; returns rows.
+    `OSError` when the target cannot be written (a full device, a directory, a FIFO without a reader)."""
     origin = _origin(chosen)
     width = max(s.columns.shape[1] for s in chosen)
     rows = 0
-    with open(target, "w", newline="") as out:
+    with _open_for_writing(target) as out:
         table = csv.writer(out)
         table.writerow(["stream", "sequence", "publish_time_s", "log_time_s", *[f"value[{i}]" for i in range(width)]])
         for s in chosen:

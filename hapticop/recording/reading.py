@@ -5,20 +5,19 @@ Only finished files are read here; a `.part` left by a crash is first rewritten 
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
+from mcap.reader import SeekingReader
+from mcap.records import Channel as ChannelRecord
+from mcap.records import Message
 
 from hapticop.recording import arrays
+from hapticop.recording.bounded import BROKEN, Clamped, RecordingError, check_chunks, open_recording, records
 from hapticop.recording.mcapfile import PART, StreamInfo, topic_of
 
-
-class RecordingError(Exception):
-    """A file that is not a readable recording, said in words."""
+__all__ = ["Channel", "Contents", "RecordingError", "Series", "contents", "resolve_topic", "series", "series_of"]
 
 
 @dataclass
@@ -49,33 +48,44 @@ class Contents:
         return {k: int(v) for k, v in self.metadata.get("hapticop.drops", {}).items()}
 
 
-def _open(path: Path):
+def _open(path: Path) -> Clamped:
     path = Path(path)
     if path.name.endswith(PART):
         raise RecordingError(f"{path} is a recording its run never finished: `hapticop recover {path}` first")
-    try:
-        return open(path, "rb")
-    except OSError as error:
-        raise RecordingError(f"cannot read {path}: {error.strerror}") from None
+    return open_recording(path)
+
+
+def _broken(path: Path, error: BaseException) -> RecordingError:
+    said = str(error).splitlines()[0][:200] if str(error) else ""
+    return RecordingError(f"{path} is not a finished MCAP recording ({type(error).__name__}{': ' if said else ''}"
+                          f"{said}); if its run was killed, try `hapticop recover`")
 
 
 def contents(path: Path) -> Contents:
+    """What the file's summary says it holds; every length it declares checked against its size."""
     with _open(path) as stream:
         try:
-            reader = make_reader(stream)
+            reader = SeekingReader(stream, record_size_limit=stream.size)
             summary = reader.get_summary()
+            if summary is not None:
+                check_chunks(stream, summary.chunk_indexes, path)
             metadata = {record.name: dict(record.metadata) for record in reader.iter_metadata()}
             attachments = {record.name: bytes(record.data) for record in reader.iter_attachments()}
-        except (McapError, ValueError, EOFError, struct.error) as error:
-            raise RecordingError(f"{path} is not a finished MCAP recording ({type(error).__name__}: {error}); "
-                                 "if its run was killed, try `hapticop recover`") from None
+        except RecordingError:
+            raise
+        except (*BROKEN, OSError) as error:
+            raise _broken(path, error) from None
     if summary is None or summary.statistics is None:
         raise RecordingError(f"{path} has no summary: try `hapticop recover`")
     counts = summary.statistics.channel_message_counts
     channels = []
     for channel in summary.channels.values():
         schema = summary.schemas.get(channel.schema_id)
-        info = StreamInfo.from_metadata(channel.metadata) if "stream" in channel.metadata else None
+        try:
+            info = StreamInfo.from_metadata(channel.metadata) if "stream" in channel.metadata else None
+        except (*BROKEN, OSError) as error:
+            raise RecordingError(f"{path}: channel '{channel.topic}' describes its stream wrongly "
+                                 f"({type(error).__name__}: {error})") from None
         channels.append(Channel(channel.topic, counts.get(channel.id, 0), dict(channel.metadata),
                                 schema.name if schema else "", info))
     stats = summary.statistics
@@ -119,18 +129,31 @@ def series_of(path: Path, streams: list[str]) -> dict[str, Series]:
     taken: dict[str, tuple[list, list, list, list]] = {topic: ([], [], [], []) for topic in channels}
     if channels:
         with _open(path) as handle:
-            for _, channel, message in make_reader(handle).iter_messages(topics=list(channels), log_time_order=False):
-                sequence, publish, log, data = taken[channel.topic]
-                sequence.append(message.sequence)
-                publish.append(message.publish_time)
-                log.append(message.log_time)
-                data.append(message.data)
+            topics: dict[int, str] = {}  # channel id to a chosen topic
+            try:
+                for record in records(handle, path, handle.size):
+                    if isinstance(record, ChannelRecord) and record.topic in taken:
+                        topics[record.id] = record.topic
+                    elif isinstance(record, Message) and record.channel_id in topics:
+                        sequence, publish, log, data = taken[topics[record.channel_id]]
+                        sequence.append(record.sequence)
+                        publish.append(record.publish_time)
+                        log.append(record.log_time)
+                        data.append(record.data)
+            except RecordingError:
+                raise
+            except (*BROKEN, OSError) as error:
+                raise _broken(path, error) from None
     result = {}
     for topic, (stream, info) in channels.items():
         sequence, publish, log, data = taken[topic]
         order = np.argsort(np.asarray(publish, dtype=np.int64), kind="stable")
-        values = (np.stack([arrays.decode(d, info.dtype, info.shape) for d in data]) if data
-                  else np.zeros((0, *info.shape), info.dtype))
+        try:
+            values = (np.stack([arrays.decode(d, info.dtype, info.shape) for d in data]) if data
+                      else np.zeros((0, *info.shape), info.dtype))
+        except (*BROKEN, OSError) as error:
+            raise RecordingError(f"{path}: a sample of '{stream}' does not decode as {info.dtype}{list(info.shape)} "
+                                 f"({type(error).__name__})") from None
         result[stream] = Series(info, np.asarray(sequence, dtype=np.int64)[order],
                                 np.asarray(publish, dtype=np.int64)[order], np.asarray(log, dtype=np.int64)[order],
                                 values[order])

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+from hapticop.recording.bounded import RecordingError, open_recording, records
 from hapticop.recording.mcapfile import CHUNK_BYTES, PART
 
 
@@ -68,21 +68,25 @@ def target_of(source: Path) -> Path:
 
 
 def recover(source: Path, target: Path | None = None) -> Recovered:
-    """Rewrite `source` into `target` (default: its name without `.part`); never overwrites."""
+    """Rewrite `source` into `target` (default: its name without `.part`); never overwrites.
+
+    A special file is refused (`RecordingError`) before anything is written; what the file
+    declares is bounded as every reading is (`bounded`), and a record that breaks a bound ends
+    the recovery there, as a cut-off one does."""
     target = target or target_of(source)
+    raw = open_recording(source)
     if target.exists():
+        raw.close()
         raise FileExistsError(f"{target} exists; say where to write with -o")
-    found = Recovered(source, target, source.stat().st_size, 0, False)
+    found = Recovered(source, target, raw.size, 0, False)
     schemas: dict[int, int] = {}
     channels: dict[int, tuple[int, str]] = {}
-    with open(source, "rb") as raw, open(target, "wb") as out:
+    with raw, open(target, "wb") as out:
         counting = _Counting(raw)
         writer = Writer(out, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
         writer.start(profile="", library="hapticop recover")
-        reader = StreamReader(counting, record_size_limit=found.size)
-        records = reader.records
         try:
-            for record in records:
+            for record in records(counting, source, found.size):
                 found.kept_bytes = counting.offset
                 if isinstance(record, Schema) and record.id not in schemas:
                     schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
@@ -106,6 +110,8 @@ def recover(source: Path, target: Path | None = None) -> Recovered:
                     break
             else:
                 found.problem = "the file ends after its last whole record"
+        except RecordingError as error:
+            found.problem = str(error).removeprefix(f"{source}: ")
         except Exception as error:  # noqa: BLE001 - a cut-off tail breaks a record in many ways
             found.problem = f"an unfinished record: {type(error).__name__}"
         writer.finish()
