@@ -58,7 +58,8 @@ class Pair:
         while not all(ready.values()):
             assert time.monotonic() < deadline, f"the bridges did not link within {PATIENCE_S} s"
             for name, harness in (("operator", self.operator), ("robot", self.robot)):
-                harness._refresh()
+                for port in vars(harness.inputs).values():  # what the runtime does before a step
+                    port.refresh()
                 if ready[name]:
                     harness.block.compute()  # answering the other's pings
                 else:
