@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from hapticop.composition.lcsm import State
-from hapticop.runtime.control import request
+from hapticop.control.client import request
 from hapticop.runtime.system import ExitStatus
 
 from .runtime_helpers import compose, pipeline

@@ -10,8 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from hapticop.runtime import control
-from hapticop.runtime.control import ControlError, ControlServer, request, socket_path
+from hapticop.control import client, server
+from hapticop.control.address import ControlError, socket_path
+from hapticop.control.client import request
+from hapticop.control.server import ControlServer
 
 
 @pytest.fixture
@@ -76,7 +78,8 @@ def test_malformed_json_becomes_ok_false(sock):
 
 
 def test_oversized_request_is_refused(sock, monkeypatch):
-    monkeypatch.setattr(control, "MAX_REQUEST_BYTES", 1000)
+    monkeypatch.setattr(server, "MAX_REQUEST_BYTES", 1000)
+    monkeypatch.setattr(client, "MAX_REQUEST_BYTES", 1000)
     with ControlServer(sock, echo):
         reply = raw(sock, b'{"a": "' + b"x" * 5000 + b'"}\n')
         assert reply["ok"] is False and "larger than 1000 bytes" in reply["error"]
@@ -93,7 +96,7 @@ def test_socket_is_owner_only(sock):
 
 def test_other_users_are_refused(sock, monkeypatch):
     stranger = os.geteuid() + 4242
-    monkeypatch.setattr(control, "peer_uid", lambda connection: stranger)
+    monkeypatch.setattr(server, "peer_uid", lambda connection: stranger)
     with ControlServer(sock, echo):
         reply = raw(sock, b'{"command": "status"}\n')
     assert reply["ok"] is False and "permission denied" in reply["error"] and str(stranger) in reply["error"]
@@ -210,7 +213,7 @@ def test_nesting_inside_strings_is_not_nesting(sock):
 
 
 def test_a_request_without_newline_is_answered_at_its_deadline(sock, monkeypatch):
-    monkeypatch.setattr(control, "READ_DEADLINE", 0.3)
+    monkeypatch.setattr(server, "READ_DEADLINE", 0.3)
     with ControlServer(sock, echo):
         from .control_helpers import send_raw
 
@@ -223,7 +226,7 @@ def test_a_request_without_newline_is_answered_at_its_deadline(sock, monkeypatch
 def test_slow_and_idle_clients_do_not_hold_up_the_others(sock, monkeypatch):
     from .control_helpers import SlowClients
 
-    monkeypatch.setattr(control, "READ_DEADLINE", 1.0)
+    monkeypatch.setattr(server, "READ_DEADLINE", 1.0)
     with ControlServer(sock, echo):
         idle = [socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) for _ in range(3)]
         try:
@@ -238,7 +241,7 @@ def test_slow_and_idle_clients_do_not_hold_up_the_others(sock, monkeypatch):
 
 
 def test_more_clients_than_it_serves_are_told_busy(sock, monkeypatch):
-    monkeypatch.setattr(control, "MAX_CLIENTS", 4)
+    monkeypatch.setattr(server, "MAX_CLIENTS", 4)
     with ControlServer(sock, echo):
         idle = [socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) for _ in range(4)]
         try:

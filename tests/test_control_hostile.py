@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hapticop.composition.lcsm import State
-from hapticop.runtime.control import request
+from hapticop.control.client import request
 
 from .control_helpers import (
     PATIENCE_S,

@@ -9,7 +9,7 @@ import pytest
 from mcap.reader import make_reader
 
 from hapticop.composition.lcsm import State
-from hapticop.runtime.control import request
+from hapticop.control.client import request
 from hapticop.runtime.system import ExitStatus
 from hapticop.validation import validate_text
 

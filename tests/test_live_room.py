@@ -72,7 +72,7 @@ def test_a_live_addition_past_the_room_is_refused_whole_and_the_system_runs_on(t
     before anything changes (the description stays as it was, no activity is added); one that
     fits is applied; then the room left is what counts."""
     from hapticop.composition.lcsm import State
-    from hapticop.runtime.control import request
+    from hapticop.control.client import request
 
     from .control_helpers import PATIENCE_S, while_running
 
@@ -104,7 +104,7 @@ def test_a_live_addition_past_the_room_is_refused_whole_and_the_system_runs_on(t
 def test_racing_additions_that_fit_alone_but_not_together_have_one_winner(tmp_path):
     import threading
 
-    from hapticop.runtime.control import request
+    from hapticop.control.client import request
 
     from .control_helpers import PATIENCE_S, while_running
 

@@ -4,7 +4,9 @@ another change, never for a client that left, and answered at shutdown (runtime/
 import threading
 import time
 
-from hapticop.runtime.control import ControlError, ControlServer, request
+from hapticop.control.address import ControlError
+from hapticop.control.client import request
+from hapticop.control.server import ControlServer
 from hapticop.runtime.live import APPLIED, CANCELLED, FAILED, STALE, WAITING
 from hapticop.testing import stepped_system
 from hapticop.validation import validate_text

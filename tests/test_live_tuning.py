@@ -101,7 +101,7 @@ def test_a_retuned_haptic_controller_renders_with_the_new_gain_at_once():
 
 
 def test_status_says_what_a_configuring_activity_waits_for(tmp_path):
-    from hapticop.runtime.control import request
+    from hapticop.control.client import request
 
     from .runtime_helpers import counting
 

@@ -206,8 +206,8 @@ def test_without_the_sdk_view_says_so_in_one_line(tmp_path, monkeypatch):
 def test_a_running_system_is_shown_from_outside_without_being_touched(tmp_path):
     """`hapticop view`: the control socket says where the region is; a viewer of its own reads the
     latest slots, timing and logs, and leaves every queue ring to its reader."""
+    from hapticop.control.client import request
     from hapticop.observe.viewer import Attachment, view
-    from hapticop.runtime.control import request
 
     from .control_helpers import while_running
     from .test_recording import counters

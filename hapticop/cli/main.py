@@ -409,7 +409,7 @@ def bare_options(argv: list[str]) -> list[str]:
 
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
-    from hapticop.runtime.control import ControlError
+    from hapticop.control.address import ControlError
     from hapticop.runtime.preflight import DevicesMissing
     from hapticop.runtime.rundirs import RunDirectoryError
     from hapticop.runtime.supervisor import ExitStatus, ForcedExit

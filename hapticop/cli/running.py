@@ -75,7 +75,8 @@ def live_options(port: str, host: str, rate_hz: float, tls_cert: Path | None = N
 
 
 def ask(system: str, message: dict) -> dict:
-    from hapticop.runtime.control import ControlError, request
+    from hapticop.control.address import ControlError
+    from hapticop.control.client import request
 
     try:
         return request(system, message, timeout=30.0)

@@ -7,10 +7,11 @@ from pathlib import Path
 
 from hapticop.blocks.interface import Params
 from hapticop.composition.lcsm import State
+from hapticop.control.address import ControlError, is_system_name, socket_path
+from hapticop.control.server import ControlServer
 from hapticop.coordination.coordinator import Coordinator
 from hapticop.published import published
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
-from hapticop.runtime.control import ControlError, ControlServer, is_system_name, socket_path
 from hapticop.runtime.described import Description
 from hapticop.runtime.lifecycle import OK
 from hapticop.runtime.live import APPLIED, APPLYING, LiveChanges

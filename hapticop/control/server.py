@@ -3,7 +3,8 @@
 A running system listens on a Unix domain socket in a directory only its owner can
 enter; the socket itself is mode 0600 and every connection's peer credentials are
 checked (SO_PEERCRED), so only the same user, or root, can patch or query it.
-`hapticop patch` and `hapticop status` talk to it with `request`.
+`hapticop patch` and `hapticop status` talk to it with `client.request`; `address.py` says where it
+is and who may talk to it.
 
 One thread serves every client with non-blocking reads, each client with its own buffer, size
 limit and deadline, so a slow, idle or malformed client delays no one and cannot stop the server.
@@ -13,7 +14,6 @@ handler never runs concurrently with itself.
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import re
@@ -21,15 +21,14 @@ import select
 import selectors
 import socket
 import stat
-import struct
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-MAX_REQUEST_BYTES = 1 << 20  # a patch is at most a composition's size (1 MiB)
-MAX_REPLY_BYTES = 16 << 20
+from hapticop.control.address import MAX_REQUEST_BYTES, ControlError, allowed, peer_pid, peer_uid
+
 MAX_DEPTH = 64  # a request's arrays and objects nest no deeper (a patch is a string in it)
 MAX_CLIENTS = 32  # served at once; as many more are told "busy", the rest wait to be accepted
 READ_DEADLINE = 2.0  # seconds a client may take to send its whole request line
@@ -37,54 +36,6 @@ WRITE_DEADLINE = 5.0  # seconds a client may take to read its reply
 DRAIN_DEADLINE = 0.5  # seconds a client's leftover bytes are read after its reply
 
 Handler = Callable[[dict], dict]
-
-
-class ControlError(Exception):
-    """The control channel could not be set up or reached; the message says why."""
-
-
-def socket_path(system: str) -> Path:
-    """Where the system's control socket is.
-
-    A value with a '/' or ending in '.sock' is the socket's path; anything else is a system
-    name: `$XDG_RUNTIME_DIR/hapticop/NAME.sock`, or `/run/hapticop/NAME.sock` for root
-    without XDG_RUNTIME_DIR, or `/tmp/hapticop-UID/NAME.sock`.
-    """
-    if not is_system_name(system):
-        return Path(system)
-    if not system or system in (".", ".."):
-        raise ControlError(f"{system!r} is not a system name")
-    runtime_dir = os.environ.get("XDG_RUNTIME_DIR")
-    if runtime_dir:
-        return Path(runtime_dir) / "hapticop" / f"{system}.sock"
-    uid = os.geteuid()
-    if uid == 0:
-        return Path("/run/hapticop") / f"{system}.sock"
-    return Path(f"/tmp/hapticop-{uid}") / f"{system}.sock"
-
-
-def is_system_name(system: str) -> bool:
-    """A system's name, whose socket goes in the default directory (else: the socket's own path)."""
-    return not ("/" in system or system.endswith(".sock"))
-
-
-def peer_uid(connection: socket.socket) -> int | None:
-    """The user id of the process at the other end, or None where SO_PEERCRED is missing."""
-    if not hasattr(socket, "SO_PEERCRED"):
-        return None
-    credentials = connection.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
-    _pid, uid, _gid = struct.unpack("3i", credentials)
-    return uid
-
-
-def _peer_pid(connection: socket.socket) -> int | None:
-    if not hasattr(socket, "SO_PEERCRED"):
-        return None
-    return struct.unpack("3i", connection.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i")))[0]
-
-
-def _allowed(uid: int | None) -> bool:
-    return uid is None or uid in (os.geteuid(), 0)
 
 
 class ControlServer:
@@ -209,7 +160,7 @@ class ControlServer:
         except OSError as error:
             raise ControlError(f"cannot check the existing socket {self.path}: {error.strerror or error}") from None
         else:
-            pid = _peer_pid(probe)
+            pid = peer_pid(probe)
             raise ControlError(
                 f"a hapticop system is already running at {self.path}"
                 + (f" (pid {pid})" if pid else "")
@@ -279,7 +230,7 @@ class ControlServer:
                 uid = peer_uid(connection)
             except OSError:
                 uid = -1
-            if not _allowed(uid):
+            if not allowed(uid):
                 self._answer(selector, client, {"ok": False, "error": f"permission denied: this system belongs to "
                                                 f"uid {os.geteuid()}, not uid {uid}"})
             elif sum(1 for c in clients.values() if c.phase == "reading") > MAX_CLIENTS:
@@ -441,80 +392,3 @@ def _encode(reply: dict) -> bytes:
     return text.encode("utf-8") + b"\n"
 
 
-class _TooLarge(Exception):
-    pass
-
-
-def _read_line(connection: socket.socket, limit: int) -> bytes:
-    """Bytes up to the first newline (or the end of the stream), at most `limit` of them."""
-    data = bytearray()
-    while True:
-        chunk = connection.recv(65536)
-        if not chunk:
-            return bytes(data)
-        newline = chunk.find(b"\n")
-        if newline >= 0:
-            data += chunk[:newline]
-            if len(data) > limit:
-                raise _TooLarge
-            return bytes(data)
-        data += chunk
-        if len(data) > limit:
-            raise _TooLarge
-
-
-def request(system_or_path: str | os.PathLike, message: dict, timeout: float = 5.0) -> dict:
-    """Send one request to a running system and return its reply, or raise `ControlError`."""
-    path = socket_path(os.fspath(system_or_path))
-    text = str(system_or_path)
-    who = f"'{text}'" if ("/" not in text and not text.endswith(".sock")) else f"at {path}"
-    data = json.dumps(message).encode("utf-8") + b"\n"
-    if len(data) > MAX_REQUEST_BYTES:
-        raise ControlError(f"the request is larger than {MAX_REQUEST_BYTES} bytes")
-    client = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    client.settimeout(timeout)
-    try:
-        try:
-            client.connect(str(path))
-        except FileNotFoundError:
-            raise ControlError(f"no hapticop system {who} is running (no socket at {path})") from None
-        except ConnectionRefusedError:
-            raise ControlError(f"no hapticop system {who} is running (nothing listens at {path}; "
-                               "the socket was left by a process that is gone)") from None
-        except PermissionError:
-            raise ControlError(f"cannot reach the hapticop system {who}: permission denied on {path} "
-                               "(it belongs to another user)") from None
-        except TimeoutError:
-            raise ControlError(f"the hapticop system {who} did not accept a connection within {timeout:g} s") from None
-        except OSError as error:
-            if error.errno in (errno.ENOTSOCK, errno.ENOTDIR):
-                raise ControlError(f"no hapticop system {who} is running ({path} is not a socket)") from None
-            raise ControlError(f"cannot reach the hapticop system {who} at {path}: {error.strerror or error}") from None
-        server_uid = peer_uid(client)
-        if os.geteuid() != 0 and not _allowed(server_uid):
-            raise ControlError(f"refusing to talk to {path}: it is served by uid {server_uid}, not by you or root")
-        try:
-            try:
-                client.sendall(data)
-            except (BrokenPipeError, ConnectionResetError):
-                pass  # refused before it read everything (busy, too large): its reply says why
-            line = _read_line(client, MAX_REPLY_BYTES)
-        except TimeoutError:
-            raise ControlError(f"the hapticop system {who} did not answer within {timeout:g} s") from None
-        except _TooLarge:
-            raise ControlError(
-                f"the reply of the hapticop system {who} is larger than {MAX_REPLY_BYTES} bytes") from None
-        except OSError as error:
-            raise ControlError(
-                f"the connection to the hapticop system {who} failed: {error.strerror or error}") from None
-    finally:
-        client.close()
-    if not line:
-        raise ControlError(f"the hapticop system {who} closed the connection without answering")
-    try:
-        reply = json.loads(line)
-    except (UnicodeDecodeError, ValueError):
-        raise ControlError(f"the hapticop system {who} answered something that is not JSON") from None
-    if not isinstance(reply, dict):
-        raise ControlError(f"the hapticop system {who} answered a JSON {type(reply).__name__}, not an object")
-    return reply
