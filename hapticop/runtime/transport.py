@@ -11,6 +11,7 @@ was measured differently. A new stream kind is a subclass here, its policy model
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -23,8 +24,8 @@ from hapticop.runtime.streams import QUEUE_HEADER, LatestSlot, RecorderRing, Sps
 
 
 @dataclass(frozen=True)
-class StreamTransport:
-    """A stream's transport: its buffers in the region and the objects over them."""
+class StreamTransport(ABC):
+    """A stream's transport: its buffers in the region and the objects over them (one subclass per kind)."""
 
     name: str
     spec: Stream
@@ -32,19 +33,19 @@ class StreamTransport:
 
     kind: ClassVar[str]
 
+    @abstractmethod
     def buffers(self) -> list[tuple[int, str | None]]:
         """The stream's buffers in the region, in order: (bytes, the reader it is for, or None)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def objects(self, views: list[np.ndarray], synchronised: bool) -> list:
         """The transports over the region's `views` of `buffers()`, in the same order. `synchronised`:
         writer and reader may run at once (other threads), so a latest slot needs its seqlock."""
-        raise NotImplementedError
 
     @staticmethod
+    @abstractmethod
     def reader_end(objects: list, index: int):
         """What the stream's `index`th reader reads from."""
-        raise NotImplementedError
 
     @classmethod
     def connect_reader(cls, spec: Stream, port_in, objects: list, index: int) -> None:
