@@ -364,3 +364,15 @@ def test_a_faulty_operator_moves_the_robot_by_nothing_beyond_its_own_limits(pair
             assert time.monotonic() < deadline, "the robot did not follow the good setpoint again"
             cycle([0.3, 0.0, -0.2])
     pair.assert_safe()
+
+
+def test_a_stream_without_a_range_is_taken_as_it_is_infinities_included():
+    """A scan says 'no return' with an infinity: only a port that declares a range is checked, so the
+    operator's side is never blinded by its own robot's scans (two hosts, systems/teleop.yaml)."""
+    from hapticop.blocks.bounds import Bounds
+    from hapticop.blocks.interface import Port
+
+    scan = Bounds(Port("float32", (4,), "m"), "stream 'scan_ranges'")
+    assert not scan.checks and scan.admits(np.array([np.inf, 1.0, np.inf, 0.5], np.float32))
+    command = Bounds(Port("float64", (3,), range=(-10.0, 10.0)), "stream 'velocity_setpoint'")
+    assert command.checks and not command.admits(np.array([np.inf, 0.0, 0.0]))

@@ -1,10 +1,12 @@
 """A port's declared range checked on a sample, without allocating: where a command is read or arrives.
 
 A command port declares `range` (`hapticop.blocks.interface.Port`): every element must be finite
-and inside it. The reader that executes the command (the governor, the platform controller) and the
-bridge that receives it from another host check each new sample here, refuse a bad one (it is not
-executed, not passed on) and follow the next good one. Refusals are counted, and said once per
-burst: the first bad sample of a burst is logged, and the burst's length when a good one follows.
+and inside it. A port without a range is taken as it is: a scan's ranges say "no return" with an
+infinity, which is data, not a fault. The reader that executes the command (the governor, the
+platform controller) and the bridge that receives it from another host check each new sample here,
+refuse a bad one (it is not executed, not passed on) and follow the next good one. Refusals are
+counted, and said once per burst: the first bad sample of a burst is logged, and the burst's length
+when a good one follows.
 """
 
 from __future__ import annotations
@@ -17,12 +19,11 @@ from hapticop.blocks.interface import Port
 
 
 class Bounds:
-    """The check of one port's samples (finite, and inside the declared range if any), with its counts."""
+    """The check of one port's samples (finite and inside its declared range), with its counts."""
 
     def __init__(self, port: Port, what: str) -> None:
         self.what = what  # for the log: the port or stream it guards
         self.range = port.range
-        self.floats = np.dtype(port.dtype).kind in "fc"
         self._ok = np.zeros(port.shape, dtype=bool)
         self._also = np.zeros(port.shape, dtype=bool)
         self.refused = 0  # every sample refused so far
@@ -30,8 +31,8 @@ class Bounds:
 
     @property
     def checks(self) -> bool:
-        """Whether anything is checked at all (an integer port without a range is taken as it is)."""
-        return self.floats or self.range is not None
+        """Whether anything is checked at all (a port without a range is taken as it is)."""
+        return self.range is not None
 
     def admits(self, value: np.ndarray) -> bool:
         """True for a sample to follow; False (counted) for one to refuse. NaN fails every comparison."""
@@ -40,8 +41,6 @@ class Bounds:
             np.greater_equal(value, self.range[0], out=ok)
             np.less_equal(value, self.range[1], out=self._also)
             np.logical_and(ok, self._also, out=ok)
-        elif self.floats:
-            np.isfinite(value, out=ok)
         else:
             return True
         if ok.all():
@@ -54,7 +53,7 @@ class Bounds:
         """Log a burst of refusals once: at its first sample, and its length when a good sample ends it."""
         if not good and self.burst == 1:
             log.warning("%s: a sample not finite or outside %s refused (not executed, not passed on)",
-                        self.what, "its range [{:g}, {:g}]".format(*self.range) if self.range else "the finite numbers")
+                        self.what, "its range [{:g}, {:g}]".format(*self.range))
         elif good and self.burst:
             log.info("%s: following again after %d refused sample(s)", self.what, self.burst)
             self.burst = 0
