@@ -34,9 +34,9 @@ from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Schema, Statistics
-from mcap.writer import CompressionType, Writer
 
 from .conftest import ROOT
+from .recordings import rewrite_recording
 from .runtime_helpers import compose
 from .test_recording import counters
 
@@ -181,27 +181,6 @@ def length_fields(real: Path) -> dict[str, int]:
             "attachment record": attachment + 1, "attachment data": at}
 
 
-def rewritten(real: Path, target: Path, attachments: dict[str, bytes]) -> Path:
-    """A copy of the real recording with these attachments in place of its own."""
-    with open(real, "rb") as stream, open(target, "wb") as out:
-        reader = make_reader(stream)
-        summary = reader.get_summary()
-        writer = Writer(out, compression=CompressionType.ZSTD)
-        writer.start(profile="", library="test")
-        schemas = {sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
-        channels = {cid: writer.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0),
-                                                 dict(c.metadata)) for cid, c in summary.channels.items()}
-        for _, channel, message in reader.iter_messages(log_time_order=False):
-            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
-                               message.sequence)
-        for record in reader.iter_attachments():
-            writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type,
-                                  attachments.get(record.name, record.data))
-        for record in reader.iter_metadata():
-            writer.add_metadata(record.name, dict(record.metadata))
-        writer.finish()
-    return target
-
 
 def hostile(real: Path, folder: Path) -> dict[str, Path]:
     """Every hostile file, by what it is."""
@@ -221,10 +200,10 @@ def hostile(real: Path, folder: Path) -> dict[str, Path]:
         for size, said in ((3 * GIB, "3 GiB"), (1 << 40, "1 TiB")):
             put(f"{name} declaring {said}", _u64(bytearray(real.read_bytes()), offset, size))
     deep = 100_000
-    files["deep parameters.json"] = rewritten(real, folder / "deep-parameters.mcap",
-                                              {"parameters.json": b"[" * deep + b"]" * deep})
-    files["deep composition.yaml"] = rewritten(real, folder / "deep-composition.mcap",
-                                               {"composition.yaml": b"version: " + b"[" * deep + b"]" * deep})
+    files["deep parameters.json"] = rewrite_recording(
+        real, folder / "deep-parameters.mcap", replaced={"parameters.json": b"[" * deep + b"]" * deep})
+    files["deep composition.yaml"] = rewrite_recording(
+        real, folder / "deep-composition.mcap", replaced={"composition.yaml": b"version: " + b"[" * deep + b"]" * deep})
     os.mkfifo(folder / "fifo.mcap")
     files["FIFO"] = folder / "fifo.mcap"
     (folder / "directory.mcap").mkdir()
@@ -365,7 +344,7 @@ def naming(real: Path, target: Path, block: str) -> Path:
         text = next(a for a in make_reader(stream).iter_attachments() if a.name == "composition.yaml").data.decode()
     assert "echo: {block: echo}" in text or "block: echo" in text, text
     changed = text.replace("block: echo", f"block: '{block}'", 1)
-    return rewritten(real, target, {"composition.yaml": changed.encode()})
+    return rewrite_recording(real, target, replaced={"composition.yaml": changed.encode()})
 
 
 def test_replay_and_report_import_nothing_a_recording_names_unless_trusted(recording, tmp_path):

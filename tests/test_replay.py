@@ -8,19 +8,17 @@ import json
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
 from typer.testing import CliRunner
 
 from hapticop.cli.main import app
 from hapticop.composition.lcsm import State
 from hapticop.observe.replay import ReplayError, replay, results
-from hapticop.recording import arrays
 from hapticop.recording.parameters import events
 from hapticop.recording.reading import series
 from hapticop.sim.recorded_run import integrate
 
 from .conftest import ROOT
+from .recordings import rewrite_recording
 from .runtime_helpers import compose
 from .test_modes import MODES
 
@@ -37,43 +35,6 @@ def recorded(tmp_path_factory):
     assert not any(s["dropped"] for s in result.recording["streams"].values())
     return tmp / "run-hallway"
 
-
-def _rewrite(source, target, *, sample=None, parameters=None, without_topic=None, attachments=True):
-    """A copy of a recording with one stream sample changed (`sample`: (topic, number, fn of the
-    array)), the parameters changed (`parameters`: fn of the dict), a channel left out, or nothing attached."""
-    with open(source, "rb") as stream, open(target, "wb") as out:
-        reader = make_reader(stream)
-        summary = reader.get_summary()
-        writer = Writer(out, compression=CompressionType.ZSTD)
-        writer.start(profile="", library="test")
-        schemas = {sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
-        channels = {cid: writer.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0),
-                                                 dict(c.metadata))
-                    for cid, c in summary.channels.items() if c.topic != without_topic}
-        for _, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.id not in channels:
-                continue
-            data = message.data
-            if sample is not None and channel.topic == sample[0] and message.sequence == sample[1]:
-                meta = channel.metadata
-                value = arrays.decode(data, meta["dtype"], tuple(json.loads(meta["shape"]))).copy()
-                sample[2](value)
-                raw = value.astype(np.dtype(meta["dtype"]).newbyteorder("<")).tobytes()
-                data = arrays.prefix(len(raw)) + raw
-            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time, message.sequence)
-        for record in reader.iter_attachments():
-            if not attachments:
-                continue
-            data = record.data
-            if parameters is not None and record.name == "parameters.json":
-                changed = json.loads(data)
-                parameters(changed)
-                data = json.dumps(changed).encode()
-            writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type, data)
-        for record in reader.iter_metadata():
-            writer.add_metadata(record.name, dict(record.metadata))
-        writer.finish()
-    return target
 
 
 def test_the_haptic_controllers_outputs_replay_equal_to_the_bit(recorded):
@@ -102,7 +63,7 @@ def test_replay_on_the_command_line_says_equal_and_exits_0(recorded):
 def test_a_changed_output_sample_is_a_mismatch_at_its_time_and_element(recorded, tmp_path):
     path = recorded / "hallway.mcap"
     number = 2000
-    tampered = _rewrite(path, tmp_path / "t.mcap",
+    tampered = rewrite_recording(path, tmp_path / "t.mcap",
                         sample=("/streams/handle_force", number, lambda v: v.__setitem__(2, v[2] + 0.25)))
     [haptic] = replay(tampered)
     compared = {c.stream: c for c in haptic.compared}
@@ -120,7 +81,7 @@ def test_a_changed_parameter_is_a_mismatch(recorded, tmp_path):
     def stiffer(parameters):
         parameters["haptic"]["centring"]["kp_n_per_m"] *= 1.5
 
-    tampered = _rewrite(recorded / "hallway.mcap", tmp_path / "p.mcap", parameters=stiffer)
+    tampered = rewrite_recording(recorded / "hallway.mcap", tmp_path / "p.mcap", parameters=stiffer)
     [haptic] = replay(tampered)
     force = {c.stream: c for c in haptic.compared}["handle_force"]
     assert not force.ok and force.max_diff > 0.01 and "handle_force[" in force.first
@@ -137,7 +98,7 @@ def test_a_changed_parameter_is_a_mismatch(recorded, tmp_path):
      "parameters.json, activity 'haptic', scan_points: "),
 ])
 def test_a_recording_that_cannot_be_replayed_is_a_located_error(recorded, tmp_path, change, expected):
-    broken = _rewrite(recorded / "hallway.mcap", tmp_path / "b.mcap", **change)
+    broken = rewrite_recording(recorded / "hallway.mcap", tmp_path / "b.mcap", **change)
     with pytest.raises(ReplayError, match="^" + str(broken)) as raised:
         replay(broken, ["haptic"])
     assert expected in str(raised.value)
@@ -154,7 +115,7 @@ def test_a_replayed_life_cycle_that_leaves_the_recorded_one_is_reported(recorded
         assert row[0] == State.RUNNING  # the controller runs at 2 s
         row[0] = State.PAUSING
 
-    tampered = _rewrite(recorded / "hallway.mcap", tmp_path / "p.mcap",
+    tampered = rewrite_recording(recorded / "hallway.mcap", tmp_path / "p.mcap",
                         sample=("/streams/cycles/haptic", number, paused))
     [haptic] = replay(tampered, ["haptic"])
     assert not haptic.ok and all(c.ok for c in haptic.compared)
@@ -220,7 +181,8 @@ def test_a_run_with_no_world_gets_the_hallways_metrics_and_picture_from_its_stre
 
 
 def test_without_odometry_the_streams_report_says_what_is_missing(recorded, tmp_path):
-    broken = _rewrite(recorded / "hallway.mcap", tmp_path / "o.mcap", without_topic="/streams/platform_velocity")
+    broken = rewrite_recording(recorded / "hallway.mcap", tmp_path / "o.mcap",
+                               without_topic="/streams/platform_velocity")
     result = cli.invoke(app, ["report", str(broken), "--from-streams"])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert f"{broken}: no recorded stream from a ropod_controller block's 'platform_velocity' port" in result.output
