@@ -182,6 +182,21 @@ def test_a_full_mailbox_refuses_writes_until_the_answer_is_fetched(preop):
     assert fetch(preop)[1] == 0  # the third was never taken
 
 
+def test_a_lost_answer_comes_back_when_the_master_toggles_the_repeat_request(preop):
+    assert post(preop, sdo(0x40, 0x1018, 2)) == 1
+    lost, wkc = fetch(preop)  # the frame that carried it never came back, say
+    assert wkc == 1 and fetch(preop)[1] == 0  # SM1 is empty now
+    status, activate = send(preop, (FPRD, WHEEL, 0x080D, bytes(2)))[0][0]
+    assert send(preop, (FPWR, WHEEL, 0x080D, bytes([status, activate ^ 0x02])))[0][1] == 1
+    assert send(preop, (FPRD, WHEEL, 0x080F, bytes(1)))[0][0][0] & 0x02 == (activate ^ 0x02) & 0x02  # acknowledged
+    assert sm_status(preop, WHEEL, 1) & 0x08  # the answer is back in SM1
+    again, wkc = fetch(preop)
+    assert wkc == 1 and again == lost
+    # the acknowledge follows the request only: the master cannot write the PDI control register
+    assert send(preop, (FPWR, WHEEL, 0x080F, bytes([0xFF])))[0][1] == 1
+    assert send(preop, (FPRD, WHEEL, 0x080F, bytes(1)))[0][0][0] & 0x02 == (activate ^ 0x02) & 0x02
+
+
 def test_the_pdo_assignment_is_writable_in_pre_op_only_and_sizes_the_sync_manager(preop):
     assert download(preop, 0x1C12, 0, b"\x00") == (0x60, bytes(4))
     assert upload(preop, 0x1C12, 0)[1] == b"\x00"

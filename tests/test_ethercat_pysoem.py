@@ -241,6 +241,29 @@ def test_sdo_reads_give_the_wheels_identity_and_pdo_assignment(master):
     assert aborted.value.abort_code == 0x06070012  # four bytes for an UNSIGNED16
 
 
+def test_soem_recovers_a_mailbox_answer_whose_reply_frame_was_lost(box, master):
+    master.master.config_init()
+    master.master.state_check(2, 50_000)
+    wheel = master.master.slaves[WHEELS[1]]
+    box.fault("lose_mailbox_reply", slave=WHEELS[1], frames=1)
+    assert int.from_bytes(wheel.sdo_read(0x1018, 2), "little") == SWMC  # asked again with the repeat request
+    assert box.fault("status")["ok"]
+
+
+def test_bring_up_maps_every_entry_when_pdo_assignment_replies_are_lost(box):
+    """SOEM reads the PDO assignment entry by entry; an entry whose answer is lost would shrink
+    the mapping (an input 4 bytes short) unless the slave repeats it."""
+    for wheel in WHEELS:
+        box.fault("lose_mailbox_reply", slave=wheel, frames=6)
+    m = SoemMaster(box.interface, expected(), receive_timeout_us=20_000)
+    m.open()
+    try:
+        m.bring_up()
+        assert [len(m.slaves[w].input) for w in WHEELS] == [TXPDO_BYTES] * 4
+    finally:
+        m.close()
+
+
 def test_config_dc_finds_the_wheels_clocks_and_dc_sync_starts_sync0(master):
     master.master.config_init()
     assert master.master.config_dc()

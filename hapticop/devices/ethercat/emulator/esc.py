@@ -39,9 +39,11 @@ REG_EEP_CONTROL, REG_EEP_ADDRESS, REG_EEP_DATA = 0x0502, 0x0504, 0x0508
 REG_WD_DIVIDER, REG_WD_PDI, REG_WD_PD, REG_WD_STATUS = 0x0400, 0x0410, 0x0420, 0x0440
 REG_FMMU, REG_SM = 0x0600, 0x0800
 EEP_READ, EEP_WRITE, EEP_RELOAD, EEP_READ64 = 0x0100, 0x0200, 0x0400, 0x0040
-# Registers the master cannot write (identity, DL status, AL status and code, watchdog status, SM status).
+# Registers the master cannot write (identity, DL status, AL status and code, watchdog status,
+# SM status, SM PDI control).
 _READ_ONLY = [(0x0000, 0x0010), (0x0110, 0x0112), (0x0130, 0x0136), (0x0440, 0x0442)] + \
-             [(REG_SM + 8 * n + 5, REG_SM + 8 * n + 6) for n in range(8)]
+             [(REG_SM + 8 * n + 5, REG_SM + 8 * n + 6) for n in range(8)] + \
+             [(REG_SM + 8 * n + 7, REG_SM + 8 * n + 8) for n in range(8)]
 _UP = {AL_INIT: {AL_INIT, AL_PREOP, AL_BOOT}, AL_PREOP: {AL_INIT, AL_PREOP, AL_SAFEOP},
        AL_BOOT: {AL_INIT, AL_BOOT}, AL_SAFEOP: {AL_INIT, AL_PREOP, AL_SAFEOP, AL_OP},
        AL_OP: {AL_INIT, AL_PREOP, AL_SAFEOP, AL_OP}}  # the legal requests from each state

@@ -8,6 +8,11 @@ puts its answer in the send mailbox (SM1), which is then full; the master reads 
 reading its last byte empties it, and a read of the empty buffer is refused the same way.
 An answer waits for the master to fetch the last one, so a request stays in SM0 until
 SM1 is free. The application serves its mailbox from PRE-OP on; INIT clears both.
+
+A reply frame can be lost after the ESC emptied SM1: the answer is gone from the buffer but
+never reached the master. The master then toggles the repeat request (bit 1 of SM1's
+activate register); the application puts its last answer back in SM1 and mirrors the bit
+into SM1's PDI control register (the repeat acknowledge), which is how SOEM recovers it.
 CoE requests go to the slave's SDO server; other protocols get a mailbox error.
 """
 
@@ -27,6 +32,7 @@ MBXERR_UNSUPPORTED_PROTOCOL, MBXERR_SERVICE_NOT_SUPPORTED, MBXERR_INVALID_SIZE =
 AL_CODE_INVALID_MAILBOX_CONFIG = 0x0016
 SM_FULL = 0x08  # SM status register: mailbox full
 REG_SM, REG_AL_CONTROL = 0x0800, 0x0120
+_ACTIVATE, _PDI_CONTROL, _REPEAT = 6, 7, 0x02  # SM register offsets; the repeat request / acknowledge bit
 _HEADER = 6  # length, address, channel/priority, type/counter
 AL_INIT, AL_PREOP, AL_BOOT = 0x01, 0x02, 0x03
 
@@ -38,6 +44,7 @@ class Mailbox:
         self.mem, self.spec, self.state = mem, spec, state
         self.sdo = SdoServer(objects, state, spec.send_size - _HEADER - 10)
         self.counter = 0
+        self.taken = 0  # answers the master has read out of SM1 (a fault can drop the frame carrying one)
         self.reset()
 
     def assigned_bytes(self, sm: int) -> int:
@@ -47,6 +54,7 @@ class Mailbox:
     def reset(self) -> None:
         """Both buffers empty (power-on, INIT)."""
         self.request_full = self.answer_full = False
+        self.last_answer = b""
         self._publish()
 
     # --- the sync managers as the master programmed them -------------------------------
@@ -92,13 +100,30 @@ class Mailbox:
         touched, completed = self._touches(0, start, end)
         if completed:
             self.request_full = True
+        if start <= REG_SM + 8 + _ACTIVATE < end:
+            self._repeat_if_asked()
         if touched or start <= REG_AL_CONTROL < end:  # a request, or a state the application acts on
             self.serve()
 
     def read_done(self, start: int, end: int) -> None:
         if self.answer_full and self._touches(1, start, end)[1]:
             self.answer_full = False
+            self.taken += 1
             self.serve()
+
+    def _repeat_if_asked(self) -> None:
+        """The master toggled SM1's repeat request: the last answer goes back into SM1 and the
+        acknowledge bit follows the request bit."""
+        asked = self.mem[REG_SM + 8 + _ACTIVATE] & _REPEAT
+        at = REG_SM + 8 + _PDI_CONTROL
+        if asked == self.mem[at] & _REPEAT:
+            return
+        if self.last_answer and not self.answer_full:
+            start, size, _ = self._sm(1)
+            self.mem[start:start + size] = self.last_answer
+            self.answer_full = True
+        self.mem[at] = (self.mem[at] & ~_REPEAT) | asked
+        self._publish()
 
     # --- the slave's application ------------------------------------------------------
     def serve(self) -> None:
@@ -128,5 +153,6 @@ class Mailbox:
         self.counter = self.counter % 7 + 1  # 1..7: a new message, not a repeat
         at, size, _ = self._sm(1)
         message = struct.pack("<HHBB", len(answer), 0, 0, kind | self.counter << 4) + answer
-        self.mem[at:at + size] = message[:size].ljust(size, b"\0")
+        self.last_answer = message[:size].ljust(size, b"\0")
+        self.mem[at:at + size] = self.last_answer
         self.answer_full = True

@@ -11,7 +11,9 @@ Faults arrive over a Unix socket as JSON lines and run between two frames:
 segment), `restore` (power back: freshly powered, in INIT), `cut` (the cable into that slave:
 it and those behind keep power and state but no frame reaches them), `reconnect`,
 `al_error` with a `code` (and `hold_ms`: the cause persists that long), `trip_watchdog`,
-`late` (`delay_us` for the next `frames` frames), `physics` (`run`: false freezes the robot,
+`late` (`delay_us` for the next `frames` frames), `lose_mailbox_reply` (the next `frames`
+frames that carry an answer out of that slave's mailbox are processed but never come back:
+the answer left SM1 and the master must ask for it again), `physics` (`run`: false freezes the robot,
 so its sensors stay put), `status` (states, codes, which slaves a frame reaches, the wheels'
 process-data buffers in hex and each wheel's drive as it truly is, the robot's pose), `ping`,
 `stop`. Slaves are named by bus position, 0-based; a request that makes no sense (no such
@@ -52,6 +54,7 @@ class FrameServer:
         self.running = True
         self.late_us = 0
         self.late_frames = 0
+        self.mailbox_losses: dict[int, int] = {}  # bus position -> reply frames still to lose
         self.physics = True
         self.started_ns = 0
 
@@ -78,8 +81,11 @@ class FrameServer:
                 now = time.monotonic_ns()
                 if ready:
                     n = sock.recv_into(buffer)
+                    taken = self._answers_taken()
                     if n > 16 and buffer[12] == 0x88 and buffer[13] == 0xA4 and segment.process(view[14:n], now):
                         buffer[6] |= 0x02  # an ESC marks the source address of a frame it returns
+                        if self.mailbox_losses and self._lose_reply(taken):
+                            continue
                         if self.late_frames:
                             self.late_frames -= 1
                             time.sleep(self.late_us / 1e6)
@@ -99,6 +105,23 @@ class FrameServer:
             if listener is not None:
                 listener.close()
                 self.control_path.unlink(missing_ok=True)
+
+    def _answers_taken(self) -> list[int] | None:
+        if not self.mailbox_losses:
+            return None
+        return [s.mailbox.taken if s.mailbox is not None else 0 for s in self.model.slaves]
+
+    def _lose_reply(self, before: list[int] | None) -> bool:
+        """Whether this frame carried an answer out of a mailbox whose replies are to be lost."""
+        for position, left in list(self.mailbox_losses.items()):
+            mailbox = self.model.slaves[position].mailbox
+            if before is not None and mailbox.taken != before[position]:
+                if left <= 1:
+                    del self.mailbox_losses[position]
+                else:
+                    self.mailbox_losses[position] = left - 1
+                return True
+        return False
 
     def answer_requests(self) -> None:
         """The control requests that arrived, answered between two frames (the loop's own thread)."""
@@ -169,6 +192,14 @@ class FrameServer:
                 self._slave(request).trip_watchdog()
             elif op == "late":
                 self.late_us, self.late_frames = int(request["delay_us"]), int(request["frames"])
+            elif op == "lose_mailbox_reply":
+                position = self._position(request)
+                if self.model.slaves[position].mailbox is None:
+                    raise ValueError(f"slave {position} has no mailbox")
+                frames = request.get("frames", 1)
+                if type(frames) is not int or frames < 1:
+                    raise ValueError(f"'frames' must be a positive integer; got {repr(frames)[:40]}")
+                self.mailbox_losses[position] = frames
             elif op == "physics":
                 self.physics = bool(request["run"])
                 self.model.last_step_ns = None  # no leap in time when it runs again
