@@ -89,7 +89,7 @@ def publish_address(run_dir: Path, activity: str, host: str, port: int) -> None:
 def published_address(run_dir: Path, activity: str) -> tuple[str, int] | None:
     """Where `activity` serves its device over TCP, or None until it has said (an address left by
     a process that has ended, in a reused run directory, is not an answer)."""
-    return published(run_dir, "links", activity)
+    return published(run_dir, "links", activity, as_type=tuple[str, int])
 
 
 def withdraw_address(run_dir: Path, activity: str) -> None:

@@ -23,7 +23,7 @@ def publish_world(run_dir: Path, activity: str, geometry: HallwayGeometry) -> No
 def find_world(run_dir: Path, activity: str) -> HallwayGeometry | None:
     """The geometry of the world `activity`, or None until it is open (a world left behind by an
     ended run in a reused run directory does not count)."""
-    return published(run_dir, "worlds", activity)
+    return published(run_dir, "worlds", activity, as_type=HallwayGeometry)
 
 
 def withdraw_world(run_dir: Path, activity: str) -> None:
