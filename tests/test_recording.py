@@ -104,6 +104,24 @@ def test_every_sample_is_recorded_with_its_number_stamp_and_value(tmp_path):
     assert params["counter"]["step"] == 1 and params["slow_counter"]["step"] == 2
 
 
+def test_a_stream_nobody_reads_is_recorded_all_the_same(tmp_path):
+    """A stream without `to:` (as a network bridge's link figures are) is valid, has its buffers and its
+    recorder ring like any other, of either kind, and records every sample."""
+    text = counters().replace("schedules: {0: [mediator, counter, echo]}",
+                              "schedules: {0: [mediator, counter, echo, watched, queued]}").replace(
+        "activities:\n", "activities:\n  watched: {block: counter, params: {step: 3}}\n"
+        "  queued: {block: counter, params: {step: 4}}\n").replace(
+        "streams:\n", "streams:\n  unread: {from: watched.count}\n"
+        "  unread_queue: {from: queued.count, to: [], policy: {kind: queue, capacity: 4}}\n")
+    result = compose(tmp_path, text, duration="1s")
+    path = tmp_path / "run-c" / "c.mcap"
+    n = result.recording["streams"]["unread"]["written"]
+    assert n > 900 and result.recording["streams"]["unread_queue"]["written"] == n
+    _check_stream(path, "unread", 3, exactly=n)
+    _check_stream(path, "unread_queue", 4, exactly=n)
+    assert {c.topic: c for c in contents(path).channels}["/streams/unread"].stream.readers == ()
+
+
 def test_a_recording_is_the_same_every_run(tmp_path):
     first = compose(tmp_path, counters(), duration="1s", name="a")
     second = compose(tmp_path, counters(), duration="1s", name="b")

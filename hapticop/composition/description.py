@@ -192,7 +192,9 @@ class Stream(Strict):
     """One writer port to one or more reader ports, with an explicit connection policy."""
 
     writer: PortRef = Field(alias="from", description="the writing port, 'activity.port'")
-    readers: list[PortRef] = Field(alias="to", min_length=1, description="the reading ports")
+    readers: list[PortRef] = Field(
+        default_factory=list, alias="to", description="the reading ports; none: a stream only watched (recorded, "
+        "plotted, in the live view), as a network bridge's link figures are")
     policy: StreamPolicy = Field(default_factory=LatestPolicy)
     max_age: Duration | None = Field(None, description="older samples count as missing")
     network: NetworkQoS | None = Field(

@@ -121,7 +121,7 @@ def plan_changes(old: Composition, new: Composition) -> ChangePlan:
     plan.removed_streams = _added(new.streams, old.streams)
     for name in plan.added_streams:
         stream = new.streams[name]
-        say(f"stream '{name}' added ({stream.writer} -> {', '.join(stream.readers)})")
+        say(f"stream '{name}' added ({stream.writer} -> {', '.join(stream.readers) or 'nobody: watched only'})")
     for name in plan.removed_streams:
         say(f"stream '{name}' removed")
     for name in _common(old.streams, new.streams):
