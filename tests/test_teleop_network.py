@@ -16,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
 
+from hapticop.blocks.bridge import LINK_OUTPUTS
 from hapticop.cli.hosts import keys_for
-from hapticop.composition.placement import place
+from hapticop.composition.placement import HEALTH, LINK_FIGURES, link_stream, place
 from hapticop.network.arrivals import Arrivals
 from hapticop.network.clock import OffsetEstimator
+from hapticop.recording.reading import series_of
 from hapticop.validation import validate_path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -114,6 +115,11 @@ def test_teleop_splits_into_two_hosts_with_bridges_and_a_deadman():
     assert setpoint.max_age == 100_000_000  # the deadline: an older setpoint is none, the wheels stop
     assert "bridge.out_velocity_setpoint" in operator.streams["velocity_setpoint"].readers
     assert robot.threads["bridge"].priority is None and robot.threads["bridge"].deploy == "process"
+    # the link's figures are the bridge's streams, which nothing needs to read: recorded and shown by `status`
+    assert tuple(LINK_OUTPUTS) == LINK_FIGURES
+    for figure in LINK_FIGURES:
+        stream = robot.streams[link_stream(figure)]
+        assert (stream.writer, stream.readers) == (f"bridge.{figure}", [])
     # the wheel fault the robot's watchdog raises reaches the operator's mediator through the bridges
     assert operator.coordination.standard.sources["bridge.in_wheel_fault"] == "WHEEL_FAULT"
     assert robot.coordination.standard.sinks["bridge.out_wheel_fault"] == "WHEEL_FAULT"
@@ -345,12 +351,15 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure, t
     link = json.loads((tmp_path / "b" / "results-link.json").read_text())
     rows = {row["metric"]: row["value"] for row in link["rows"]}
     assert rows["round trip p50"] >= delay_ms, rows
+    # the link's figures are b's bridge's streams, recorded like any other: its health went lost, then up again
     recording = next((tmp_path / "b").glob("*.mcap"))
-    with recording.open("rb") as stream:
-        figures = [json.loads(message.data) for _, channel, message in make_reader(stream).iter_messages()
-                   if channel.topic == "/link/bridge"]
-    assert figures and any(f["up"] and f["rtt_ms"] >= delay_ms for f in figures), figures
-    assert any(f["lost"] for f in figures)  # the link's loss, as b's bridge told it, is in the recording too
+    figures = series_of(recording, [link_stream("rtt"), link_stream("health")])
+    rtt_s, health = figures[link_stream("rtt")].values, figures[link_stream("health")].values
+    assert rtt_s.max() >= delay_ms / 1e3, rtt_s
+    told = [HEALTH[h] for h in health]
+    lost = told.index("lost")
+    # back, though degraded while the pings lost in the outage are still counted in the loss
+    assert "up" in told[:lost] and told[-1] in ("up", "degraded"), " ".join(told[lost:])
     data = np.load(tmp_path / "b" / "probe.npz")
     arrived, cycles = data["arrived"], data["cycles"]
     assert len(arrived), out

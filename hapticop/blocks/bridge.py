@@ -7,7 +7,8 @@ streams it reads, takes what arrived for the streams it writes (newest first: a 
 sample is dropped by its sequence number), stamps each with its send time on this host's clock
 (through the estimated clock offset), so a reader's `max_age` counts the network too, and pings
 the other hosts to estimate the offset, round trip, jitter and loss, which it publishes as ordinary
-streams and as the flags `link_up`, `link_lost` and `link_degraded`.
+streams (with the link's `health`; each host's composition records them and `hapticop status` shows them)
+and as the flags `link_up`, `link_lost` and `link_degraded`.
 
 Nothing that arrives is trusted (docs/teleop.md, "What the link refuses"): a sample is delivered
 only whole (its exact length), from the session of the host that owns its stream, in order and not
@@ -28,24 +29,26 @@ from typing import Literal, get_args
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from hapticop import published
 from hapticop.blocks.base import Block
 from hapticop.blocks.bounds import Bounds
 from hapticop.blocks.interface import Interface, Params, Port
+from hapticop.composition.placement import HEALTH
 from hapticop.network import wire
 from hapticop.network.arrivals import Arrivals
 from hapticop.network.clock import OffsetEstimator, round_trip_rows, table_row
 from hapticop.network.link import EmulatedLink, LinkParams, MessageLink
 
 WINDOW = 64  # pings the clock estimate looks back over (3.2 s at the default 50 ms)
-STATUS_PERIOD_NS = 1_000_000_000  # how often `hapticop status` learns the link's figures
 
 LINK_OUTPUTS = {
     "rtt": Port("float64", (), "s", "round trip to the other host (median of the last pings)"),
     "jitter": Port("float64", (), "s", "smoothed change of the round trip between pings"),
     "loss": Port("float64", (), "1", "fraction of the last pings not answered"),
     "offset": Port("float64", (), "s", "the other host's clock minus this one's"),
-    "offset_error": Port("float64", (), "s", "bound on the offset's error (half the shortest round trip)"),
+    "offset_error": Port("float64", (), "s", "bound on the offset's error (half the shortest round trip); "
+                         "infinite until the clocks are compared"),
+    "health": Port("int64", (), "1", "the link: " + ", ".join(f"{i} {name}" for i, name in enumerate(HEALTH))
+                   + " (the worst that holds; degraded: round trip or loss above the limits)"),
     "refused": Port("int64", (), "1", "samples, pongs and states refused so far (malformed, foreign, "
                     "out of order, out of range)"),
     "sessions": Port("int64", (), "1", "sessions of the other hosts seen so far (a restart is a new one)"),
@@ -182,7 +185,6 @@ class ZenohBridge(Block):
         self.offset_seen = (0.0, float("inf"))
         self.was_lost = False
         self.remote_holding: frozenset[str] = frozenset()  # the other host's exported places that hold a token
-        self.next_status_ns = 0
         self.net = None
 
     def configure_resources(self) -> bool:
@@ -449,21 +451,16 @@ class ZenohBridge(Block):
         self.flags["link_degraded"] = rtt > p.degraded_rtt_ms * 1e6 or loss > p.degraded_loss
         for place in p.import_flags:  # the other host's places, or the safe side of them while it is out of reach
             self.flags[f"in_{place.lower()}"] = place in self.remote_holding or (lost and place in p.hold_when_lost)
-        if publish and self.clocks and now >= self.next_status_ns:
-            self.next_status_ns = now + STATUS_PERIOD_NS
-            clock = next(iter(self.clocks.values()))
-            published.publish(self.run_dir, "network", self.name, {
-                "peers": p.peers, "up": self.flags["link_up"], "lost": self.flags["link_lost"],
-                "degraded": self.flags["link_degraded"], "rtt_ms": rtt / 1e6, "jitter_ms": clock.jitter_ns / 1e6,
-                "loss": loss, "offset_ms": clock.offset_ns / 1e6,
-                "offset_error_ms": clock.error_ns / 1e6 if clock.synced else None})
         if publish and self.clocks:
             clock = next(iter(self.clocks.values()))
             refused = self.pong_refusals.total + sum(r.total for r in self.refusals.values())
+            flags = self.flags
+            health = HEALTH.index("lost" if flags["link_lost"] else "degraded" if flags["link_degraded"]
+                                  else "up" if flags["link_up"] else "waiting")
             for name, value in (("rtt", rtt / 1e9), ("jitter", clock.jitter_ns / 1e9), ("loss", loss),
                                 ("offset", clock.offset_ns / 1e9),
                                 ("offset_error", clock.error_ns / 1e9 if clock.synced else math.inf),
-                                ("refused", refused), ("sessions", self.sessions_seen)):
+                                ("health", health), ("refused", refused), ("sessions", self.sessions_seen)):
                 port = getattr(self.outputs, name)
                 port.value[...] = value
                 port.publish()

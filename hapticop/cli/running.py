@@ -155,10 +155,13 @@ def status(
     if state.get("modes") is not None:
         typer.echo(f"  modes holding: {', '.join(state['modes']) or 'none'}")
     typer.echo(f"  flags set: {', '.join(state['flags'])}")
-    for name, link in state.get("links", {}).items():
-        health = "lost" if link["lost"] else "degraded" if link["degraded"] else "up" if link["up"] else "waiting"
+    for name, link in state.get("links", {}).items():  # from its figures' streams (`bridge_rtt`, ...)
+        peers = f"  link {name} to {', '.join(link['peers'])}: {link['health']}"
+        if "sessions" not in link:  # not all told yet
+            typer.echo(f"{peers}, no figures yet")
+            continue
         error = link["offset_error_ms"]
         within = f" (within {error:.3f})" if error is not None else " (not yet measured)"
-        typer.echo(f"  link {name} to {', '.join(link['peers'])}: {health}, round trip {link['rtt_ms']:.2f} ms, "
-                   f"jitter {link['jitter_ms']:.2f} ms, loss {link['loss']:.1%}, clock offset "
-                   f"{link['offset_ms']:+.3f} ms{within}")
+        typer.echo(f"{peers}, round trip {link['rtt_ms']:.2f} ms, jitter {link['jitter_ms']:.2f} ms, "
+                   f"loss {link['loss']:.1%}, clock offset {link['offset_ms']:+.3f} ms{within}, "
+                   f"{link['refused']} refused")

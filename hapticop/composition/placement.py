@@ -20,6 +20,17 @@ from hapticop.network.keys import files
 
 BRIDGE = "bridge"
 BRIDGE_THREAD = "bridge"
+LINK_FIGURES = ("rtt", "jitter", "loss", "offset", "offset_error", "health", "refused", "sessions")
+"""The bridge's outputs that tell how the link does: each host's composition gives each a stream of its own
+that nobody needs to read (`link_stream`), so they are recorded, plotted and shown by `hapticop status`."""
+
+HEALTH = ("waiting", "up", "degraded", "lost")
+"""The bridge's `health` stream: the index of the worst that holds (waiting: the clocks not yet compared)."""
+
+
+def link_stream(figure: str) -> str:
+    """The stream of one of the bridge's link figures: 'bridge_rtt'."""
+    return f"{BRIDGE}_{figure}"
 
 
 @dataclass
@@ -111,7 +122,7 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                 entry["to"] = readers
             else:
                 del out["streams"][name]
-            if is_local(spec.writer) and not readers:
+            if is_local(spec.writer) and spec.readers and not readers:
                 del out["streams"][name]
             continue
         qos = spec.network.model_dump(mode="json", exclude={"doc"}) if spec.network else {}
@@ -145,6 +156,9 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                    **({"tls": {k: str(v) for k, v in vars(files(keys, host)).items()}} if keys is not None else {}),
                    **({"emulate": copy.deepcopy(emulate)} if emulate is not None else {})},
     }
+    for figure in LINK_FIGURES:
+        out.setdefault("streams", {})[link_stream(figure)] = {
+            "from": f"{BRIDGE}.{figure}", "doc": f"the link's {figure.replace('_', ' ')}, as host '{host}' sees it"}
     out.setdefault("threads", {})[BRIDGE_THREAD] = {
         "period": f"{composition.hosts[host].bridge_period}ns", "deploy": "process", "schedules": {0: [BRIDGE]},
         "doc": "normal scheduling: the network never reaches a real-time loop"}
@@ -161,7 +175,9 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                 del mode["params"][activity]
     record = out.get("record")
     if record and isinstance(record.get("streams"), list):
-        record["streams"] = [s for s in record["streams"] if s in out["streams"]]
+        # the link's figures are recorded whenever the run records, as they were before they were streams
+        record["streams"] = [s for s in record["streams"] if s in out["streams"]] + [
+            link_stream(f) for f in LINK_FIGURES]
     return out
 
 

@@ -7,8 +7,8 @@ sample with its number and publication stamp (`RecordingFile`), and hands the sa
 its views, which may derive channels of their own from them (a scan from two streams, the
 robot's frames from a pose) without the loops knowing. A ring the recorder falls a whole
 ring behind on is overwritten, and the lost samples are counted, never waited for. Beside the
-rings it follows sources of its own: each loop's timing counters (`timing_channels`), the
-run's log files (`log_channel`) and the network bridges' figures (`link_channel`). Whatever it
+rings it follows sources of its own: each loop's timing counters (`timing_channels`) and the
+run's log files (`log_channel`); a network bridge's link figures are ordinary streams. Whatever it
 writes goes to its outputs (`recording.outputs`):
 the file, the live view (`recording.live`, `compose --view`), or both.
 
@@ -40,7 +40,6 @@ from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.outputs import Fanout, Output
 from hapticop.recording.plan import RecordedStream, recorded_streams
 from hapticop.recording.scene import views_for
-from hapticop.runtime.link_channel import LinkChannel
 from hapticop.runtime.region import Layout, Transport
 from hapticop.runtime.streams import SpscQueue, sample_dtype
 
@@ -320,7 +319,7 @@ def _library() -> str:
 
 
 def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
-    """The loops' timing, the run's events, its log and the network bridges' link figures, as the plan asks."""
+    """The loops' timing, the run's events, its log and its parameter events, as the plan asks."""
     sources: list[Source] = []
     if plan.timing is not None:
         sources.append(LoopTiming(plan.timing, buffer))
@@ -328,7 +327,6 @@ def sources_of(plan: RecorderPlan, buffer) -> list[Source]:
         sources.append(RunEvents(plan.events, buffer))
     if plan.run_dir is not None:
         sources.append(LogChannel(plan.run_dir))
-        sources.append(LinkChannel(plan.run_dir))
         sources.append(ParameterEvents(plan.run_dir))
     return sources
 

@@ -45,7 +45,6 @@ STREAM_TOPIC = "/streams/{}"
 TIMING_TOPIC = "/timing/{}"  # a loop's timing windows (hapticop.observe.timing_channels)
 LOG_TOPIC = "/log"  # the run's log records (hapticop.observe.log_channel)
 EVENT_TOPIC = "/events/{}"  # what happened to the run: modes, flags, life cycles (hapticop.observe.event_channels)
-LINK_TOPIC = "/link/{}"  # a network bridge's link figures (hapticop.runtime.link_channel)
 
 
 def topic_of(stream: str) -> str:

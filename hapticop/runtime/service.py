@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from hapticop.blocks.interface import Params
 from hapticop.composition.lcsm import State
+from hapticop.composition.placement import BRIDGE, HEALTH, LINK_FIGURES, link_stream
 from hapticop.control.address import ControlError, is_system_name, socket_path
 from hapticop.control.server import ControlServer
 from hapticop.coordination.coordinator import Coordinator
-from hapticop.published import published
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.described import Description
 from hapticop.runtime.lifecycle import OK
@@ -19,7 +22,9 @@ from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing
 from hapticop.runtime.rundirs import private_directory
+from hapticop.runtime.streams import LatestSlot
 from hapticop.runtime.supervisor import SECOND, failure
+from hapticop.runtime.transport import writer_port
 from hapticop.validation.patches import PatchError, load_patch
 
 APPLY_TIMEOUT_S = 5.0  # a patch waits this long for the main thread's next cycle boundary
@@ -38,19 +43,15 @@ def control_path(socket: str | None, system: str) -> Path:
     return path
 
 
-LINKS = "network"  # the published facts a network bridge keeps up to date (hapticop.blocks.bridge)
-
-
 class ControlService:
     """Requests are handled on the control server's thread; patches are only prepared there
     and handed to the main thread through `live.pending`."""
 
     def __init__(self, name: str, live: LiveChanges, region: Region, clock: RealtimeClock | VirtualClock,
                  coordinator: Coordinator, description: Callable[[], Description], log: Logger,
-                 run_dir: Path | None = None, attach: Callable[[], dict] | None = None,
+                 attach: Callable[[], dict] | None = None,
                  params: Callable[[], dict[str, Params]] | None = None):
         self.name, self.live, self.region, self.clock = name, live, region, clock
-        self.run_dir = run_dir  # where activities publish what `status` shows of them (a bridge's link)
         self.attach = attach  # what `hapticop view` needs to read the region from outside (viewer.Attachment)
         self.coordinator, self.description, self.log = coordinator, description, log  # description(): the running one
         self.params = params  # each activity's parameters as it runs them (modes over its description)
@@ -130,19 +131,40 @@ class ControlService:
             "modes": [name for name, mode in composition.modes.items()
                       if mode.when in layout.flag_index and region.flag(mode.when)],
             "timing": timing(region, composition),
-            "links": self._links(),
+            "links": self._links(description, params),
         }
 
-    def _links(self) -> dict:
-        """Each network bridge's link as it last told it (round trip, jitter, loss, offset, state)."""
-        if self.run_dir is None:
+    def _links(self, description: Description, params: dict[str, dict]) -> dict:
+        """The host's network bridge's link (docs/teleop.md), from the newest sample of each of its figures'
+        streams in the region: nothing while the composition has no bridge, no figures before its first."""
+        if BRIDGE not in params or link_stream(LINK_FIGURES[0]) not in self.region.layout.transports:
             return {}
-        found = {}
-        for path in sorted((self.run_dir / LINKS).glob("*.pickle")):
-            value = published(self.run_dir, LINKS, path.stem)
-            if value is not None:
-                found[path.stem] = value
-        return found
+        link: dict = {"peers": params[BRIDGE].get("peers", []), "health": HEALTH[0]}
+        for figure in LINK_FIGURES:
+            value = self._newest(description, link_stream(figure))
+            if value is None:
+                return link
+            if figure == "health":
+                link["health"] = HEALTH[int(value)] if 0 <= value < len(HEALTH) else str(value)
+            elif figure in ("rtt", "jitter", "offset", "offset_error"):  # seconds on the stream, ms here
+                link[f"{figure}_ms"] = value * 1e3 if math.isfinite(value) else None
+            else:
+                link[figure] = value
+        return {BRIDGE: link}
+
+    def _newest(self, description: Description, stream: str) -> float | None:
+        """A scalar stream's newest sample, read from its latest slot, or None before its first."""
+        spec = description.composition.streams.get(stream)
+        transports = self.region.layout.transports.get(stream, [])
+        if spec is None or not transports or transports[0].kind != "latest":
+            return None
+        port = writer_port(description.activities, spec)
+        slot = LatestSlot(self.region.buffer_at(transports[0].offset, transports[0].nbytes), port)
+        value, meta = np.zeros(port.shape, port.dtype), np.zeros(2, np.int64)
+        try:
+            return value.item() if slot.read_into(value, meta) else None
+        finally:
+            slot.close()
 
 
 def _always() -> bool:

@@ -147,7 +147,7 @@ class System:
                     "name": self.name}
 
         self.service = ControlService(self.name, self.live, self.region, self.clock, self.coordinator,
-                                      lambda: self.description, self.log, self.run_dir, attach,
+                                      lambda: self.description, self.log, attach,
                                       lambda: dict(self.modes.given))
         self.main.supervisor = self._between_cycles
         self.observer.start(ObservedRun(loaded, tree, self.file, self.name, self.region, self.clock.now_ns,
