@@ -149,6 +149,17 @@ def test_a_hosts_bridge_cpus_and_period_shape_its_bridge_thread(tmp_path):
     assert operator.cpus is None and operator.period == 1_000_000  # the defaults: anywhere, every millisecond
 
 
+def test_a_host_records_its_links_figures_beside_the_streams_it_chose(tmp_path):
+    """A composition that records chosen streams records the link's on each host too, as `--record` does."""
+    chosen = tmp_path / "chosen.yaml"
+    chosen.write_text(f"extends: {ROOT / 'systems' / 'teleop.yaml'}\nrecord: {{streams: [velocity_setpoint]}}\n")
+    validated = validate_path(chosen)
+    assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    for host in ("robot", "operator"):
+        recorded = validated.hosts[host].composition.record.streams
+        assert recorded == ["velocity_setpoint", *map(link_stream, LINK_FIGURES)], recorded
+
+
 def test_a_hosts_transport_reaches_its_bridge(tmp_path):
     """teleop.yaml's hosts ask for Zenoh's low-latency transport; a host that says nothing gets the
     prioritised one, and so does its bridge."""
