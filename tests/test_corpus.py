@@ -160,6 +160,8 @@ CASES = [
      None),
     ("invalid-host-transport.yaml", "host-transport", 6, "host 'desk' asks for the low-latency transport but host "
      "'robot' does not", "the same 'transport:' on every host"),
+    ("invalid-host-reserved-name.yaml", "host-reserved-name", 14, "stream 'bridge_rtt' has the name the host split "
+     "gives each host's network bridge", "rename it"),
     ("invalid-network-no-qos.yaml", "network-qos", 24, "crosses from host 'desk' to 'robot' and states no", None),
     ("invalid-network-no-deadline.yaml", "network-deadline", 27, "without a 'deadline'", None),
     ("invalid-network-unbounded.yaml", "network-unbounded", 27, "as a queue without 'depth'", None),

@@ -17,7 +17,7 @@ import networkx as nx
 from hapticop.composition.description import Composition
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.loader import Loaded
-from hapticop.composition.placement import place
+from hapticop.composition.placement import BRIDGE, BRIDGE_THREAD, LINK_FIGURES, link_stream, place
 from hapticop.composition.units import format_duration
 from hapticop.composition.yamlsource import Source
 
@@ -45,6 +45,12 @@ def placement(composition: Composition) -> Check:
         elif thread.host not in hosts:
             yield Diagnostic("host-unknown", f"thread '{name}' is placed on host '{thread.host}', which 'hosts:' "
                              "does not declare", ("threads", name, "host"), hint=f"hosts: {', '.join(hosts)}")
+    reserved = {"activities": {BRIDGE}, "threads": {BRIDGE_THREAD}, "streams": set(map(link_stream, LINK_FIGURES))}
+    for kind, names in reserved.items():
+        for name in sorted(names & set(getattr(composition, kind))):
+            yield Diagnostic("host-reserved-name", f"{kind[:-1].replace('ie', 'y')} '{name}' has the name the host "
+                             "split gives each host's network bridge (docs/teleop.md): it would be replaced",
+                             (kind, name), hint=f"rename it; taken with 'hosts:': {', '.join(sorted(names))}")
     standard = composition.coordination.standard
     shared = set(standard.sources.values()) if standard is not None else set()
     for name, host in hosts.items():
