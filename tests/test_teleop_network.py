@@ -323,9 +323,9 @@ def stop(process: subprocess.Popen, sig: int = signal.SIGINT) -> str:
     return out
 
 
-def status(system: str) -> str:
+def status(system: str, *options: str) -> str:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "hapticop.cli", "status", system], cwd=ROOT, env=env,
+    return subprocess.run([sys.executable, "-m", "hapticop.cli", "status", system, *options], cwd=ROOT, env=env,
                           capture_output=True, text=True).stdout
 
 
@@ -350,6 +350,10 @@ def test_two_hosts_on_loopback_age_deadman_loss_and_recovery(tmp_path, figure, t
         wait_for("link up on b", lambda: log_says(bridge_log, "running"), [a, b])
         wait_for("the link's figures in b's status",
                  lambda: "link bridge to a: up, round trip" in status(f"two{os.getpid()}_b"), [a, b])
+        # read from the bridge's streams in b's shared region
+        link = json.loads(status(f"two{os.getpid()}_b", "--json"))["links"]["bridge"]
+        assert link["peers"] == ["a"] and link["rtt_ms"] >= delay_ms and link["offset_error_ms"] is not None, link
+        assert link["sessions"] >= 1 and link["refused"] >= 0 and link["health"] == "up", link
         stop(a, signal.SIGKILL)  # the operator's side dies without a word
         wait_for("link lost on b", lambda: log_says(bridge_log, "link lost"), [b])
         a = start(path, "a", tmp_path / "a2")
