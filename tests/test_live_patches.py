@@ -126,6 +126,21 @@ def test_a_stream_added_live_is_recorded_from_then_until_it_is_removed(tmp_path)
     assert [c.topic for c in channels].count("/streams/tap") == 1
 
 
+def test_a_stream_nobody_reads_may_be_added_live_and_is_recorded(tmp_path):
+    """A figure worth watching is given a stream without readers while the system runs."""
+    text = base() + """record: {}
+patches:
+  watch:
+    at: 200ms
+    patch: {streams: {watched: {from: relay.output}}}
+"""
+    result = compose(tmp_path, text, duration="500ms")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    watched = recorded_times_ms(tmp_path / "run-c" / "live.mcap", "/streams/watched")
+    assert len(watched) == 150 and watched.min() >= 200  # the relay writes every 2 ms from then on
+    assert result.recording["streams"]["watched"] == {"written": 150, "recorded": 150, "dropped": 0}
+
+
 def test_a_stream_added_by_a_live_patch_reaches_the_recorders_process(tmp_path):
     """On the wall clock the recorder is a process of its own: it hears of the added stream's ring
     over its pipe and records it until the run ends."""
