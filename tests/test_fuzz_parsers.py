@@ -28,8 +28,9 @@ from hapticop.devices.falcon.codec import (
     is_valid_frame,
     new_frame,
 )
-from hapticop.devices.sick import cola, scan
-from hapticop.devices.sick.cola import ColaError, Reply
+from hapticop.devices.sick import cola, commands, scan
+from hapticop.devices.sick.cola import ColaError
+from hapticop.devices.sick.commands import Reply
 from hapticop.devices.sick.probe import parse_identity
 from hapticop.devices.sick.stream import TelegramReader
 from tests.test_sick_cola import _TOKENS, REAL_BODIES, _mutate
@@ -74,7 +75,7 @@ def _cola_decoders(data: bytes) -> None:
     calls = (
         lambda: scan.parse_scan(data, ranges, angles, out_raw=raw, out_rssi=rssi),
         lambda: scan.parse_scan(data, None),
-        lambda: cola.parse_reply(data, "sRN LMDscandata"),
+        lambda: commands.parse_reply(data, "sRN LMDscandata"),
         lambda: cola.unframe(data),
         lambda: cola.decode_uint(data, 16),
         lambda: cola.decode_int32(data),

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick import commands, scan
 from hapticop.devices.sick.client import ClientState, ColaClient
 from hapticop.devices.sick.device_model import ANGLES_RAD, POINTS, room_ranges
 from hapticop.devices.sick.simulator import TiMSimulator
@@ -171,14 +171,14 @@ def test_reply_timeout_then_recovery(rig):
 
 def test_a_refusal_reads_clearly_and_the_client_retries():
     with TiMSimulator() as sim:
-        bad_range = cola.startup_sequence(output_range=cola.OutputRange(step=10000))
+        bad_range = commands.startup_sequence(output_range=commands.OutputRange(step=10000))
         client = ColaClient(sim.host, sim.port, startup=bad_range)
         loop = Lockstep(sim, client)
         loop.run_until(50 * MS)
         assert client.device_errors == 1 and client.state is ClientState.DISCONNECTED
         assert "sFA 4 = LOCALCONDITIONFAILED" in client.last_error and "LMPoutputRange" in client.last_error
         client.close()
-        wrong = cola.startup_sequence(hash_hex="00000000")
+        wrong = commands.startup_sequence(hash_hex="00000000")
         client = ColaClient(sim.host, sim.port, startup=wrong)
         Lockstep(sim, client).run_until(50 * MS)
         assert "login refused" in client.last_error
@@ -205,7 +205,7 @@ def test_backoff_doubles_up_to_the_limit():
 
 
 def test_minimal_startup_just_subscribes(rig):
-    client = ColaClient(rig.sim.host, rig.sim.port, startup=cola.startup_sequence(configure=False))
+    client = ColaClient(rig.sim.host, rig.sim.port, startup=commands.startup_sequence(configure=False))
     rig.client = client
     rig.run_until(300 * MS)
     assert client.state is ClientState.STREAMING and client.scans == 4 and rig.sim.commands == 1

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick import cola, commands, scan
 from hapticop.devices.sick.cola import ColaDeviceError, ColaError
 from hapticop.devices.sick.scan import SensorMount
 from hapticop.devices.sick.stream import TelegramReader
@@ -64,9 +64,9 @@ def test_value_encodings_match_the_notes():
 
 
 def test_password_hashes_of_the_three_levels():
-    assert cola.password_hash("client") == "F4724744" == cola.LEVEL3_HASH
-    assert cola.password_hash("main") == "B21ACE26"
-    assert cola.password_hash("servicelevel") == "81BE23AA"
+    assert commands.password_hash("client") == "F4724744" == cola.LEVEL3_HASH
+    assert commands.password_hash("main") == "B21ACE26"
+    assert commands.password_hash("servicelevel") == "81BE23AA"
 
 
 def test_framing():
@@ -177,19 +177,19 @@ def test_sensor_to_robot_frame():
 # -- replies and commands (§3, §6) -------------------------------------------------------------
 
 def test_startup_commands_are_the_documented_bytes():
-    texts = [command.text for command in cola.startup_sequence(scan_config=cola.ScanDataConfig(rssi=True))]
+    texts = [command.text for command in commands.startup_sequence(scan_config=commands.ScanDataConfig(rssi=True))]
     assert texts == [
         "sMN SetAccessMode 3 F4724744", "sWN EIHstCola 0", "sRN SCdevicestate",
         "sWN LMPoutputRange 1 D05 FFF92230 225510", "sWN LMDscandatacfg 1 0 1 1 0 0 0 0 0 0 0 1",
         "sMN LMCstartmeas", "sMN Run", "sEN LMDscandata 1",
     ]
-    assert [c.text for c in cola.startup_sequence(configure=False)] == ["sEN LMDscandata 1"]
-    assert cola.expected_reply(b"\x02sRI0\x03") == (b"sRA", b"0")
+    assert [c.text for c in commands.startup_sequence(configure=False)] == ["sEN LMDscandata 1"]
+    assert commands.expected_reply(b"\x02sRI0\x03") == (b"sRA", b"0")
 
 
 @pytest.mark.parametrize("path", captures("*.bin", "replies"), ids=ident)
 def test_captured_replies_parse(path):
-    reply = cola.parse_reply(path.read_bytes())
+    reply = commands.parse_reply(path.read_bytes())
     expected = {
         "mrs6124_sAN_SetAccessMode_1": (b"sAN", b"SetAccessMode", b"1"),
         "mrs6124_sWA_EIHstCola": (b"sWA", b"EIHstCola", b""),
@@ -201,7 +201,7 @@ def test_captured_replies_parse(path):
     if path.stem.endswith("deviceident"):
         reader = reply.reader()
         assert reader.string("name") == b"TiM561" and reader.string("version") == b"V2.51-21.08.15"
-    login = cola.set_access_mode()
+    login = commands.set_access_mode()
     if reply.name == b"SetAccessMode" and reply.params == b"0":
         with pytest.raises(ColaError, match="login refused"):
             login.check(reply)
@@ -209,13 +209,13 @@ def test_captured_replies_parse(path):
 
 def test_sfa_is_a_clear_device_error():
     with pytest.raises(ColaDeviceError, match=r"sFA 4 = LOCALCONDITIONFAILED") as caught:
-        cola.parse_reply(b"\x02sFA 4\x03", "sWN LMPoutputRange 1 D05 0 1B7740")
+        commands.parse_reply(b"\x02sFA 4\x03", "sWN LMPoutputRange 1 D05 0 1B7740")
     assert caught.value.code == 4 and "LMPoutputRange" in str(caught.value)
     with pytest.raises(ColaDeviceError, match="METHODIN_ACCESSDENIED"):
         scan.parse_scan(b"sFA 1", np.empty(811))
     assert "ComplexArraysNotSupported" in str(ColaDeviceError(0x20))
     with pytest.raises(ColaError):
-        cola.parse_reply(b"sXX Foo")
+        commands.parse_reply(b"sXX Foo")
 
 
 # -- malformed telegrams and fuzz ----------------------------------------------------------------
@@ -258,7 +258,7 @@ def _decode_everything(data: bytes) -> None:
     """Every decoder on untrusted bytes: only ColaError may come out."""
     ranges, angles, raw, rssi = arrays()
     for call in (lambda d: scan.parse_scan(d, ranges, angles, out_raw=raw, out_rssi=rssi),
-                 cola.parse_reply, cola.unframe, lambda d: cola.TokenReader(d).values(3, 4, "v")):
+                 commands.parse_reply, cola.unframe, lambda d: cola.TokenReader(d).values(3, 4, "v")):
         try:
             call(data)
         except ColaError:

@@ -87,7 +87,7 @@ class Lidar(Block):
         """A CoLa A client for the scanner at host:port, or where the simulator says it listens."""
         from hapticop.devices.link import published_address
         from hapticop.devices.sick.client import ColaClient
-        from hapticop.devices.sick.cola import OutputRange, startup_sequence
+        from hapticop.devices.sick.commands import OutputRange, startup_sequence
 
         p = self.params
         address = (p.host, p.port) if p.driver == "tcp" else published_address(self.run_dir, p.simulator)

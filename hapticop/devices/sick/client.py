@@ -28,8 +28,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.sick import cola, scan
-from hapticop.devices.sick.cola import ColaDeviceError, ColaError, Command
+from hapticop.devices.sick import commands, scan
+from hapticop.devices.sick.cola import ColaDeviceError, ColaError
+from hapticop.devices.sick.commands import Command
 from hapticop.devices.sick.scan import ScanHeader
 from hapticop.devices.sick.stream import MAX_TELEGRAM, TelegramReader
 
@@ -83,7 +84,7 @@ class ColaClient:
         self.backoff = backoff
         self._clock = clock_ns
         self.points = points
-        self.startup: tuple[Command, ...] = tuple(startup) if startup is not None else cola.startup_sequence()
+        self.startup: tuple[Command, ...] = tuple(startup) if startup is not None else commands.startup_sequence()
         if not self.startup:
             raise ValueError("the start-up sequence needs at least the subscription")
         self.reply_timeout_ns = int(reply_timeout_s * 1e9)
@@ -300,7 +301,7 @@ class ColaClient:
             return
         command = self.startup[self._step]
         try:
-            reply = cola.parse_reply(body, command.text)
+            reply = commands.parse_reply(body, command.text)
         except ColaDeviceError as error:
             self.device_errors += 1
             self._fail(now, str(error))

@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.sick import cola, scan
+from hapticop.devices.sick import cola, commands, scan
 from hapticop.devices.sick.cola import ColaError, encode_int32, encode_string, encode_uint
 from hapticop.devices.sick.scan import Channel, ScanHeader
 
@@ -186,7 +186,7 @@ class TiMDevice:
 
     def answer(self, body: bytes) -> bytes | None:
         """The framed reply to one request body; None when the device stays silent."""
-        if not body or not cola.is_text(body) or self.muted:
+        if not body or not commands.is_text(body) or self.muted:
             return None  # empty frame, other dialect or binary noise: the device stays silent
         self.commands += 1
         kind, _, rest = body.partition(b" ")

@@ -14,8 +14,9 @@ import socket
 import time
 from dataclasses import dataclass
 
-from hapticop.devices.sick import cola
-from hapticop.devices.sick.cola import ColaDeviceError, ColaError, Reply
+from hapticop.devices.sick import commands
+from hapticop.devices.sick.cola import ColaDeviceError, ColaError
+from hapticop.devices.sick.commands import Reply
 from hapticop.devices.sick.stream import TelegramReader
 
 __all__ = ["LidarIdentity", "ProbeError", "probe_lidar", "parse_identity", "DEVICE_STATES"]
@@ -77,12 +78,12 @@ def probe_lidar(host: str, port: int = 2112, timeout_s: float = 2.0) -> LidarIde
             deadline = time.monotonic() + timeout_s
 
             def ask(kind: str, name: str, *params) -> Reply:
-                sock.sendall(cola.request(kind, name, *params))
+                sock.sendall(commands.request(kind, name, *params))
                 while True:
                     for body in reader:
                         if body.startswith(b"sSN "):
                             continue  # a scan from an earlier subscription: not our answer
-                        return cola.parse_reply(body, f"{kind} {name}")
+                        return commands.parse_reply(body, f"{kind} {name}")
                     left = deadline - time.monotonic()
                     if left <= 0:
                         raise TimeoutError

@@ -32,10 +32,10 @@ from hapticop.devices.sick.cola import (
     encode_string,
     encode_uint,
     frame,
-    sfa_code,
     show_token,
     unframe,
 )
+from hapticop.devices.sick.commands import sfa_code
 
 MIN_RANGE_M = 0.05  # TiM5xx minimum range: anything closer (including 0 = no echo) is invalid
 TIM561_POINTS = 811
