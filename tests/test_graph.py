@@ -10,8 +10,8 @@ from typer.testing import CliRunner
 
 from hapticop.cli import app
 from hapticop.cli import render as render_module
-from hapticop.cli.layered import MAX_WIDTH
 from hapticop.cli.render import MAX_SIZE_IN, drawing, to_dot
+from hapticop.cli.svg import MAX_WIDTH
 from hapticop.validation import validate_path
 
 from .conftest import SYSTEMS
@@ -134,7 +134,8 @@ def laid_out():
 
 @pytest.mark.parametrize(("name", "view"), list(CROSSINGS_BEFORE))
 def test_the_layout_without_graphviz_is_legible(laid_out, name, view):
-    from hapticop.cli.layered import crossings, to_svg
+    from hapticop.cli.layered import crossings
+    from hapticop.cli.svg import to_svg
 
     picture, laid = laid_out[(name, view)]
     # no two boxes overlap: nodes, and the edges' labels laid out as boxes

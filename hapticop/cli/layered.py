@@ -1,4 +1,4 @@
-"""A drawing as SVG without graphviz: a small layered (Sugiyama-style) layout.
+"""A drawing laid out without graphviz: a small layered (Sugiyama-style) layout.
 
 Used by `hapticop graph` when neither graphviz's `dot` nor pygraphviz is installed. Each connected
 part of the drawing is laid out alone: cycles are broken by reversing the edges a depth-first
@@ -9,14 +9,13 @@ barycentre sweeps grouped by cluster (a thread or a net), the sweep with fewest 
 then neighbours exchanged while that removes crossings; boxes then move across their layer towards
 their neighbours so edges run straight. A part is laid out top to bottom or left to right, whichever
 is nearer a screen's shape, and the parts are packed in rows to about that shape (the hallway's
-dataflow was a 2634 x 428 px strip). A cluster is shown by its colour and a legend, not a box.
+dataflow was a 2634 x 428 px strip). `svg.py` draws the result.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from html import escape
 
 from hapticop.cli.drawing import Drawing, Edge
 
@@ -26,12 +25,10 @@ LINE_H = 1.3 * FONT
 GAP_X, GAP_Y, MARGIN = 30.0, 16.0, 20.0
 ASPECT = 1.6  # width to height the layout aims for: a screen's
 SWEEPS = 24  # barycentre sweeps, alternately down and up the layers
-MAX_WIDTH = 2880  # px: a larger drawing is scaled down to this, as graphviz's size attribute does
-PALETTE = ("#fff6cc", "#dcecfb", "#e2f5dc", "#fbe3e3", "#ece3fb", "#fbecd9", "#e0f4f4", "#f0f0f0")
 
 
 @dataclass
-class _Box:
+class Box:
     width: float
     height: float
     layer: int = 0
@@ -44,14 +41,14 @@ def _text_size(text: str, font: float = FONT) -> tuple[float, float]:
     return max((len(line) for line in lines), default=0) * 0.6 * font, len(lines) * 1.3 * font
 
 
-def _node_box(label: str, shape: str) -> _Box:
+def _node_box(label: str, shape: str) -> Box:
     width, height = _text_size(label)
     if shape == "point":
-        return _Box(6.0, 6.0)
+        return Box(6.0, 6.0)
     if shape == "circle":
         side = max(width, height) + 16
-        return _Box(side, side)
-    return _Box(width + 20, height + 12)
+        return Box(side, side)
+    return Box(width + 20, height + 12)
 
 
 @dataclass
@@ -59,7 +56,7 @@ class Layout:
     """Where everything of a drawing goes: its boxes (nodes, and the points edges pass through),
     each edge's chain of them, the layers of every part in order, and the picture's size."""
 
-    boxes: dict[str, _Box]
+    boxes: dict[str, Box]
     chains: list[tuple[Edge, list[str]]]
     columns: list[list[str]]  # each part's layers, one after the other
     vertical: set[str]  # the nodes of parts laid out top to bottom (the others: left to right)
@@ -123,7 +120,7 @@ def _parts(nodes: list[str], edges: list[Edge]) -> list[list[str]]:
     return sorted(parts, key=len, reverse=True)
 
 
-def _pack(boxes: dict[str, _Box], parts: list[tuple[list[str], float, float]]) -> tuple[float, float]:
+def _pack(boxes: dict[str, Box], parts: list[tuple[list[str], float, float]]) -> tuple[float, float]:
     """The parts in rows (each laid out from the origin), tallest first, rows about as wide as
     the whole is to be: its area at the screen's shape, or the widest part."""
     area = sum(w * h for _, w, h in parts)
@@ -162,41 +159,6 @@ def _crossings(columns: list[list[str]], chains: list[list[str]]) -> int:
     return count
 
 
-def to_svg(d: Drawing) -> str:
-    laid = layout(d)
-    boxes, chains, width, height = laid.boxes, laid.chains, laid.width, laid.height
-
-    colours = {cid: PALETTE[i % len(PALETTE)] for i, cid in enumerate(d.clusters)}
-    legend_h = LINE_H * (len(d.clusters) + 1) + 10
-    scale = min(1.0, MAX_WIDTH / width)
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width * scale:.0f}" '
-        f'height="{(height + legend_h) * scale:.0f}" '
-        f'viewBox="0 0 {width:.0f} {height + legend_h:.0f}" font-family="Helvetica, Arial, sans-serif" '
-        f'font-size="{FONT}">',
-        "<defs>",
-        '<marker id="normal" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="8" markerHeight="8" '
-        'orient="auto"><path d="M0,0 L10,5 L0,10 z"/></marker>',
-        '<marker id="odot" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="8" markerHeight="8" '
-        'orient="auto"><circle cx="5" cy="5" r="4" fill="white" stroke="black"/></marker>',
-        "</defs>",
-        '<rect width="100%" height="100%" fill="white"/>',
-        f'<text x="{MARGIN}" y="{MARGIN + FONT}" font-weight="bold">{escape(d.title)}</text>',
-    ]
-    for i, (cid, label) in enumerate(d.clusters.items()):
-        y = MARGIN + LINE_H * (i + 1) + 4
-        out.append(f'<rect x="{MARGIN}" y="{y:.1f}" width="14" height="{FONT}" fill="{colours[cid]}" stroke="gray"/>'
-                   f'<text x="{MARGIN + 20}" y="{y + FONT - 2:.1f}">{escape(label)}</text>')
-    out.append(f'<g transform="translate(0,{legend_h:.1f})">')
-    for edge, chain in chains:
-        out.extend(_edge_svg(edge, chain, boxes, chain[0] in laid.vertical))
-    for nid, node in d.nodes.items():
-        fill = colours.get(node.cluster, node.fill) if node.shape != "bar" else "black"
-        out.extend(_node_svg(node.label, node.shape, boxes[nid], fill, node.peripheries))
-    out.append("</g></svg>")
-    return "\n".join(out) + "\n"
-
-
 def _acyclic(nodes: list[str], edges: list[Edge]) -> set[tuple[str, str]]:
     """The edges kept in their direction: all but those a depth-first search finds going back."""
     successors: dict[str, list[str]] = {n: [] for n in nodes}
@@ -223,7 +185,7 @@ def _acyclic(nodes: list[str], edges: list[Edge]) -> set[tuple[str, str]]:
     return {(e.tail, e.head) for e in edges if (e.tail, e.head) not in back}
 
 
-def _assign_layers(boxes: dict[str, _Box], forward: set[tuple[str, str]]) -> None:
+def _assign_layers(boxes: dict[str, Box], forward: set[tuple[str, str]]) -> None:
     """Every node two columns right of its furthest predecessor (the column between holds labels)."""
     predecessors: dict[str, list[str]] = {nid: [] for nid in boxes}
     for u, v in forward:
@@ -248,7 +210,7 @@ def _assign_layers(boxes: dict[str, _Box], forward: set[tuple[str, str]]) -> Non
         place(nid)
 
 
-def _chains(boxes: dict[str, _Box], edges: list[tuple[int, Edge]],
+def _chains(boxes: dict[str, Box], edges: list[tuple[int, Edge]],
             forward: set[tuple[str, str]]) -> list[tuple[Edge, list[str]]]:
     """Each edge (numbered) as the node ids it passes through, layer by layer, with dummies in the layers between."""
     chains = []
@@ -259,15 +221,15 @@ def _chains(boxes: dict[str, _Box], edges: list[tuple[int, Edge]],
         middle = (a + b) // 2 if (b - a) % 2 == 0 else a + 1
         for layer in range(a + 1, b):
             dummy = f"\0{i}:{layer}"
-            w, h = _text_size(_wrapped(edge.label), FONT - 2) if layer == middle and edge.label else (0.0, 0.0)
-            boxes[dummy] = _Box(w + 4, h + 4, layer)
+            w, h = _text_size(wrapped(edge.label), FONT - 2) if layer == middle and edge.label else (0.0, 0.0)
+            boxes[dummy] = Box(w + 4, h + 4, layer)
             chain.append(dummy)
         chain.append(right)
         chains.append((edge, chain))
     return chains
 
 
-def _neighbours(boxes: dict[str, _Box], chains: list[tuple[Edge, list[str]]]) -> dict[str, list[str]]:
+def _neighbours(boxes: dict[str, Box], chains: list[tuple[Edge, list[str]]]) -> dict[str, list[str]]:
     found: dict[str, list[str]] = {nid: [] for nid in boxes}
     for _, chain in chains:
         for a, b in zip(chain, chain[1:]):
@@ -276,7 +238,7 @@ def _neighbours(boxes: dict[str, _Box], chains: list[tuple[Edge, list[str]]]) ->
     return found
 
 
-def _order(boxes: dict[str, _Box], chains: list[tuple[Edge, list[str]]],
+def _order(boxes: dict[str, Box], chains: list[tuple[Edge, list[str]]],
            clusters: dict[str, str | None]) -> list[list[str]]:
     """Layers of node ids, ordered by barycentre sweeps that keep a cluster's members together, then
     neighbours exchanged where that removes crossings; the order with fewest crossings seen is kept."""
@@ -346,7 +308,7 @@ def _exchange(columns: list[list[str]], paths: list[list[str]], clusters: dict[s
                     position[first], position[second] = i, i + 1
 
 
-def _place(boxes: dict[str, _Box], columns: list[list[str]], vertical: bool) -> tuple[float, float]:
+def _place(boxes: dict[str, Box], columns: list[list[str]], vertical: bool) -> tuple[float, float]:
     """Centres for every box, layer after layer from the origin, left to right or (`vertical`) top
     to bottom, each layer centred across; returns the size, margins included."""
     along = [max(boxes[n].height if vertical else boxes[n].width for n in col) for col in columns]
@@ -370,7 +332,7 @@ def _place(boxes: dict[str, _Box], columns: list[list[str]], vertical: bool) -> 
     return (total + 2 * MARGIN, length) if vertical else (length, total + 2 * MARGIN)
 
 
-def _straighten(boxes: dict[str, _Box], columns: list[list[str]], neighbours: dict[str, list[str]],
+def _straighten(boxes: dict[str, Box], columns: list[list[str]], neighbours: dict[str, list[str]],
                 vertical: bool) -> tuple[float, float]:
     """Move boxes across their layer towards the middle of their neighbours in the layer before
     (sweeping down, then up), keeping the order and the gaps: an edge runs as straight as its
@@ -406,54 +368,7 @@ def _straighten(boxes: dict[str, _Box], columns: list[list[str]], neighbours: di
     return (extent, along) if vertical else (along, extent)
 
 
-def _edge_svg(edge: Edge, chain: list[str], boxes: dict[str, _Box], vertical: bool) -> list[str]:
-    points = [(boxes[n].x, boxes[n].y) for n in chain]
-    first, last = boxes[chain[0]], boxes[chain[-1]]
-    if vertical:  # from the bottom of one box to the top of the next layer's
-        points[0] = (first.x, first.y + first.height / 2)
-        points[-1] = (last.x, last.y - last.height / 2)
-    else:
-        points[0] = (first.x + first.width / 2, first.y)
-        points[-1] = (last.x - last.width / 2, last.y)
-    if edge.tail != chain[0]:  # laid out reversed: the arrow still points at its head
-        points.reverse()
-    dash = {"dashed": ' stroke-dasharray="6,3"', "dotted": ' stroke-dasharray="2,3"'}.get(edge.style, "")
-    marker = f' marker-end="url(#{edge.arrowhead})"' if edge.arrowhead != "none" else ""
-    path = " ".join(f"{x:.1f},{y:.1f}" for x, y in points)
-    title = f"<title>{escape(edge.tooltip)}</title>" if edge.tooltip else ""
-    out = [f'<polyline points="{path}" fill="none" stroke="{edge.color}"{dash}{marker}>{title}</polyline>']
-    label_box = next((boxes[n] for n in chain[1:-1] if boxes[n].height > 4), None)
-    if edge.label and label_box is not None:
-        out.append(_text(_wrapped(edge.label), label_box.x, label_box.y, FONT - 2, edge.color))
-    elif edge.label:  # no column between: beside the middle of the line
-        (x0, y0), (x1, y1) = points[0], points[-1]
-        out.append(_text(edge.label, (x0 + x1) / 2, (y0 + y1) / 2 - 6, FONT - 2, edge.color))
-    return out
-
-
-def _node_svg(label: str, shape: str, box: _Box, fill: str, peripheries: int) -> list[str]:
-    left, top = box.x - box.width / 2, box.y - box.height / 2
-    if shape == "point":
-        return [f'<circle cx="{box.x:.1f}" cy="{box.y:.1f}" r="3" fill="black"/>']
-    if shape == "circle":
-        out = [f'<circle cx="{box.x:.1f}" cy="{box.y:.1f}" r="{box.width / 2 - 4 * i:.1f}" fill="{fill}" '
-               'stroke="black"/>' for i in range(peripheries)]
-        return [*out, _text(label, box.x, box.y, FONT)]
-    radius = 0 if shape == "bar" else 6
-    colour = "white" if shape == "bar" else "black"
-    return [f'<rect x="{left:.1f}" y="{top:.1f}" width="{box.width:.1f}" height="{box.height:.1f}" '
-            f'rx="{radius}" fill="{fill}" stroke="black"/>', _text(label, box.x, box.y, FONT, colour)]
-
-
-def _wrapped(label: str) -> str:
+def wrapped(label: str) -> str:
     """An edge's label with what it says of the stream in brackets on a line of its own (a network
     stream's QoS is longer than its name)."""
     return label.replace(" (", "\n(", 1)
-
-
-def _text(label: str, x: float, y: float, font: float, colour: str = "black") -> str:
-    lines = label.split("\n")
-    top = y - (len(lines) - 1) * 1.3 * font / 2
-    spans = "".join(f'<tspan x="{x:.1f}" y="{top + i * 1.3 * font + font * 0.35:.1f}">{escape(line)}</tspan>'
-                    for i, line in enumerate(lines))
-    return f'<text text-anchor="middle" font-size="{font:.0f}" fill="{colour}">{spans}</text>'

@@ -7,7 +7,7 @@ needs (a device block to its simulator). The nets view draws each Petri net as a
 (circles) and transitions (bars), with the flags its flag maps bind; a net's name draws that net
 alone; `all` draws everything in one picture. A view is first a `Drawing`, written as DOT for
 graphviz (its `dot` program when on the PATH, else the pygraphviz wheel) or, with neither, as SVG
-by the small layered layout in `hapticop.cli.layered`.
+by the small layered layout in `hapticop.cli.layered`, drawn by `hapticop.cli.svg`.
 """
 
 from __future__ import annotations
@@ -208,7 +208,7 @@ def render(d: Drawing, output: Path, fmt: str) -> str:
         except (OSError, ValueError) as error:
             raise RenderError(f"graphviz failed: {error}") from None
     elif fmt == "svg":
-        from hapticop.cli.layered import to_svg
+        from hapticop.cli.svg import to_svg
 
         output.write_text(to_svg(d))
     else:
