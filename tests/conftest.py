@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 from pathlib import Path
 
 import pytest
@@ -32,14 +33,17 @@ def link_keys() -> None:
     from hapticop.validation import validate_path
     from hapticop.validation.security import key_directory
 
-    for file in WITH_KEYS:
-        validated = validate_path(file)
-        composition = validated.graph.loaded.composition
-        directory = key_directory(validated.source, composition)
-        wrong = any(keys.problems(directory, name, [keys.endpoint_address(e) for e in host.endpoints])
-                    for name, host in composition.hosts.items())
-        if wrong:
-            keys_for(file, force=True, new_ca=True)
+    # test processes running side by side (pytest -n) make them once: the first takes the lock
+    with open(ROOT / "tests" / ".keys.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        for file in WITH_KEYS:
+            validated = validate_path(file)
+            composition = validated.graph.loaded.composition
+            directory = key_directory(validated.source, composition)
+            wrong = any(keys.problems(directory, name, [keys.endpoint_address(e) for e in host.endpoints])
+                        for name, host in composition.hosts.items())
+            if wrong:
+                keys_for(file, force=True, new_ca=True)
 
 
 @pytest.fixture
