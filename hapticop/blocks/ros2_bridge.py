@@ -152,6 +152,7 @@ class Ros2Bridge(Block):
     """A ROS 2 node over Zenoh as rmw_zenoh speaks it: ports published and subscribed as topics (docs/ros2.md)."""
 
     Params = Ros2BridgeParams
+    own_process = "Zenoh's session and its threads must not share a process or a GIL with the loops"
 
     @classmethod
     def interface(cls, params: Ros2BridgeParams) -> Interface:
