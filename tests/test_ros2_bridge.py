@@ -67,6 +67,11 @@ class Client:
             except queue.Empty:
                 return self.seen
 
+    def lines_since(self) -> list[dict]:
+        """The lines that came since the last call."""
+        seen = len(self.seen)
+        return self.drain()[seen:]
+
     def wait(self, condition, what: str) -> dict:
         deadline = time.monotonic() + PATIENCE_S
         while True:
