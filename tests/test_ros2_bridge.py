@@ -276,3 +276,34 @@ def test_a_stale_command_is_published_as_a_stop(tmp_path):
         harness.clean()
         listener.close()
         hub.close()
+
+
+def test_humble_keys_carry_no_hash_and_jazzys_are_refused(tmp_path):
+    """With `distro: humble` the key ends in TypeHashNotSupported: Jazzy's publisher is told apart and counted."""
+    port = _free_port()
+    hub = router(port)
+    harness = BlockHarness("ros2_bridge", {
+        "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"], "distro": "humble",
+        "subscribe": {"cmd": {"topic": "/cmd_vel", "type": TWIST}}}, name="ros2", run_dir=tmp_path)
+    writer = transport.session([], [f"tcp/127.0.0.1:{port}"], mode="client")
+    try:
+        harness.block.create()
+        harness.block.configure_resources()
+        twist = Codec(TWIST, "humble", "float64", (3,))
+        senders = {d: transport.Sender(writer, names.data_key(0, "/cmd_vel", TWIST, d), reliable=True)
+                   for d in names.DISTROS}
+        refusals = harness.block.refusals["cmd"].by_reason
+        deadline = time.monotonic() + PATIENCE_S
+        while not (harness.outputs.cmd.value.tolist() == [0.5, 0.0, 0.25] and refusals):
+            assert time.monotonic() < deadline, f"humble's sample not delivered, or jazzy's not refused: {refusals}"
+            for distro, value in (("jazzy", [9.0, 0.0, 0.0]), ("humble", [0.5, 0.0, 0.25])):
+                senders[distro].put(twist.encode(np.array(value), 0), attachment.pack(1, time.time_ns(), bytes(16)))
+            harness.block.compute()
+            harness.advance()
+            time.sleep(0.005)
+        assert list(refusals) == [
+            "another type or type hash: geometry_msgs::msg::dds_::Twist_/" + HASH]
+    finally:
+        harness.clean()
+        writer.close()
+        hub.close()
