@@ -4,6 +4,7 @@ JSON lines on its standard output.
 
     python tests/ros2_client.py PORT probe   # publishes /cmd_in (Twist, 20 Hz), prints /cmd_out and the graph
     python tests/ros2_client.py PORT robot   # a planar robot in a corridor: cmd_vel in; odom and scan out
+    python tests/ros2_client.py PORT latency # /cmd_in at 20 Hz; the age of each /cmd_stamped on arrival
 
 The SDK computes the type hashes itself from the .msg texts given here (it would clone them from GitHub
 otherwise); its CDR is rosbags', as hapticop's is, so the bytes are checked apart too (test_ros2_names).
@@ -72,6 +73,23 @@ def probe(port: int, types) -> None:
         if time.monotonic() > next_graph:
             next_graph = time.monotonic() + 0.5
             graph(port)
+        time.sleep(0.05)
+
+
+def latency(port: int, types) -> None:
+    """Publishes /cmd_in at 20 Hz; for every /cmd_stamped, how long after its header's stamp it arrived."""
+    vector = types["geometry_msgs/msg/Vector3"]
+    cmd_in = endpoint(ROS2Publisher, "/cmd_in", "geometry_msgs/msg/Twist", port, "probe")
+
+    def arrived(m) -> None:
+        now, stamp = time.time_ns(), m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+        say(age_ms=(now - stamp) / 1e6, stamp=stamp)
+
+    endpoint(ROS2Subscriber, "/cmd_stamped", "geometry_msgs/msg/TwistStamped", port, "probe", callback=arrived)
+    n = 0
+    while True:
+        n += 1
+        cmd_in.publish(linear=vector(x=0.001 * (n % 100), y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=0.0))
         time.sleep(0.05)
 
 
@@ -148,7 +166,7 @@ def main() -> None:
     for ros_type, text in MSGS.items():
         session.store.register(get_types_from_msg(text, ros_type))
     say(ready=True)
-    {"probe": probe, "robot": robot}[role](port, session.store.types)
+    {"probe": probe, "robot": robot, "latency": latency}[role](port, session.store.types)
 
 
 if __name__ == "__main__":
