@@ -89,7 +89,7 @@ def main() -> None:
     for line in out.splitlines():
         if '"age_ms"' in line:
             seen = json.loads(line)
-            first.setdefault(round(seen["stamp"] / 1e6), seen["age_ms"])  # each sent with its stamp +- a few us
+            first.setdefault(seen["stamp"], seen["age_ms"])
     ages = np.array(list(first.values()))
     ages = ages[len(ages) // 10:]  # the first tenth: start-up
     figures = {"samples": int(ages.size), "p50_ms": round(float(np.percentile(ages, 50)), 3),

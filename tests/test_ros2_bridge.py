@@ -307,3 +307,40 @@ def test_humble_keys_carry_no_hash_and_jazzys_are_refused(tmp_path):
         harness.clean()
         writer.close()
         hub.close()
+
+
+def test_a_sample_is_sent_at_the_rate_with_its_own_stamp_each_time(tmp_path):
+    """The newest sample goes out at every slot (a base wants its command repeated), each time with the
+    stamp of the loop's step that made it, a new sequence number, and the port's values."""
+    port = _free_port()
+    hub = router(port)
+    harness = BlockHarness("ros2_bridge", {
+        "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
+        "publish": {"cmd": {"topic": "/cmd_vel", "type": "geometry_msgs/msg/TwistStamped", "rate_hz": 100}}},
+        name="ros2", run_dir=tmp_path)
+    listener = transport.session([], [f"tcp/127.0.0.1:{port}"], mode="client")
+    try:
+        receiver = transport.Receiver(listener, names.data_key(0, "/cmd_vel", "geometry_msgs/msg/TwistStamped",
+                                                               "jazzy"), 64)
+        harness.configure()
+        harness.feed("cmd", [0.5, 0.0, 0.25])
+        got = []
+        deadline = time.monotonic() + PATIENCE_S
+        while len(got) < 3:
+            assert time.monotonic() < deadline, f"{len(got)} of 3 samples published"
+            harness.step()
+            harness.advance(10_000_000)
+            while (sample := receiver.take_sample()) is not None:
+                got.append(sample)
+            time.sleep(0.002)
+        store = names.typestore("jazzy")
+        messages = [store.deserialize_cdr(payload, "geometry_msgs/msg/TwistStamped") for _, payload, _ in got]
+        stamps = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in messages}
+        assert len(stamps) == 1  # one sample, one stamp
+        assert all([m.twist.linear.x, m.twist.angular.z] == [0.5, 0.25] for m in messages)
+        sequences = [attachment.unpack(extra)[0] for _, _, extra in got]
+        assert sequences == sorted(set(sequences))
+    finally:
+        harness.clean()
+        listener.close()
+        hub.close()

@@ -172,6 +172,8 @@ class Ros2Bridge(Block):
                      for name, t in {**p.publish, **p.subscribe}.items()}
         self.sequence = dict.fromkeys(p.publish, 0)
         self.next_ns = dict.fromkeys(p.publish, 0)
+        self.sent_seq = dict.fromkeys(p.publish, 0)  # the input sample last sent, and its stamp on the wall clock
+        self.sent_stamp = dict.fromkeys(p.publish, 0)
         self.zeros = {name: np.zeros(t.port_shape, LAYOUTS[t.type][0].dtype) for name, t in p.publish.items()}
         self.values = {name: np.zeros(t.port_shape, LAYOUTS[t.type][0].dtype) for name, t in p.subscribe.items()}
         self.angles = {name: np.zeros(t.port_shape, np.float32) for name, t in p.subscribe.items()
@@ -234,7 +236,9 @@ class Ros2Bridge(Block):
             self.next_ns[name] = max(self.next_ns[name] + int(1e9 / t.rate_hz), now)
             port = getattr(self.inputs, name)
             if port.valid:
-                value, source = port.value, wall - (now - port.stamp_ns)
+                if port.seq != self.sent_seq[name]:  # a sample sent again keeps its stamp, to the nanosecond
+                    self.sent_seq[name], self.sent_stamp[name] = port.seq, wall - (now - port.stamp_ns)
+                value, source = port.value, self.sent_stamp[name]
             elif t.stale == "zero":
                 value, source = self.zeros[name], wall
             else:
