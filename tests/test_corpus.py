@@ -20,6 +20,9 @@ VALID = CORPUS / "valid"
 
 # (file, rule, line, substring of the message, substring of the hint or None)
 CASES = [
+    ("invalid-ros2-own-process.yaml", "own-process", 8, "must run alone in a process of its own", "deploy: process"),
+    ("invalid-ros2-shape.yaml", "bad-value", 14, "shape [4] does not fit geometry_msgs/msg/Twist", None),
+    ("invalid-ros2-unit.yaml", "stream-unit", 21, "'ros2.scan' writes float32[181] [m]", None),
     ("invalid-nested-param-key.yaml", "unknown-key", 18, "unknown key 'fz_maxx'", "did you mean 'fz_max_n'?"),
     ("invalid-nested-param-value.yaml", "bad-value", 18, "'silent_ratio' must be less than 1.0 (got 1.5)", None),
     ("invalid-param-nan.yaml", "bad-value", 18, "Input should be a finite number (got nan)", None),

@@ -67,6 +67,9 @@ class Block:
     needs: ClassVar[dict[str, str]] = {}
     # What this block offers to activities that need it ("falcon_device", "hallway").
     provides: ClassVar[frozenset[str]] = frozenset()
+    # Why the block must run alone in a process of its own at normal scheduling (a network session and
+    # its threads, which must not share a GIL with the loops), or None; validation keeps it so.
+    own_process: ClassVar[str | None] = None
 
     @classmethod
     def interface(cls, params: Params) -> Interface:

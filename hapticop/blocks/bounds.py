@@ -57,3 +57,25 @@ class Bounds:
         elif good and self.burst:
             log.info("%s: following again after %d refused sample(s)", self.what, self.burst)
             self.burst = 0
+
+
+class Refusals:
+    """What a receiver refused of one stream, by reason, said once per burst (the first refusal with its
+    reason; the burst's length when a good one ends it). Off the 1 kHz loops: a reason is a string."""
+
+    def __init__(self) -> None:
+        self.by_reason: dict[str, int] = {}
+        self.total = 0
+        self.burst = 0
+
+    def count(self, why: str) -> None:
+        self.by_reason[why] = self.by_reason.get(why, 0) + 1
+        self.total += 1
+        self.burst += 1
+
+    def said(self, log, what: str, why: str | None) -> None:
+        if why is not None and self.burst == 1:
+            log.warning("%s: refused a sample (%s); refusals are counted in 'refused' until a good one", what, why)
+        elif why is None and self.burst:
+            log.info("%s: a good one again after %d refused", what, self.burst)
+            self.burst = 0

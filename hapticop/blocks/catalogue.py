@@ -142,8 +142,10 @@ def _parameters(cls: type[Block], defaults: dict) -> list[ParameterEntry]:
                                             _live(cls, root), variant, depth))
                 walk(target["properties"], f"{dotted}.", root, variant, depth + 1)
                 continue
-            # inside one of a choice's models the defaults at hand are another model's: the schema's
-            default = prop.get("default", "(required)") if variant else _default_at(defaults, dotted)
+            # inside one of a choice's models, or a list's or mapping's, the defaults at hand are not this
+            # model's: the schema's
+            keyed = ".NAME." in dotted or "[]." in dotted
+            default = prop.get("default", "(required)") if variant or keyed else _default_at(defaults, dotted)
             found.append(ParameterEntry(dotted, _type_name(prop, deref), default, unit_of(name), description,
                                         _live(cls, root), variant, depth))
             for label, model, nested in _nested_models(target, deref):

@@ -63,6 +63,7 @@ BUILTIN: dict[str, str] = {
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
     "zenoh_bridge": "hapticop.blocks.bridge:ZenohBridge",
+    "ros2_bridge": "hapticop.blocks.ros2_bridge:Ros2Bridge",
 }
 
 _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")

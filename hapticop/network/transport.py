@@ -1,6 +1,7 @@
-"""Zenoh, and only here: a peer session with explicit endpoints, publishers, and bounded subscribers.
+"""Zenoh, and only here: a session with explicit endpoints, publishers, bounded subscribers, liveliness tokens.
 
-The rest of hapticop never imports zenoh (an import-linter contract). The session is a peer that
+The rest of hapticop never imports zenoh (an import-linter contract): the two-host bridge and the ROS 2
+bridge (hapticop.blocks.ros2_bridge, docs/ros2.md) both reach it through this module. The session is a peer that
 listens on its host's endpoints and connects to the other hosts' ones, with multicast and gossip
 scouting off, so two hosts find each other the same way every time, whichever starts first.
 Subscribers are ring channels polled with `try_recv`: no Python callback shares the bridge's GIL,
@@ -25,6 +26,7 @@ import json
 from dataclasses import dataclass, field
 
 import zenoh
+import zenoh.ext
 
 PRIORITIES = {"real_time": zenoh.Priority.REAL_TIME, "interactive": zenoh.Priority.INTERACTIVE_HIGH,
               "data": zenoh.Priority.DATA, "background": zenoh.Priority.BACKGROUND}
@@ -70,10 +72,11 @@ def access_rules(rights: list[Rights]) -> dict:
 
 
 def session(listen: list[str], connect: list[str], low_latency: bool = False,
-            credentials: Credentials | None = None) -> zenoh.Session:
-    """A peer session at these endpoints; no scouting; mutual TLS and access rules with `credentials`."""
+            credentials: Credentials | None = None, mode: str = "peer") -> zenoh.Session:
+    """A peer session at these endpoints (or a client of the routers `connect` names); no scouting; mutual
+    TLS and access rules with `credentials`."""
     config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("peer"))
+    config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("listen/endpoints", json.dumps(listen))
     config.insert_json5("connect/endpoints", json.dumps(connect))
     config.insert_json5("scouting/multicast/enabled", "false")
@@ -94,24 +97,60 @@ def session(listen: list[str], connect: list[str], low_latency: bool = False,
     return zenoh.open(config)
 
 
-class Sender:
-    def __init__(self, owner: zenoh.Session, key: str, priority: str = "data", reliable: bool = False,
-                 block: bool = False) -> None:
-        self._publisher = owner.declare_publisher(
-            key, priority=PRIORITIES[priority], express=True,
-            congestion_control=zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP,
-            reliability=zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT)
+def session_id(owner: zenoh.Session) -> str:
+    """The session's Zenoh id, as hex (what ROS 2's liveliness tokens name a participant by)."""
+    return str(owner.info.zid())
 
-    def put(self, payload: bytes) -> None:
-        self._publisher.put(payload)
+
+class Sender:
+    """Puts on one key; with `cache`, the last `cache` samples are kept for late subscribers that ask for
+    history (Zenoh's advanced publisher: ROS 2's transient-local durability as rmw_zenoh maps it)."""
+
+    def __init__(self, owner: zenoh.Session, key: str, priority: str = "data", reliable: bool = False,
+                 block: bool = False, cache: int = 0) -> None:
+        options = dict(priority=PRIORITIES[priority], express=True,
+                       congestion_control=zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP,
+                       reliability=zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT)
+        if cache:
+            self._publisher = zenoh.ext.declare_advanced_publisher(
+                owner, key, cache=zenoh.ext.CacheConfig(max_samples=cache), publisher_detection=True, **options)
+        else:
+            self._publisher = owner.declare_publisher(key, **options)
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        self._publisher.put(payload, attachment=attachment)
 
 
 class Receiver:
-    """The newest `depth` samples of a key, taken without waiting."""
+    """The newest `depth` samples of a key (or key expression), taken without waiting; with `history`, a
+    late subscriber first asks the publishers' caches for their last samples (transient local)."""
 
-    def __init__(self, owner: zenoh.Session, key: str, depth: int = 1) -> None:
-        self._subscriber = owner.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
+    def __init__(self, owner: zenoh.Session, key: str, depth: int = 1, history: bool = False) -> None:
+        if history:
+            self._subscriber = zenoh.ext.declare_advanced_subscriber(
+                owner, key, zenoh.handlers.RingChannel(depth),
+                history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=depth))
+        else:
+            self._subscriber = owner.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
 
     def take(self) -> bytes | None:
         sample = self._subscriber.try_recv()
         return None if sample is None else sample.payload.to_bytes()
+
+    def take_sample(self) -> tuple[str, bytes, bytes | None] | None:
+        """The next sample's key, payload and attachment (None: nothing waiting)."""
+        sample = self._subscriber.try_recv()
+        if sample is None:
+            return None
+        attachment = sample.attachment
+        return str(sample.key_expr), sample.payload.to_bytes(), None if attachment is None else attachment.to_bytes()
+
+
+class Token:
+    """A liveliness token: declared while this session lives (ROS 2's graph is made of them)."""
+
+    def __init__(self, owner: zenoh.Session, key: str) -> None:
+        self._token = owner.liveliness().declare_token(key)
+
+    def undeclare(self) -> None:
+        self._token.undeclare()

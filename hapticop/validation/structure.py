@@ -145,6 +145,28 @@ def main_thread_and_mediator(cg: G.CompositionGraph) -> Check:
                                  f"runs only on the main thread '{mains[0]}'", data["path"])
 
 
+def own_processes(cg: G.CompositionGraph) -> Check:
+    """A block that asks for a process of its own (a network session) gets one: 'deploy: process', normal
+    scheduling, and no other activity in that process."""
+    comp = cg.loaded.composition
+    for u, v, data in cg.edges_of("schedules"):
+        resolved = cg.loaded.activities.get(v[1])
+        why = resolved.block.own_process if resolved is not None else None
+        if why is None:
+            continue
+        spec = comp.threads[u[1]]
+        process = spec.process_name(u[1])
+        others = sorted({m for t, s in comp.threads.items() if s.process_name(t) == process
+                         for members in s.schedules.values() for m in members} - {v[1]}) if process else []
+        if process is None or spec.priority is not None or others:
+            found = ("it runs in the main process" if process is None else
+                     f"thread '{u[1]}' has priority {spec.priority}" if spec.priority is not None else
+                     f"its process also runs {', '.join(repr(o) for o in others)}")
+            yield Diagnostic("own-process", f"activity '{v[1]}' ({resolved.spec.block}) must run alone in a process "
+                             f"of its own at normal scheduling: {found}", data["path"],
+                             hint=f"give it a thread with 'deploy: process' and no priority ({why})")
+
+
 def rates(cg: G.CompositionGraph) -> Check:
     for u, v, data in cg.edges_of("schedules"):
         if cg.g.nodes[v].get("declared") is False:
@@ -339,5 +361,5 @@ def recording(cg: G.CompositionGraph) -> Check:
                              hint=_suggest(name, composition.streams) or "record one of the streams under 'streams'")
 
 
-CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, rates, streams, cpus,
-          latencies, busy_waits, recording)
+CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, own_processes, rates,
+          streams, cpus, latencies, busy_waits, recording)
