@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.bounds import Bounds
+from hapticop.blocks.bounds import Bounds, Refusals
 from hapticop.blocks.interface import Interface, Params, Port
 from hapticop.composition.placement import HEALTH
 from hapticop.network import wire
@@ -470,27 +470,6 @@ class ZenohBridge(Block):
         holding = ",".join(p for p in self.params.export_flags if self.flags[f"out_{p.lower()}"])
         return wire.STATE.pack(self.session_id, ended) + holding.encode()
 
-
-class Refusals:
-    """What a bridge refused of one stream (or of the pongs and states), by reason, said once per burst."""
-
-    def __init__(self) -> None:
-        self.by_reason: dict[str, int] = {}
-        self.total = 0
-        self.burst = 0
-
-    def count(self, why: str) -> None:
-        self.by_reason[why] = self.by_reason.get(why, 0) + 1
-        self.total += 1
-        self.burst += 1
-
-    def said(self, log, what: str, why: str | None) -> None:
-        """The first refusal of a burst logged with its reason; the burst's length when a good one ends it."""
-        if why is not None and self.burst == 1:
-            log.warning("%s: refused a sample (%s); refusals are counted in 'refused' until a good one", what, why)
-        elif why is None and self.burst:
-            log.info("%s: a good one again after %d refused", what, self.burst)
-            self.burst = 0
 
 
 def _impaired(params: LinkParams, name: str) -> MessageLink:
