@@ -11,14 +11,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 from hapticop.blocks.base import Block
 from hapticop.composition import flags as flagdefs
 from hapticop.composition.lcsm import State
-from hapticop.runtime.context import ActivityContext, CycleClock, FlagView, InputPort, OutputPort, SimulationTimer
+from hapticop.runtime.assembly import make_context
+from hapticop.runtime.context import ActivityContext
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.thread import ActivityRunner
@@ -63,17 +63,12 @@ class Alone:
 def alone(name: str, block_type: type[Block], params, clock, run_dir: Path, rng: np.random.Generator,
           log: Logger, runtime_log: Logger, *, period_ns: int = 0, start_on_request: bool = False) -> Alone:
     """The block built on its own runner; `log` is what the block says, `runtime_log` what its life
-    cycle says (state changes, failures)."""
+    cycle says (state changes, failures). Its context is built as a run builds one
+    (`assembly.make_context`), over a one-activity layout."""
     interface = block_type.declare(params)
-    names = list(interface.flags_written) + list(interface.flags_read)
     layout = Layout.alone(name, list(flagdefs.activity_flags(name, interface.flags_written, interface.flags_read)))
     region = Region(layout, _Private(layout.size), owner=False)  # type: ignore[arg-type]
     region.state[:] = State.CREATION
-    cycle = CycleClock()
-    inputs = {p: InputPort(p, spec, cycle.now_ns) for p, spec in interface.inputs.items()}
-    outputs = {p: OutputPort(p, spec, clock.now_ns) for p, spec in interface.outputs.items()}
-    context = ActivityContext(name, params, SimpleNamespace(**inputs), SimpleNamespace(**outputs),
-                              FlagView(region.flags, layout.flag_index, name, names), clock, log, rng, Path(run_dir),
-                              SimulationTimer(region.sim_ns, 0), None, period_ns, region.waiting[0])
+    context, cycle = make_context(name, interface, params, region, clock, log, rng, run_dir, period_ns)
     block = block_type(context)
     return Alone(ActivityRunner(name, block, region, start_on_request, runtime_log, cycle=cycle), region, context)
