@@ -79,7 +79,6 @@ def replay_activity(run: Run, activity: str, tolerance: float = 0.0, keep: Path 
     """The activity replayed by its rewritten composition and judged; `keep`: a folder the files the
     replay's run leaves that its block promises are copied to (the hallway world's results)."""
     rewritten, validated = validated_rewrite(run, activity)
-    run.load([*rewritten.inputs, *(stream for stream, _ in rewritten.outputs)])
     rows = run.series(f"cycles/{activity}").publish_ns
     start = int(rows[0])
     origin = min([int(run.series(s).publish_ns[0]) for s in rewritten.inputs if len(run.series(s).publish_ns)]

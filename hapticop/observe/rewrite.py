@@ -73,6 +73,8 @@ def rewrite(run: Run, activity: str) -> Rewrite:
     block_type = resolve_block(run, activity)
     params = parameters_of(run, activity, block_type)
     interface = block_type.declare(params)
+    run.load([cycle_log.stream_of(activity)] + [stream for stream, _ in inputs_of(run, activity)]
+             + [stream for stream, _ in outputs_of(run, activity)])  # one pass over the file
     rows = run.series(cycle_log.stream_of(activity))
     expected = cycle_log.columns(interface, block_type.implements_flush())
     if json.loads(rows.info.doc or "[]") != expected:
