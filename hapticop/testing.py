@@ -2,7 +2,8 @@
 
 `BlockHarness` runs one block without a composition, the way dora's mock node does: its ports
 are real ports fed and read by the test, its clock is virtual, and its hooks are called by the
-runtime's own runner and life-cycle state machine (`runtime.alone`), as in a run. The measuring
+runtime's own runner and life-cycle state machine, over a region laid out for it alone, with the
+context a run would build (`runtime.assembly.make_context`), as in a run. The measuring
 functions report microseconds per call and what a call leaves allocated (bench/ reports figures;
 tests check allocations only).
 """
@@ -21,11 +22,25 @@ import numpy as np
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.registry import resolve
+from hapticop.composition import flags as flagdefs
 from hapticop.composition.lcsm import State
-from hapticop.runtime.alone import alone
+from hapticop.runtime.assembly import make_context
 from hapticop.runtime.clock import VirtualClock
 from hapticop.runtime.logs import Level, Logger
+from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.streams import LatestSlot, latest_nbytes
+from hapticop.runtime.thread import ActivityRunner
+
+
+class _Private:
+    """The region's memory, private to this process: nobody else attaches to one block alone."""
+
+    def __init__(self, size: int) -> None:
+        self.buf = memoryview(bytearray(size))
+        self.name = ""
+
+    def close(self) -> None:
+        return None
 
 
 class HookDidNotComplete(AssertionError):
@@ -57,14 +72,19 @@ class BlockHarness:
         self._log_queue: queue.SimpleQueue = queue.SimpleQueue()
         log = Logger(name, Level.DEBUG, self._log_queue, self.clock.now_ns)
         runtime_log = Logger(name, Level.WARNING, self._log_queue, self.clock.now_ns)  # failures, not state changes
-        self.alone = alone(name, self.block_type, self.params, self.clock, Path(run_dir), np.random.default_rng(seed),
-                           log, runtime_log, period_ns=period_ns)
-        self.context, self.block, self.runner = self.alone.context, self.alone.block, self.alone.runner
+        interface = self.interface
+        layout = Layout.alone(name, list(flagdefs.activity_flags(name, interface.flags_written, interface.flags_read)))
+        self.region = Region(layout, _Private(layout.size), owner=False)  # type: ignore[arg-type]
+        self.region.state[:] = State.CREATION
+        self.context, cycle = make_context(name, interface, self.params, self.region, self.clock, log,
+                                           np.random.default_rng(seed), Path(run_dir), period_ns)
+        self.block = self.block_type(self.context)
+        self.runner = ActivityRunner(name, self.block, self.region, False, runtime_log, cycle=cycle)
         self._sources: dict[str, LatestSlot] = {}
         for port_name, port in vars(self.context.inputs).items():
             self._sources[port_name] = LatestSlot(bytearray(latest_nbytes(port.spec)), port.spec, synchronised=False)
             port.connect(self._sources[port_name], queue=False, max_age_ns=(max_age_ns or {}).get(port_name, 0))
-        self.flag_values = self.alone.region.flags
+        self.flag_values = self.region.flags
         self.inputs, self.outputs, self.flags = self.context.inputs, self.context.outputs, self.context.flags
 
     def feed(self, port: str, value) -> None:
@@ -124,7 +144,7 @@ class BlockHarness:
         runner.step()
         if runner.flushes:
             runner.flush()
-        error = self.alone.failure()
+        error, runner.lifecycle.error = runner.lifecycle.error, None  # the runner only logs it
         if error is not None:
             raise error
         self.advance()

@@ -12,7 +12,8 @@ from typer.testing import CliRunner
 
 from hapticop.cli.main import app
 from hapticop.composition.lcsm import State
-from hapticop.observe.replay import ReplayError, replay, results
+from hapticop.observe.replay import ReplayError, open_run, replay, results, validated_rewrite
+from hapticop.observe.rewrite import PACED
 from hapticop.recording.parameters import events
 from hapticop.recording.reading import series
 from hapticop.sim.recorded_run import integrate
@@ -51,6 +52,29 @@ def test_the_haptic_controllers_outputs_replay_equal_to_the_bit(recorded):
     assert np.abs(series(path, "velocity_setpoint").values).max() > 0.1  # the robot was driven: a real test
     assert haptic.cycles == len(series(path, "cycles/haptic").values) and haptic.computed > 2500
     assert not haptic.diverged
+
+
+def test_a_replay_is_a_rewritten_composition_that_validates(recorded):
+    """What replays the controller is a composition of its own, validated as any file is: the
+    controller with its recorded block and parameters, fed only by a recorded_source on its inputs'
+    streams, the two on a thread of their own; nothing else of the hallway is in it."""
+    run = open_run(recorded / "hallway.mcap")
+    rewritten, validated = validated_rewrite(run, "haptic")
+    loaded = validated.graph.loaded
+    composition = loaded.composition
+    assert {name: a.spec.block for name, a in loaded.activities.items()} == {
+        "mediator": "mediator", "recorded": "recorded_source", "haptic": "haptic_controller"}
+    assert loaded.activities["haptic"].params == run.loaded.activities["haptic"].params
+    assert composition.threads[PACED].schedules[0] == ["recorded", "haptic"]
+    inputs = {name: spec for name, spec in composition.streams.items()
+              if any(r.startswith("haptic.") for r in spec.readers)}
+    assert set(inputs) == {"handle_position", "handle_velocity", "scan_ranges", "scan_angles", "platform_velocity"}
+    assert all(spec.writer.startswith("recorded.") for spec in inputs.values())
+    for name, spec in inputs.items():  # each stream as the run had it: its policy and max_age
+        assert spec.policy == run.loaded.composition.streams[name].policy
+        assert spec.max_age == run.loaded.composition.streams[name].max_age
+    assert composition.record.streams == ["handle_force", "velocity_setpoint", "environment_force"]
+    assert rewritten.start_ns <= int(series(recorded / "hallway.mcap", "cycles/haptic").publish_ns[0])
 
 
 def test_replay_on_the_command_line_says_equal_and_exits_0(recorded):

@@ -60,6 +60,7 @@ BUILTIN: dict[str, str] = {
     "falcon_simulator": "hapticop.sim.devices.falcon:FalconSimulator",
     "tim561_simulator": "hapticop.sim.devices.tim561:Tim561Simulator",
     "ropod_plant": "hapticop.sim.devices.ropod_plant:RopodPlantSimulator",
+    "recorded_source": "hapticop.observe.recorded_source:RecordedSource",
     "counter": "hapticop.blocks.basic:Counter",
     "echo": "hapticop.blocks.basic:Echo",
     "zenoh_bridge": "hapticop.blocks.bridge:ZenohBridge",

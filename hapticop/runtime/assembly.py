@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -20,7 +21,7 @@ from hapticop.runtime import cycle_log
 from hapticop.runtime.context import ActivityContext, CycleClock, FlagView, InputPort, OutputPort, SimulationTimer
 from hapticop.runtime.cycle_log import CycleLog
 from hapticop.runtime.latencies import OriginRelay
-from hapticop.runtime.logs import Level, LogWriter
+from hapticop.runtime.logs import Level, Logger, LogWriter
 from hapticop.runtime.region import Layout, Region
 from hapticop.runtime.streams import QUEUE_HEADER, RecorderRing, latest_nbytes
 from hapticop.runtime.thread import ActivityRunner, CyclicThread
@@ -103,15 +104,39 @@ def make_transports(loaded: Loaded, region: Region, stream: str, owner: dict[str
     return objects
 
 
+def make_context(name: str, interface, params, region: Region, clock, log: Logger, rng: np.random.Generator,
+                 run_dir, period_ns: int, coordination: Any = None,
+                 track: bool = False) -> tuple[ActivityContext, CycleClock]:
+    """What an activity's block sees, over its region: the one place an activity's context is built
+    (a run's activities, a live addition, a block harness alike). Its ports are not connected yet;
+    the returned cycle clock is the one its runner sets at each step."""
+    cycle = CycleClock()
+    inputs = {p: InputPort(p, spec, cycle.now_ns, track) for p, spec in interface.inputs.items()}
+    outputs = {p: OutputPort(p, spec, clock.now_ns, track) for p, spec in interface.outputs.items()}
+    for port in inputs.values():
+        port.log = log  # a stream whose every sample arrives stale says so in its reader's log
+    layout = region.layout
+    flags = FlagView(region.flags, layout.flag_index, name,
+                     list(interface.flags_written) + list(interface.flags_read))
+    index = layout.activity_index[name]
+    context = ActivityContext(name, params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags, clock, log,
+                              rng, Path(run_dir), SimulationTimer(region.sim_ns, index), coordination, period_ns,
+                              region.waiting[index])
+    return context, cycle
+
+
 def make_runner(name: str, resolved: ResolvedActivity, composition: Composition, region: Region,
                 transports: dict[str, list], clock, writer: LogWriter, seed: int,
                 coordination: Any = None) -> ActivityRunner:
     """The block instance of one activity, its ports wired to the given transports."""
     iface = resolved.interface
     track = bool(composition.latencies)
-    cycle = CycleClock()
-    inputs = {p: InputPort(p, spec, cycle.now_ns, track) for p, spec in iface.inputs.items()}
-    outputs = {p: OutputPort(p, spec, clock.now_ns, track) for p, spec in iface.outputs.items()}
+    log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
+    thread = thread_of(composition).get(name)
+    period_ns = composition.threads[thread].period if thread else 0
+    context, cycle = make_context(name, iface, resolved.params, region, clock, log, activity_rng(seed, name),
+                                  writer.run_dir, period_ns, coordination, track)
+    inputs, outputs = vars(context.inputs), vars(context.outputs)
     sinks = []
     for slot, latency in enumerate(composition.latencies.values()):
         activity, port = latency.source.split(".")
@@ -132,16 +157,6 @@ def make_runner(name: str, resolved: ResolvedActivity, composition: Composition,
             activity, port = reader.split(".")
             if activity == name:
                 connect_reader(spec, inputs[port], objects, index)
-    flags = FlagView(region.flags, region.layout.flag_index, name, list(iface.flags_written) + list(iface.flags_read))
-    log = writer.logger(name, Level[resolved.spec.log.upper()], clock.now_ns)
-    for port in inputs.values():
-        port.log = log  # a stream whose every sample arrives stale says so in its reader's log
-    timer = SimulationTimer(region.sim_ns, region.layout.activity_index[name])
-    thread = thread_of(composition).get(name)
-    period_ns = composition.threads[thread].period if thread else 0
-    context = ActivityContext(name, resolved.params, SimpleNamespace(**inputs), SimpleNamespace(**outputs), flags,
-                              clock, log, activity_rng(seed, name), writer.run_dir, timer, coordination, period_ns,
-                              region.waiting[region.layout.activity_index[name]])
     block = resolved.block(context)
     runner = ActivityRunner(name, block, region, resolved.spec.start == "on_request", log, relay, cycle)
     cycles = region.layout.cycles.get(name)

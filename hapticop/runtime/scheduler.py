@@ -25,6 +25,7 @@ from hapticop.runtime.child import process_main
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.deadlines import thread_start
 from hapticop.runtime.logs import Logger
+from hapticop.runtime.pacing import Pacing
 from hapticop.runtime.region import Region
 from hapticop.runtime.thread import CyclicThread
 
@@ -157,22 +158,27 @@ class Scheduler:
             if hold is not None:
                 hold.close()
 
-    def run_virtual(self, threads: dict[str, CyclicThread], limit_ns: int | None) -> bool:
-        """Step every started thread at its deadlines; False if the run outlived `limit_ns`."""
+    def run_virtual(self, threads: dict[str, CyclicThread], limit_ns: int | None, pacing: Pacing | None = None) -> bool:
+        """Step every started thread at its deadlines (a `pacing`'s, for a replay); False if the run
+        outlived `limit_ns`."""
         order = {name: i for i, name in enumerate(self.composition.threads)}
         queue = self.queue
-        heapq.heappush(queue, (0, order[self.main_name], self.main_name))
+        heapq.heappush(queue, (self.clock.now_ns(), order[self.main_name], self.main_name))
         while queue:
             deadline, rank, name = heapq.heappop(queue)
             if limit_ns is not None and deadline > limit_ns:
                 return False
             self.clock.advance_to(deadline)
             thread = threads[name]
+            if pacing is not None:
+                pacing.before(name, deadline)
             thread.cycle()
             if name == self.main_name and thread.done:
                 break
             if not thread.done:
-                heapq.heappush(queue, (deadline + thread.period, rank, name))
+                following = deadline + thread.period if pacing is None else pacing.next_ns(
+                    name, deadline, thread.period, thread.lifecycle.state is State.RUNNING)
+                heapq.heappush(queue, (following, rank, name))
         return True
 
     def stop(self) -> None:

@@ -35,6 +35,7 @@ from hapticop.runtime.live import LiveChanges
 from hapticop.runtime.logs import Level, LogWriter
 from hapticop.runtime.modes import Modes
 from hapticop.runtime.observer import ObservedRun, Observer, standard_observer
+from hapticop.runtime.pacing import Pacing
 from hapticop.runtime.preflight import DevicesMissing, missing_devices
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
@@ -66,6 +67,8 @@ class RunOptions:
     record: str | None = None  # record every stream even if the file does not say so: to this file ('': the default)
     view: LiveOptions | None = None  # serve live to Foxglove the recorded streams (the latest slots if none is)
     observer: Any = None  # an `Observer` instead of the standard one (which `record` and `view` configure)
+    clock_start_ns: int = 0  # the virtual clock's first time (a replay's: a little before the recorded cycles)
+    pacing: Pacing | None = None  # under the virtual clock, threads cycled at other times than each period
 
 
 @dataclass
@@ -102,7 +105,7 @@ class System:
         if missing:  # before anything is made: nothing is left behind
             raise DevicesMissing(self.name, missing)
         self.control_path = None if self.virtual else control_path(options.control, self.name)
-        self.clock = VirtualClock() if self.virtual else RealtimeClock()
+        self.clock = VirtualClock(options.clock_start_ns) if self.virtual else RealtimeClock()
         if options.run_dir is None:
             self.run_dir = new_run_directory(self.name, group=options.group_readable)
         else:
@@ -243,7 +246,7 @@ class System:
         try:
             if not self.virtual:
                 self.scheduler.run_realtime(self.main)
-            elif not self.scheduler.run_virtual(self.built.threads, self.supervisor.time_limit_ns()):
+            elif not self.scheduler.run_virtual(self.built.threads, self._virtual_limit_ns(), self.options.pacing):
                 self.supervisor.reasons.append("the virtual run did not end within its time limit")
         finally:
             self.finished = True
@@ -254,6 +257,10 @@ class System:
             self._stop_observer()
         return Outcome(self.supervisor.exit_status(self.description, self.run_dir), self.run_dir,
                        self.supervisor.reasons)
+
+    def _virtual_limit_ns(self) -> int | None:
+        limit = self.supervisor.time_limit_ns()
+        return None if limit is None else self.options.clock_start_ns + limit
 
     def _stop_observer(self) -> None:
         """The loops are done: the observer takes the last samples and finishes the file."""
