@@ -74,6 +74,8 @@ class WireStream(BaseModel):
     congestion: Literal["drop", "block"] = Field("drop", description="what Zenoh does with a full queue")
     host: str | None = Field(None, description="the host that writes it: its samples come from that host's "
                              "session only (None: the only other host)")
+    readers: list[str] | None = Field(None, description="the hosts that read it, the only ones its writer sends it "
+                                      "to (None: every other host)")
     range: tuple[float, float] | None = Field(None, description="the receiving ports' declared range: a sample "
                                               "with an element outside it is refused")
 
@@ -191,10 +193,12 @@ class ZenohBridge(Block):
         p = self.params
         credentials = None
         if p.tls is not None:
+            # each host may put only the streams it writes, and read only those it reads (a third host is no operator)
             rights = [transport.Rights(
-                peer, puts=[wire.sample_key(p.system, w.stream) for w in p.receive] + [
+                peer, puts=[wire.sample_key(p.system, w.stream) for w in p.receive if w.host in (None, peer)] + [
                     wire.ping_key(p.system, peer), wire.pong_key(p.system, p.host), wire.state_key(p.system, peer)],
-                reads=[wire.sample_key(p.system, w.stream) for w in p.send] + [
+                reads=[wire.sample_key(p.system, w.stream) for w in p.send
+                       if w.readers is None or peer in w.readers] + [
                     wire.ping_key(p.system, p.host), wire.pong_key(p.system, peer), wire.state_key(p.system, p.host)])
                 for peer in p.peers]
             credentials = transport.Credentials(p.tls.ca, p.tls.certificate, p.tls.key, rights)
