@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import time
 import zlib
 from typing import Literal, get_args
 
@@ -203,6 +204,7 @@ class ZenohBridge(Block):
                 for peer in p.peers]
             credentials = transport.Credentials(p.tls.ca, p.tls.certificate, p.tls.key, rights)
         self.net = transport.session(p.listen, p.connect, p.low_latency, credentials)
+        self.expires_ns = None if p.tls is None else _expiry_ns(p.tls)
         self.senders = {w.stream: transport.Sender(self.net, wire.sample_key(p.system, w.stream), w.priority,
                                                    w.reliability == "reliable", w.congestion == "block")
                         for w in p.send}
@@ -243,6 +245,14 @@ class ZenohBridge(Block):
     # -- the cycle --------------------------------------------------------------------
     def _service(self) -> None:
         now = self.clock.now_ns()
+        if self.expires_ns is not None and time.time_ns() >= self.expires_ns:
+            self._expire()
+        if self.net is None:  # its certificate ended: nothing crosses, the link is lost, the deadman stops
+            due = now >= self.next_ping_ns
+            if due:
+                self.next_ping_ns = now + int(self.params.ping_period_ms * 1e6)
+            self._judge_link(now, publish=due)
+            return
         self._send_samples()
         self._answer_pings()
         due = now >= self.next_ping_ns
@@ -253,6 +263,18 @@ class ZenohBridge(Block):
         self._take_states(now)
         self._take_samples(now)
         self._judge_link(now, publish=due)
+
+    def _expire(self) -> None:
+        """This host's certificate (or its CA's) has ended: close the session, as Zenoh would not without
+        panicking (docs/security.md); the other hosts hear nothing more and their deadmen stop the robot."""
+        self.expires_ns = None
+        self.log.error("this host's certificate has expired: the link is closed until the run restarts with new keys")
+        net, self.net = self.net, None
+        if net is not None:
+            try:
+                net.close()
+            except Exception as error:  # noqa: BLE001 - Zenoh's close may time out; the link is gone either way
+                self.log.warning("closing the expired link: %s", error)
 
     def _send_samples(self) -> None:
         for w in self.send_order:
@@ -498,6 +520,16 @@ class Refusals:
         elif why is None and self.burst:
             log.info("%s: a good one again after %d refused", what, self.burst)
             self.burst = 0
+
+
+def _expiry_ns(tls: TlsParams) -> int:
+    """When this host's link must close (wall clock, ns): the end of its certificate or of its CA's."""
+    from pathlib import Path
+
+    from hapticop.network.keys import expiry
+
+    end = expiry(Path(tls.ca), Path(tls.certificate))
+    return 0 if end is None else int(end.timestamp()) * 1_000_000_000
 
 
 def _impaired(params: LinkParams, name: str) -> MessageLink:
