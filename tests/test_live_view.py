@@ -292,7 +292,7 @@ def test_a_view_beyond_loopback_says_at_start_who_can_watch(tmp_path):
     assert exposure(LiveOptions(host="localhost")) is None
     said = exposure(LiveOptions(host="0.0.0.0", port=9000))
     assert "anyone who can reach this machine on any of its networks, at port 9000" in said
-    assert "without authentication" in said and "in the clear" in said
+    assert "if they hold the run's token" in said and "in the clear" in said
     cert, key = _identity(tmp_path)
     assert "over TLS" in exposure(LiveOptions(host="192.0.2.7", tls_cert=str(cert), tls_key=str(key)))
 
@@ -309,3 +309,106 @@ def test_a_view_beyond_loopback_says_at_start_who_can_watch(tmp_path):
     result = runner.invoke(app, ["view", "x", "--tls-cert", str(cert), "--tls-key", str(tmp_path / "absent.pem")])
     assert result.exit_code == 2 and "cannot read its TLS identity" in result.output
     assert "Traceback" not in result.output
+
+
+async def _refused(address: str, **options) -> int:
+    """The HTTP status a handshake was refused with (the client never gets a WebSocket)."""
+    from websockets.exceptions import InvalidStatus
+
+    try:
+        async with websockets.connect(address, subprotocols=[SUBPROTOCOL], open_timeout=PATIENCE_S, **options):
+            return 101
+    except InvalidStatus as refusal:
+        return refusal.response.status_code
+
+
+def test_the_view_lets_in_only_a_client_with_the_runs_token(tmp_path):
+    """The token is written owner-only in the run directory; without it, or with another, the handshake is
+    refused; with it the client is served. A client that sends garbage, or opens and never finishes its
+    request, or connects and never reads, holds back no one: a good client is served meanwhile."""
+    import socket
+
+    from hapticop.recording.live import LiveServer
+
+    server = LiveServer(LiveOptions(port=0), run_dir=tmp_path)
+    try:
+        token = server.token_file.read_text().strip()
+        assert server.token_file.stat().st_mode & 0o777 == 0o600
+        assert server.address == f"{server.public_address}/?token={token}"
+        assert asyncio.run(_refused(server.public_address)) == 401
+        assert asyncio.run(_refused(f"{server.public_address}/?token=x{token[1:]}")) == 401
+        assert asyncio.run(_refused(f"{server.public_address}/?token=")) == 401
+        assert server.gate.refused == 3
+        host, port = server.public_address.removeprefix("ws://").rsplit(":", 1)
+        stalled = [socket.create_connection((host, int(port))) for _ in range(3)]
+        stalled[0].sendall(b"\x00\xff" * 5000)  # garbage, longer than a request may be
+        stalled[1].sendall(b"GET /?token=")  # a request never finished
+        reader = socket.create_connection((host, int(port)))  # the token, then never reads
+        reader.sendall(f"GET /?token={token} HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                       "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+                       f"Sec-WebSocket-Protocol: {SUBPROTOCOL}\r\n\r\n".encode())
+        assert asyncio.run(_first_op(server.address)) == "serverInfo"
+        for s in [*stalled, reader]:
+            s.close()
+    finally:
+        server.stop()
+
+
+def test_a_run_served_live_writes_its_token_where_only_its_owner_reads(tmp_path):
+    """`compose --view`: the token file lies in the run directory, and the address the run gives carries it."""
+    from .test_recording import counters
+
+    _, seen = _live_run(tmp_path, counters(), lambda seen: "messages" in seen, "token")
+    assert "error" not in seen, seen
+    files = list((tmp_path / "run-token").glob("live-view-*.token"))
+    assert len(files) == 1 and files[0].stat().st_mode & 0o777 == 0o600
+
+
+async def _subscribe_all(socket) -> None:
+    while True:
+        op = json.loads(await socket.recv())
+        if op["op"] == "advertise":
+            await socket.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": n, "channelId": c["id"]} for n, c in enumerate(op["channels"], 1)]}))
+            return
+
+
+def test_a_client_that_stops_reading_holds_back_neither_the_writer_nor_a_good_client(tmp_path):
+    """Through the gate, a subscribed client that reads nothing fills its socket; the writer's calls go on
+    returning and another client keeps receiving."""
+    from hapticop.recording.live import LiveServer
+
+    server = LiveServer(LiveOptions(port=0, rate_hz=1000), run_dir=tmp_path)
+    channel = server.channel("/big", "json", 0, {})
+    stop = threading.Event()
+    writes = [0]
+
+    def write() -> None:
+        payload = b"x" * 65536
+        while not stop.is_set():
+            writes[0] += 1
+            server.write(channel, 0, payload, time.monotonic_ns(), writes[0])
+            time.sleep(0.001)
+
+    async def clients() -> int:
+        async with websockets.connect(server.address, subprotocols=[SUBPROTOCOL], max_queue=1, max_size=None) as slow:
+            await _subscribe_all(slow)  # then never reads again
+            async with websockets.connect(server.address, subprotocols=[SUBPROTOCOL], max_size=None) as good:
+                await _subscribe_all(good)
+                received, deadline = 0, time.monotonic() + PATIENCE_S
+                while received < 200 and time.monotonic() < deadline:
+                    frame = await asyncio.wait_for(good.recv(), PATIENCE_S)
+                    received += isinstance(frame, bytes)
+                return received
+
+    writer = threading.Thread(target=write, daemon=True)
+    writer.start()
+    try:
+        before = writes[0]
+        assert asyncio.run(clients()) >= 200
+        assert writes[0] > before + 200  # the writer went on while the slow client read nothing
+    finally:
+        stop.set()
+        writer.join(timeout=PATIENCE_S)
+        server.stop()
+    assert not writer.is_alive(), "the writer stalled"

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import time
 import zlib
 from typing import Literal, get_args
 
@@ -77,6 +78,8 @@ class WireStream(BaseModel):
     congestion: Literal["drop", "block"] = Field("drop", description="what Zenoh does with a full queue")
     host: str | None = Field(None, description="the host that writes it: its samples come from that host's "
                              "session only (None: the only other host)")
+    readers: list[str] | None = Field(None, description="the hosts that read it, the only ones its writer sends it "
+                                      "to (None: every other host)")
     range: tuple[float, float] | None = Field(None, description="the receiving ports' declared range: a sample "
                                               "with an element outside it is refused")
 
@@ -193,14 +196,17 @@ class ZenohBridge(Block):
         p = self.params
         credentials = None
         if p.tls is not None:
+            # each host may put only the streams it writes, and read only those it reads (a third host is no operator)
             rights = [transport.Rights(
-                peer, puts=[wire.sample_key(p.system, w.stream) for w in p.receive] + [
+                peer, puts=[wire.sample_key(p.system, w.stream) for w in p.receive if w.host in (None, peer)] + [
                     wire.ping_key(p.system, peer), wire.pong_key(p.system, p.host), wire.state_key(p.system, peer)],
-                reads=[wire.sample_key(p.system, w.stream) for w in p.send] + [
+                reads=[wire.sample_key(p.system, w.stream) for w in p.send
+                       if w.readers is None or peer in w.readers] + [
                     wire.ping_key(p.system, p.host), wire.pong_key(p.system, peer), wire.state_key(p.system, p.host)])
                 for peer in p.peers]
             credentials = transport.Credentials(p.tls.ca, p.tls.certificate, p.tls.key, rights)
         self.net = transport.session(p.listen, p.connect, p.low_latency, credentials)
+        self.expires_ns = None if p.tls is None else _expiry_ns(p.tls)
         self.senders = {w.stream: transport.Sender(self.net, wire.sample_key(p.system, w.stream), w.priority,
                                                    w.reliability == "reliable", w.congestion == "block")
                         for w in p.send}
@@ -241,6 +247,14 @@ class ZenohBridge(Block):
     # -- the cycle --------------------------------------------------------------------
     def _service(self) -> None:
         now = self.clock.now_ns()
+        if self.expires_ns is not None and time.time_ns() >= self.expires_ns:
+            self._expire()
+        if self.net is None:  # its certificate ended: nothing crosses, the link is lost, the deadman stops
+            due = now >= self.next_ping_ns
+            if due:
+                self.next_ping_ns = now + int(self.params.ping_period_ms * 1e6)
+            self._judge_link(now, publish=due)
+            return
         self._send_samples()
         self._answer_pings()
         due = now >= self.next_ping_ns
@@ -251,6 +265,18 @@ class ZenohBridge(Block):
         self._take_states(now)
         self._take_samples(now)
         self._judge_link(now, publish=due)
+
+    def _expire(self) -> None:
+        """This host's certificate (or its CA's) has ended: close the session, as Zenoh would not without
+        panicking (docs/security.md); the other hosts hear nothing more and their deadmen stop the robot."""
+        self.expires_ns = None
+        self.log.error("this host's certificate has expired: the link is closed until the run restarts with new keys")
+        net, self.net = self.net, None
+        if net is not None:
+            try:
+                net.close()
+            except Exception as error:  # noqa: BLE001 - Zenoh's close may time out; the link is gone either way
+                self.log.warning("closing the expired link: %s", error)
 
     def _send_samples(self) -> None:
         for w in self.send_order:
@@ -470,6 +496,16 @@ class ZenohBridge(Block):
         holding = ",".join(p for p in self.params.export_flags if self.flags[f"out_{p.lower()}"])
         return wire.STATE.pack(self.session_id, ended) + holding.encode()
 
+
+
+def _expiry_ns(tls: TlsParams) -> int:
+    """When this host's link must close (wall clock, ns): the end of its certificate or of its CA's."""
+    from pathlib import Path
+
+    from hapticop.network.keys import expiry
+
+    end = expiry(Path(tls.ca), Path(tls.certificate))
+    return 0 if end is None else int(end.timestamp()) * 1_000_000_000
 
 
 def _impaired(params: LinkParams, name: str) -> MessageLink:

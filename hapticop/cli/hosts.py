@@ -110,6 +110,7 @@ def keys_for(file: Path, force: bool = False, new_ca: bool = False, days: int = 
             said.append(f"{where.certificate}, {where.key.name}: host '{name}'")
         else:
             said.append(f"{where.certificate}: kept (--force replaces it)")
+        said.extend(f"warning: {path} {soon}" for path, soon in keys.ending_soon(directory, name))
     if composition.security.keys is None:
         said.append(f"now name them in {file}: 'security: {{keys: {directory.name}}}'")
     return said

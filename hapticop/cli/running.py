@@ -20,6 +20,7 @@ def view(
     """Show a running system live in Foxglove, from a process of its own: every stream's newest
     sample, the scan, frames and force arrow, the loops' timing and the log; Ctrl+C stops."""
     from hapticop.observe.viewer import Attachment, view
+    from hapticop.recording.live import LiveViewUnavailable
 
     options = live_options(str(port), host, rate, tls_cert, tls_key)
     answer = ask(system, {"op": "attach"})
@@ -31,6 +32,9 @@ def view(
     try:
         summary = view(Attachment(**answer["attach"]), options, lambda line: typer.echo(f"{line}; Ctrl+C stops",
                                                                                         err=True), stop.is_set)
+    except LiveViewUnavailable as unavailable:  # a port taken, a run directory it may not write its token in
+        typer.echo(f"hapticop: {unavailable}", err=True)
+        raise typer.Exit(2) from None
     finally:
         signal.signal(signal.SIGINT, previous)
     typer.echo(f"{summary['view']['sent']} messages sent", err=True)

@@ -126,7 +126,8 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
                 del out["streams"][name]
             continue
         qos = spec.network.model_dump(mode="json", exclude={"doc"}) if spec.network else {}
-        wire = {"stream": name, "host": net.writer_host, **ports[name], **{k: qos.get(k) for k in
+        wire = {"stream": name, "host": net.writer_host, "readers": sorted(net.reader_hosts - {net.writer_host}),
+                **ports[name], **{k: qos.get(k) for k in
                                                   ("priority", "keep", "depth", "reliability", "congestion")}}
         entry.pop("network", None)
         if net.writer_host == host:

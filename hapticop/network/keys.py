@@ -23,6 +23,7 @@ from cryptography.x509.oid import NameOID
 
 CA_NAME = "ca"
 VALID_DAYS = 365
+WARN_DAYS = 30  # `validate` and `hosts keys` say when a certificate ends within this many days
 LOOPBACK = ("localhost", "127.0.0.1", "::1")
 
 
@@ -95,7 +96,7 @@ def make_ca(directory: Path, system: str, days: int = VALID_DAYS, force: bool = 
     _write(directory / f"{CA_NAME}.pem", cert.public_bytes(serialization.Encoding.PEM), force)
 
 
-def make_host(directory: Path, host: str, addresses: list[str], days: int = VALID_DAYS, force: bool = False,
+def make_host(directory: Path, host: str, addresses: list[str], days: float = VALID_DAYS, force: bool = False,
               start: dt.datetime | None = None) -> None:
     """`HOST.pem` and `HOST.key`: the host's name as common name and SAN, with the addresses it is reached at,
     valid for `days` from `start` (default: now)."""
@@ -170,6 +171,27 @@ def problems_of(ca_path: Path, cert_path: Path, key_path: Path | None, host: str
                             cert.public_key().public_bytes(serialization.Encoding.DER,
                                                            serialization.PublicFormat.SubjectPublicKeyInfo):
                         found.append((str(where.key), f"does not belong to {where.certificate.name}"))
+    return found
+
+
+def expiry(*paths: Path) -> dt.datetime | None:
+    """When the first of these certificates ends (a host's link is good only while its CA's and its own are);
+    None when one cannot be read (`problems_of` says why)."""
+    try:
+        return min(x509.load_pem_x509_certificate(p.read_bytes()).not_valid_after_utc for p in paths)
+    except (OSError, ValueError):
+        return None
+
+
+def ending_soon(directory: Path, host: str, days: float = WARN_DAYS) -> list[tuple[str, str]]:
+    """(which file, when it ends) for `host`'s certificate and the CA's, when they end within `days` (still valid)."""
+    now = dt.datetime.now(dt.UTC)
+    found = []
+    for path in (files(directory, host).ca, files(directory, host).certificate):
+        end = expiry(path)
+        if end is not None and now <= end < now + dt.timedelta(days=days):
+            found.append((str(path), f"expires on {end:%Y-%m-%d %H:%M} UTC, within {days:g} days: the link will "
+                          "stop then"))
     return found
 
 

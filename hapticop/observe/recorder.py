@@ -129,7 +129,7 @@ class Recorder:
         self.live, self.view_error = None, None
         if plan.live is not None:  # before the file: a view that cannot listen leaves no file behind
             try:
-                self.live = LiveServer(plan.live, plan.name)
+                self.live = LiveServer(plan.live, plan.name, plan.run_dir)
             except LiveViewUnavailable as error:
                 if plan.path is None:
                     raise
@@ -234,7 +234,7 @@ class Recorder:
         """Per stream: samples its writer published, recorded, and lost (the ring was lapped)."""
         return {"path": str(self.plan.path) if self.file is not None else None, "clock": self.plan.clock,
                 "messages": self.file.messages if self.file is not None else 0,
-                "view": {"address": self.address, "sent": self.live.sent} if self.live is not None else None,
+                "view": None if self.live is None else {"address": self.live.public_address, "sent": self.live.sent},
                 "view_error": self.view_error, "cpu_s": time.process_time() - self.cpu_started,
                 "elapsed_s": (self.clock() - self.started_ns) / 1e9, "streams": {
             name: self._counts(name, ring) for name, ring in self.rings.items()}}

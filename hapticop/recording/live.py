@@ -7,11 +7,12 @@ SDK's own threads in the recorder's process, never on a real-time loop. Each mes
 with the loop's own stamp as its time, so plots and frames line up as in a recording; a client
 that falls behind loses the oldest messages (the SDK's backlog), never the recording.
 
-The protocol has no authentication, and the SDK's server offers no hook to add one (no
-connection callback, no per-client sink, no way to close a client), so whoever can reach the
-address sees every stream: `exposure` says who that is, at start, for any address other than
-loopback. With a certificate and key (`tls_cert`, `tls_key`) the server speaks only `wss://`,
-the SDK's own TLS, so the streams are not readable on the way.
+The protocol has no authentication, and the SDK's server offers no hook to add one, so the SDK's
+server listens on a loopback port of its own and `live_gate.Gate` listens where asked, letting a
+client through only with the run's token (`?token=` in its URL), written owner-only in the run
+directory (docs/security.md). With a certificate and key (`tls_cert`, `tls_key`) the gate speaks only
+`wss://`, so neither the streams nor the token are readable on the way. `exposure` says at start
+who can reach the address when it is more than loopback.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from hapticop.recording import arrays
+from hapticop.recording.live_gate import Gate, new_token, write_token
 from hapticop.recording.mcapfile import LOG_TOPIC, StreamInfo, topic_of
 
 DEFAULT_PORT = 8765
@@ -76,8 +78,7 @@ def exposure(options: LiveOptions) -> str | None:
            else f"anyone who can reach {options.host}:{options.port}")
     wire = ("over TLS (wss://)" if options.tls_cert else
             "in the clear (ws://: anyone on the path reads it too; a TLS certificate and key give wss://)")
-    return (f"warning: the live view serves every stream to {who}, without authentication (Foxglove's "
-            f"WebSocket protocol has none), {wire}")
+    return f"warning: the live view serves every stream to {who}, if they hold the run's token, {wire}"
 
 
 def read_identity(options: LiveOptions) -> tuple[bytes, bytes] | tuple[None, None]:
@@ -113,7 +114,7 @@ class _Live:
 class LiveServer:
     """A Foxglove WebSocket server fed as a recorder output."""
 
-    def __init__(self, options: LiveOptions, name: str = "hapticop"):
+    def __init__(self, options: LiveOptions, name: str = "hapticop", run_dir: Path | None = None):
         require_sdk()
         import foxglove
 
@@ -121,14 +122,26 @@ class LiveServer:
         self.period_ns = int(1e9 / options.rate_hz)
         self.context = foxglove.Context()  # this server's channels alone (not the SDK's global context)
         cert, key = read_identity(options)
+        where = f"{options.host}:{options.port}"
+        try:  # the SDK's own server: loopback, any port, reached through the gate only
+            self.server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self.context)
+        except Exception as error:  # noqa: BLE001 - the SDK raises its own error types
+            raise LiveViewUnavailable(f"the live view cannot listen on 127.0.0.1: {error}") from error
+        token = new_token()
         try:
-            self.server = foxglove.start_server(name=name, host=options.host, port=options.port, context=self.context,
-                                                tls_cert=cert, tls_key=key)
-        except Exception as error:  # noqa: BLE001 - the SDK raises its own error types for a port in use
-            where = f"{options.host}:{options.port}"
+            self.gate = Gate(options.host, options.port, self.server.port, token,
+                             (cert, key) if cert is not None and key is not None else None)
+        except (OSError, ValueError) as error:
+            self.server.stop()
             raise LiveViewUnavailable(f"the live view cannot listen on {where}: {error}") from error
         scheme = "wss" if cert else "ws"
-        self.address = f"{scheme}://{options.host}:{self.server.port}"  # the port chosen when asked for any (0)
+        self.public_address = f"{scheme}://{options.host}:{self.gate.port}"  # the port chosen when asked for any (0)
+        self.address = f"{self.public_address}/?token={token}"  # what a client opens
+        try:
+            self.token_file = write_token(run_dir, self.gate.port, token) if run_dir is not None else None
+        except OSError as error:
+            self.stop()
+            raise LiveViewUnavailable(f"the live view cannot write its token in {run_dir}: {error.strerror}") from None
         self._schemas: list[object] = []
         self._channels: list[_Live] = []
         self.sent = 0
@@ -182,4 +195,5 @@ class LiveServer:
         self.sent += len(chosen)
 
     def stop(self) -> None:
-        self.server.stop()
+        self.server.stop()  # its goodbye to each client first, through the gate
+        self.gate.stop()

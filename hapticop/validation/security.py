@@ -54,6 +54,9 @@ def check(source: Source, composition: Composition) -> Iterator[Diagnostic]:
     for name, host in composition.hosts.items():
         present = keys.files(directory, name).key.exists()
         addresses = [keys.endpoint_address(e) for e in host.endpoints]
+        for path, soon in keys.ending_soon(directory, name):
+            yield Diagnostic("security-expiry", f"host '{name}': {path} {soon}", ("security", "keys"),
+                             Severity.WARNING, hint="renew the keys before then (docs/security.md, 'Rotation')")
         for path, problem in keys.problems(directory, name, addresses, private=present or not any_private):
             yield Diagnostic("security-keys", f"host '{name}': {path} {problem}", ("security", "keys"),
                              hint=f"`hapticop hosts keys FILE{' --force' if 'missing' not in problem else ''}` "
