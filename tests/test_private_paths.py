@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from hapticop.runtime.rundirs import private_directory
+from hapticop.rundirs import private_directory
 
 from .conftest import ROOT
 from .runtime_helpers import COUNTER

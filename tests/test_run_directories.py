@@ -8,7 +8,7 @@ import stat
 
 import pytest
 
-from hapticop.runtime.rundirs import RunDirectoryError, new_run_directory, private_directory, prune_runs
+from hapticop.rundirs import RunDirectoryError, new_run_directory, private_directory, prune_runs
 
 from .runtime_helpers import COUNTER
 

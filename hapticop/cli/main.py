@@ -238,7 +238,7 @@ def _one_host(validated, file: Path, host: str | None, clock: ClockKind, run_dir
         raise typer.Exit(2)
     if host is None:
         from hapticop.cli.hosts import run_every_host
-        from hapticop.runtime.rundirs import new_run_directory, private_directory
+        from hapticop.rundirs import new_run_directory, private_directory
 
         parent = private_directory(run_dir) if run_dir else new_run_directory(
             validated.composition.name or file.stem, group=group_readable)
@@ -410,8 +410,8 @@ def bare_options(argv: list[str]) -> list[str]:
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless HAPTICOP_DEBUG is set."""
     from hapticop.control.address import ControlError
+    from hapticop.rundirs import RunDirectoryError
     from hapticop.runtime.preflight import DevicesMissing
-    from hapticop.runtime.rundirs import RunDirectoryError
     from hapticop.runtime.supervisor import ExitStatus, ForcedExit
 
     try:

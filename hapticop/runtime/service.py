@@ -14,6 +14,7 @@ from hapticop.composition.placement import BRIDGE, HEALTH, LINK_FIGURES, link_st
 from hapticop.control.address import ControlError, is_system_name, socket_path
 from hapticop.control.server import ControlServer
 from hapticop.coordination.coordinator import Coordinator
+from hapticop.rundirs import private_directory
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
 from hapticop.runtime.described import Description
 from hapticop.runtime.lifecycle import OK
@@ -21,7 +22,6 @@ from hapticop.runtime.live import APPLIED, APPLYING, LiveChanges
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing
-from hapticop.runtime.rundirs import private_directory
 from hapticop.runtime.streams import LatestSlot
 from hapticop.runtime.supervisor import SECOND, failure
 from hapticop.runtime.transport import writer_port

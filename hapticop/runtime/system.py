@@ -27,6 +27,7 @@ from hapticop.composition.description import Composition
 from hapticop.composition.lcsm import State
 from hapticop.composition.loader import Loaded, ResolvedActivity
 from hapticop.coordination.coordinator import Coordinator
+from hapticop.rundirs import directory_mode, new_run_directory
 from hapticop.runtime import realtime
 from hapticop.runtime.assembly import build, layout_of, make_runner, make_transports
 from hapticop.runtime.clock import RealtimeClock, VirtualClock
@@ -39,7 +40,6 @@ from hapticop.runtime.pacing import Pacing
 from hapticop.runtime.preflight import DevicesMissing, missing_devices
 from hapticop.runtime.region import Region
 from hapticop.runtime.report import timing, write_timing
-from hapticop.runtime.rundirs import directory_mode, new_run_directory
 from hapticop.runtime.scheduler import Scheduler
 from hapticop.runtime.service import ControlService, control_path
 from hapticop.runtime.supervisor import SECOND, ExitStatus, Supervisor
