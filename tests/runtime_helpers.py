@@ -16,7 +16,7 @@ from hapticop.validation import validate_path
 
 
 def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name="c", on_start=None,
-            shutdown_timeout="2s", control=None, record: str | None = None) -> RunResult:
+            shutdown_timeout="5s", control=None, record: str | None = None) -> RunResult:
     path = tmp_path / f"{name}.yaml"
     path.write_text(textwrap.dedent(text))
     validated = validate_path(path)
@@ -30,7 +30,7 @@ def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name
 PATIENCE_S = 30.0  # what a condition may take on a loaded machine: a bound on hangs, never a speed requirement
 
 
-def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdown_timeout: str = "2s") -> RunResult:
+def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdown_timeout: str = "5s") -> RunResult:
     """Run `text` on the wall clock until `condition(system)` holds, then shut it down: a test
     waits for what it checks to happen, not for a duration it hopes is long enough. The run
     fails the test if the condition does not hold within PATIENCE_S."""
