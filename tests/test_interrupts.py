@@ -83,3 +83,12 @@ def test_ctrl_c_leaves_cleanly_at_every_moment_of_start_up(tmp_path, moment, pre
     assert not [name for name in segments if Path("/dev/shm", name).exists()]
     assert not [pid for pid in children if _alive(pid)]
     assert not (tmp_path / "control.sock").exists()
+
+
+def test_a_command_started_with_ctrl_c_ignored_takes_it_from_the_start():
+    """A shell's background job inherits Ctrl+C ignored; a run takes it once it runs, so the command
+    must take it before as well (ignored until then, one sent while the run's processes started was lost)."""
+    probe = "import signal, hapticop.cli; print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)"
+    done = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert done.stdout.strip() == "True", done.stderr
