@@ -27,8 +27,6 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
-Positive = Field(gt=0)
-
 
 class Material(_Strict):
     """How a surface grips and looks."""
@@ -50,6 +48,8 @@ MATERIALS: dict[str, Material] = {
 
 
 class Floor(_Strict):
+    """The floor everything stands on."""
+
     material: str = Field("floor", description="a material of MATERIALS or of the scene's `materials`")
 
 
@@ -67,23 +67,23 @@ class Block3(_Strict):
 class Cylinder(_Strict):
     """A static upright cylinder standing on the floor: a column, a post."""
 
-    name: str = ""
-    radius_m: float = Positive
-    height_m: float = Positive
+    name: str = Field("", description="what it is called in messages")
+    radius_m: float = Field(gt=0, description="its radius (m)")
+    height_m: float = Field(gt=0, description="its height (m)")
     position_m: tuple[float, float] = Field(description="its axis' x, y (m)")
-    material: str = "wall"
+    material: str = Field("wall", description="a material of MATERIALS or of the scene's `materials`")
 
 
 class Movable(_Strict):
     """A body that moves when pushed: it slides on the floor with its friction and damping."""
 
-    name: str = ""
-    shape: Literal["box", "cylinder"] = "box"
+    name: str = Field("", description="what it is called in messages")
+    shape: Literal["box", "cylinder"] = Field("box", description="its shape")
     size_m: tuple[float, float, float] | None = Field(None, description="a box's full lengths x, y, z (m)")
     radius_m: float | None = Field(None, gt=0, description="a cylinder's radius (m)")
     height_m: float | None = Field(None, gt=0, description="a cylinder's height (m)")
     position_m: tuple[float, float] = Field(description="its centre x, y (m) on the floor")
-    yaw_deg: float = 0.0
+    yaw_deg: float = Field(0.0, description="turned counter-clockwise about z")
     mass_kg: float | None = Field(None, description="its mass: a movable body needs one (> 0)")
     material: str = Field("cardboard", description="a material of MATERIALS or of the scene's `materials`")
     friction: float | None = Field(None, ge=0, description="its sliding friction, if not its material's")
@@ -98,8 +98,8 @@ class Lidar(_Strict):
     height_m: float = Field(0.20, gt=0, description="above the floor (thesis §4.3.3: 20 cm)")
     yaw_deg: float = Field(math.degrees(_ROBOT.lidar.yaw_rad), description="its heading on the robot")
     noise_sigma_m: float = Field(0.01, ge=0, description="Gaussian range noise (standard deviation)")
-    min_range_m: float = Field(0.05, gt=0)
-    max_range_m: float = Field(10.0, gt=0)
+    min_range_m: float = Field(0.05, gt=0, description="nearer returns count as none")
+    max_range_m: float = Field(10.0, gt=0, description="farther returns count as none")
 
 
 class Robot(_Strict):
@@ -111,40 +111,42 @@ class Robot(_Strict):
     height_m: float = Field(0.15, gt=0, description="its body's height; it rides 5 mm above the floor")
     mass_kg: float = Field(36.5, gt=0, description="the plant's mass (thesis §4.3.2)")
     yaw_inertia_kgm2: float = Field(2.6, gt=0, description="the plant's I_z")
-    lidar: Lidar = Field(default_factory=Lidar)
+    lidar: Lidar = Field(default_factory=Lidar, description="the scanner on it")
 
 
 class Pillar(_Strict):
-    x_m: float
-    along_m: float
-    depth_m: float
-    side: Literal["left", "right"] = "right"
+    """A pillar against a side wall, for the judge's side clearance (the scene's boxes are its geometry)."""
+
+    x_m: float = Field(description="its centre along the hallway")
+    along_m: float = Field(description="its length along the hallway")
+    depth_m: float = Field(description="how far it stands out of the wall")
+    side: Literal["left", "right"] = Field("right", description="the wall it stands against")
 
 
 class HallwayTask(_Strict):
     """What the hallway experiment's judge measures against (docs/hallway-experiment.md §2, §5)."""
 
-    name: str
-    width_m: float = Positive
-    length_m: float = Positive
-    entrance_x_m: float = 0.0
-    dist1_m: float = 0.40
-    dist2_m: float = 0.50
-    dist3_m: float = 0.10
-    pillars: tuple[Pillar, ...] = ()
+    name: str = Field(description="H1..H6 of docs/hallway-experiment.md §2")
+    width_m: float = Field(gt=0, description="between the side walls")
+    length_m: float = Field(gt=0, description="x of the end wall's face")
+    entrance_x_m: float = Field(0.0, description="x of the open entrance")
+    dist1_m: float = Field(0.40, description="side clearance to keep")
+    dist2_m: float = Field(0.50, description="where the front should stop before the end wall")
+    dist3_m: float = Field(0.10, description="virtual bumper: nearer counts as a collision")
+    pillars: tuple[Pillar, ...] = Field((), description="pillars against the side walls")
 
 
 class Scene(_Strict):
     """A whole scene. Static geometry may touch but not overlap; the robot starts clear of it."""
 
-    doc: str = ""
+    doc: str = Field("", description="what the scene is, in words")
     materials: dict[str, Material] = Field(default_factory=dict, description="materials of its own, by name")
-    floor: Floor = Field(default_factory=Floor)
-    walls: tuple[Block3, ...] = ()
-    boxes: tuple[Block3, ...] = ()
-    cylinders: tuple[Cylinder, ...] = ()
+    floor: Floor = Field(default_factory=Floor, description="an endless plane at z = 0")
+    walls: tuple[Block3, ...] = Field((), description="static boxes (default material 'wall')")
+    boxes: tuple[Block3, ...] = Field((), description="more static boxes: pillars, shelves")
+    cylinders: tuple[Cylinder, ...] = Field((), description="static upright cylinders")
     bodies: tuple[Movable, ...] = Field((), description="movable bodies")
-    robot: Robot = Field(default_factory=Robot)
+    robot: Robot = Field(default_factory=Robot, description="the ropod: its start, body and LIDAR")
     hallway: HallwayTask | None = Field(None, description="the hallway experiment's task, for its judge")
     timestep_s: float = Field(0.001, gt=0, le=0.01, description="the engine's step: the simulators' period")
 

@@ -29,8 +29,8 @@ class SceneWorldParams(HallwayWorldParams):
     hallway: None = Field(None, description="not used: the scene says what it is (its `hallway` task)")
     operator: str | None = Field(None, description="the activity whose run this world judges (block "
                                  "blind_operator): its variant sets the targets")
-    scene: str | Scene = Field("H1", description="the scene: written here, or a scene file (a shipped name such as 'H1', "
-                               "or a path beside the composition; .yaml, or .xml for MJCF): docs/scenes.md")
+    scene: str | Scene = Field("H1", description="the scene: written here, or a scene file (a shipped name such as "
+                               "'H1', or a path beside the composition; .yaml, or .xml for MJCF): docs/scenes.md")
 
 
 def _loaded(params: SceneWorldParams, folder: Path | None = None):
