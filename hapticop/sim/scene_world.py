@@ -15,9 +15,10 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from hapticop.blocks.interface import Display, Interface, Port
 from hapticop.composition.diagnostics import Diagnostic
@@ -26,11 +27,21 @@ from hapticop.sim.world import HallwayWorld, HallwayWorldParams
 
 
 class SceneWorldParams(HallwayWorldParams):
-    hallway: None = Field(None, description="not used: the scene says what it is (its `hallway` task)")
+    hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] | None = Field(
+        None, description="the shipped scene of that hallway (docs/hallway-experiment.md §2): `scene: H2` said as "
+        "hallway_world says it")
     operator: str | None = Field(None, description="the activity whose run this world judges (block "
                                  "blind_operator): its variant sets the targets")
     scene: str | Scene = Field("H1", description="the scene: written here, or a scene file (a shipped name such as "
                                "'H1', or a path beside the composition; .yaml, or .xml for MJCF): docs/scenes.md")
+
+    @model_validator(mode="after")
+    def _hallway_names_the_scene(self) -> SceneWorldParams:
+        if self.hallway is not None:
+            if "scene" in self.model_fields_set and self.scene != self.hallway:
+                raise ValueError(f"hallway {self.hallway} and scene {self.scene!r} say different things: give one")
+            object.__setattr__(self, "scene", self.hallway)
+        return self
 
 
 def _loaded(params: SceneWorldParams, folder: Path | None = None):
