@@ -234,3 +234,20 @@ def test_the_scene_world_publishes_contact_and_bodies(tmp_path):
     assert world.outputs.body_poses.value[0, 0] > 1.2 + 0.02  # and moves
     assert not world.outputs.collision.value  # a movable body is not a collision
     assert math.isclose(world.outputs.pose_in_hallway.value[0], 0.5 + 0.3 * 899e-3)
+
+
+def test_the_scene_world_judges_touching_a_wall_a_collision(tmp_path):
+    clock = VirtualClock()
+    scene = Scene(walls=(Block3(size_m=(0.1, 4.0, 1.0), position_m=(1.5, 0.0)),), robot=Robot(start=(0.5, 0.0, 0.0)))
+    world = standalone(SceneWorld, "world", {"scene": scene.model_dump(), "judge": False}, tmp_path, clock)
+    world.create()
+    robot_pose = world.inputs.robot_pose
+    touched = []
+    for i, x in enumerate((0.5, 0.59, 0.61)):  # the front at 1.35 + x: clear, clear, into the wall's face at 1.45
+        clock.advance_to(clock.now_ns() + 1_000_000)
+        robot_pose.value[:] = (x, 0.0, 0.0)
+        robot_pose.meta[0] = i + 1
+        world.compute()
+        touched.append(int(world.outputs.collision.value))
+    assert touched == [0, 0, 1]
+    assert world.outputs.contact_wrench.value[0] < 0.0  # the wall pushes back
