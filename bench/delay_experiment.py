@@ -139,7 +139,7 @@ def run_one(rtt_ms: int, loss: float, tank: bool, governor: bool, i: int, hallwa
     tree = apply_patch(tree, cell_patch(rtt_ms, loss, tank, governor, i))
     tree = apply_patch(tree, {"activities": {
         "operator": {"params": {"variant": profile, "variation": variation, "time_limit_s": TIME_LIMIT_S}},
-        "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": TIME_LIMIT_S}}}})
+        "world": {"params": {"scene": hallway, "plot": False, "time_limit_s": TIME_LIMIT_S}}}})
     validated = validate_source(Source("teleop_sim.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
     activities = validated.graph.loaded.activities

@@ -56,7 +56,7 @@ def run_one(model: str, profile: str, variation: int, hallway: str, braking_fiel
     patch = {"activities": {"haptic": {"params": haptic},
                             "operator": {"params": {"variant": profile, "variation": variation,
                                                     "time_limit_s": limit}},
-                            "world": {"params": {"hallway": hallway, "plot": False, "time_limit_s": limit}}}}
+                            "world": {"params": {"scene": hallway, "plot": False, "time_limit_s": limit}}}}
     tree = apply_patch(tree, patch)
     validated = validate_source(Source("hallway.yaml", tree, source.text), state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]

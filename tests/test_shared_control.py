@@ -219,7 +219,7 @@ def shared_run(tmp_path_factory):
         extends: {SYSTEMS / 'hallway_shared.yaml'}
         activities:
           operator: {{params: {{variant: aggressive, variation: 0, time_limit_s: 50.0}}}}
-          world: {{params: {{hallway: H2, plot: false, time_limit_s: 50.0}}}}
+          world: {{params: {{scene: H2, plot: false, time_limit_s: 50.0}}}}
         """
     result = compose(tmp, text, duration=None, name="shared", seed=0)
     return result, tmp / "run-shared"

@@ -25,9 +25,11 @@ what follows. `compute` is the time-critical step: it reads `self.inputs`, write
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
 from hapticop.blocks.interface import Display, Interface, Need, Params, Port, RateRange
+from hapticop.composition.diagnostics import Diagnostic
 
 if TYPE_CHECKING:
     from hapticop.runtime.context import ActivityContext
@@ -98,6 +100,13 @@ class Block:
         message. It may block, at most `timeout_s`; it must leave the device as it found it.
         """
         return None
+
+    @classmethod
+    def findings(cls, params: Params, folder: Path | None) -> list[Diagnostic]:
+        """What is wrong with these parameters that their model alone cannot say, such as a file they
+        name (a scene) read from `folder` (the composition's): each finding's path is under the
+        activity's `params`, or it is already located in the file it blames. Asked by validation."""
+        return []
 
     @classmethod
     def promises(cls, params: Params) -> tuple[str, ...]:

@@ -55,6 +55,7 @@ BUILTIN: dict[str, str] = {
     "energy_tank": "hapticop.blocks.tank:EnergyTankBlock",
     "speed_governor": "hapticop.blocks.governor:SpeedGovernor",
     "hallway_world": "hapticop.sim.world:HallwayWorld",
+    "scene_world": "hapticop.sim.scene_world:SceneWorld",
     "blind_operator": "hapticop.sim.blind_operator:Operator",
     "scripted_hand": "hapticop.sim.scripted_hand:ScriptedHand",
     "falcon_simulator": "hapticop.sim.devices.falcon:FalconSimulator",

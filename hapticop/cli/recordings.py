@@ -214,8 +214,10 @@ def _from_streams(run, target: Path, hallway: str | None) -> None:
 
     composition = run.loaded.composition
     if hallway is None:
-        worlds = [a for a in run.loaded.activities.values() if a.spec.block == "hallway_world"]
-        hallway = str(getattr(worlds[0].params, "hallway", "H1")) if worlds else "H1"
+        worlds = [a for a in run.loaded.activities.values() if a.spec.block in ("hallway_world", "scene_world")]
+        params = worlds[0].params if worlds else None
+        named = getattr(params, "hallway", None) or getattr(params, "scene", None)
+        hallway = named if isinstance(named, str) else "H1"  # a scene_world names a shipped hallway by its scene
     try:
         geometry = HallwayGeometry.named(hallway)
     except (KeyError, ValueError):

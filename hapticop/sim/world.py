@@ -78,15 +78,20 @@ class HallwayWorld(Block):
 
     def create(self) -> None:
         from hapticop.sim.hallway import HallwayGeometry, World
-        from hapticop.sim.recording import TrajectoryRecorder
         from hapticop.sim.world_share import publish_world
 
-        p = self.params
-        self.geometry = HallwayGeometry.named(p.hallway)
+        self.geometry = HallwayGeometry.named(self.params.hallway)
         self.world = World.from_geometry(self.geometry)
         publish_world(self.run_dir, self.name, self.geometry)
-        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": p.hallway})
-        self.pose = self.outputs.pose_in_hallway.value
+        self.prepare(self.outputs.pose_in_hallway.value)
+
+    def prepare(self, pose: np.ndarray) -> None:
+        """The judge's state, once `geometry` is known; `pose` is the output the robot's pose goes to."""
+        from hapticop.sim.recording import TrajectoryRecorder
+
+        p = self.params
+        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": self.geometry.name})
+        self.pose = pose
         self.pose[:] = self.geometry.start
         self.started_ns: int | None = None  # when the operator started driving, on the system's clock
         self.ended = ""
@@ -104,19 +109,21 @@ class HallwayWorld(Block):
         self.extremes = {key: math.inf if lowest else -math.inf for key, _, lowest in self.watched}
 
     def compute(self) -> None:
-        inputs = self.inputs
-        if inputs.robot_pose.seq:  # the robot where it is, for the LIDAR, even before the operator drives
-            place(self.geometry.start, inputs.robot_pose.value, self.pose)
+        if self.inputs.robot_pose.seq:  # the robot where it is, for the LIDAR, even before the operator drives
+            place(self.geometry.start, self.inputs.robot_pose.value, self.pose)
         self.outputs.pose_in_hallway.publish()
+        if self.inputs.operator_time.seq and not self.ended:
+            self.judge(*self.world.clearance(self.pose, self.geometry.footprint))
+
+    def judge(self, clearance: float, crashed: bool) -> None:
+        """Record this cycle once the operator drives, and end the run when its time has come."""
+        inputs = self.inputs
         driven = inputs.operator_time
-        if not driven.seq or self.ended:
-            return
         now = self.clock.now_ns()
         if self.started_ns is None:  # the recording's time 0: when the operator started, on the system's clock
             self.started_ns = driven.stamp_ns - round(float(driven.value) * 1e9)
             self.recorder.meta["operator_start_ns"] = self.started_ns
         t = (now - self.started_ns) / 1e9
-        clearance, crashed = self.world.clearance(self.pose, self.geometry.footprint)
         vx, vy, wz = inputs.robot_twist.value.tolist()  # floats: numpy scalars are slow to compare
         self.velocity[0], self.velocity[1] = vx, wz
         setpoint = inputs.velocity_setpoint.value
@@ -157,7 +164,7 @@ class HallwayWorld(Block):
         withdraw_world(self.run_dir, self.name)
         if self.recorder.n < 2:
             return
-        operator = find_operator(self.run_dir, self.params.operator) or {}
+        operator = (find_operator(self.run_dir, self.params.operator) if self.params.operator else None) or {}
         self.variant = str(operator.get("variant", self.variant))
         self.recorder.meta.update(operator=self.variant, variation=operator.get("variation"))
         self.recorder.save(self.run_dir / "trajectory.npz")
@@ -174,7 +181,7 @@ class HallwayWorld(Block):
                 from hapticop.sim.plot import plot_run
 
                 plot_run(self.recorder, self.geometry, self.run_dir / "run.png",
-                         title=f"{self.params.hallway}, {self.variant} operator")
+                         title=f"{self.geometry.name}, {self.variant} operator")
             except RuntimeError as error:  # matplotlib missing: the numbers are still there
                 self.log.warning("no picture of the run: %s", error)
         self._results(metrics)
@@ -183,7 +190,7 @@ class HallwayWorld(Block):
         """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
         from hapticop.sim.targets import judged_rows
 
-        results = {"title": f"hallway {self.params.hallway}, {self.variant} operator",
+        results = {"title": f"hallway {self.geometry.name}, {self.variant} operator",
                    "rows": judged_rows(m, self.geometry, self.variant, end_time_s(m, self.recorder)),
                    "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 from hapticop.composition.description import Composition
 from hapticop.composition.diagnostics import Diagnostic, Report
@@ -49,7 +50,26 @@ def check_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> Vali
         for check in structure.CHECKS + coordination.CHECKS + modes.CHECKS:
             found = check(cg, state_limit) if check is coordination.reachability else check(cg)
             report.extend(placed(source, loaded, d) for d in found)
+        report.extend(_block_findings(source, loaded))
     return Validated(report, source, cg)
+
+
+def _block_findings(source: Source, loaded: Loaded) -> list[Diagnostic]:
+    """Each activity's block on what its parameters name outside the composition (a scene file)."""
+    folder = Path(source.file).resolve().parent if source.file and not source.file.startswith("<") else None
+    found = []
+    for name, activity in loaded.activities.items():
+        try:
+            findings = activity.block.findings(activity.params, folder)
+        except Exception as error:  # noqa: BLE001 - an author's block: its failure is a finding, not a crash
+            findings = [Diagnostic("block-findings", f"block '{activity.spec.block}' failed to check its "
+                                   f"parameters: {type(error).__name__}: {error}", ("block",))]
+        for d in findings:
+            if d.file:  # located in the file it blames
+                found.append(d)
+            else:
+                found.append(placed(source, loaded, replace(d, path=("activities", name) + tuple(d.path))))
+    return found
 
 
 def placed(source: Source, loaded: Loaded, diagnostic: Diagnostic) -> Diagnostic:

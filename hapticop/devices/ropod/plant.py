@@ -147,6 +147,9 @@ class RopodPlant:
         self._noise_p = np.zeros(units)
         self._rx_src: np.ndarray | None = None
         self._tx_src: np.ndarray | None = None
+        # An external force and torque on the platform (N, N, N m in its frame), held over a step: what
+        # the world's contacts push back with (a box being pushed, a wall).
+        self.external = [0.0, 0.0, 0.0]
         self.reset_state(p.initial_pose, p.initial_twist, p.initial_pivot_angles_rad)
 
     def reset_state(self, pose=(0.0, 0.0, 0.0), twist=(0.0, 0.0, 0.0), pivot_angles=None) -> None:
@@ -239,9 +242,10 @@ class RopodPlant:
             m12 += ci * q3
             m22 += q3 * q3
         m = p.mass_kg
-        r0 = fx + (m * wz * vy - p.linear_damping_ns_per_m * vx) + w0
-        r1 = fy + (-m * wz * vx - p.linear_damping_ns_per_m * vy) + w1
-        r2 = mz - p.yaw_damping_nms * wz + p.pivot_damping_nms * sdd + w2
+        ex, ey, ez = self.external
+        r0 = fx + (m * wz * vy - p.linear_damping_ns_per_m * vx) + w0 + ex
+        r1 = fy + (-m * wz * vx - p.linear_damping_ns_per_m * vy) + w1 + ey
+        r2 = mz - p.yaw_damping_nms * wz + p.pivot_damping_nms * sdd + w2 + ez
         if ic:
             d0, d1, d2 = self._diag
             _, i00, i01, i02, i11, i12, i22 = inverse_sym3(m00 * ic + d0, m01 * ic, m02 * ic, m11 * ic + d1, m12 * ic,

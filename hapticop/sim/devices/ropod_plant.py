@@ -6,7 +6,8 @@ Each step takes the newest wheel commands the master sent (the RxPDO images, ove
 (TxPDO images), every slave in OP and a full working counter. It publishes where the robot
 truly is, from where it started, for the simulated world; a controller never sees that.
 In the master's thread just before it, a command sent in one cycle's flush moves the robot
-in the next cycle, whose compute reads the sensors: the order of a real exchange.
+in the next cycle, whose compute reads the sensors: the order of a real exchange. In a scene
+(scene_world) the contacts' wrench on the robot comes back as an external force on the platform.
 """
 
 from __future__ import annotations
@@ -32,6 +33,10 @@ class RopodPlantSimulator(Block):
     outputs = {
         "robot_pose": Port("float64", (3,), "m, m, rad", "pose from where it started [x, y, theta]"),
         "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "true twist [vx, vy, wz]"),
+    }
+    inputs = {
+        "contact_wrench": Port("float64", (3,), "N, N, N m", "what the world's contacts push the robot with, in its "
+                               "frame (scene_world): pushing a box slows it, a wall stops it", required=False),
     }
     rate = RateRange(100.0, 4000.0, "the drives' model steps at the master's cycle")
 
@@ -65,6 +70,10 @@ class RopodPlantSimulator(Block):
         now = self.clock.now_ns()
         dt = min(max(now - self.last_ns, 0), _MAX_STEP_NS) / 1e9
         self.last_ns = now
+        contact = self.inputs.contact_wrench
+        if contact.seq:
+            external, wrench = self.plant.external, contact.value
+            external[0], external[1], external[2] = float(wrench[0]), float(wrench[1]), float(wrench[2])
         if dt > 0:
             self.plant.step(self.commands, dt, self.reply.inputs)
         link.send(self.reply.buffer)

@@ -23,6 +23,8 @@ from hapticop.blocks.interface import Interface, Params, Port, RateRange
 
 class Tim561SimulatorParams(Params):
     world: str = Field(description="the world activity whose hallway it scans")
+    bodies: int = Field(0, ge=0, description="movable bodies in the world's scene it sees move (the rows of "
+                        "scene_world's body_poses); 0: it sees them where they started")
     scan_rate_hz: float = Field(15.0, gt=0, le=100, description="the TiM561 scans at 15 Hz")
     sim_fault: Literal["none", "unplugged", "stall", "garbage"] = Field(
         "none", description="a fault of the simulated scanner, for fault scenarios (set it by a patch): "
@@ -39,8 +41,12 @@ class Tim561Simulator(Block):
 
     @classmethod
     def interface(cls, params: Tim561SimulatorParams) -> Interface:
+        inputs = {"pose_in_hallway": Port("float64", (3,), "m, m, rad", "where the robot is in its world")}
+        if params.bodies:
+            inputs["body_poses"] = Port("float64", (params.bodies, 3), "m, m, rad", "where the scene's movable "
+                                        "bodies are (scene_world's body_poses)")
         return Interface(
-            inputs={"pose_in_hallway": Port("float64", (3,), "m, m, rad", "where the robot is in the hallway")},
+            inputs=inputs,
             rate=RateRange(params.scan_rate_hz, 1000.0, "it sends each scan at the first step after it is due"),
         )
 
@@ -50,29 +56,38 @@ class Tim561Simulator(Block):
         self.waiting_logged = False
 
     def configure_resources(self) -> bool:
-        """Open the scanner once the world has published its hallway, and say where it listens."""
+        """Open the scanner once the world has published its hallway or scene, and say where it listens."""
         from hapticop.devices.link import publish_address
         from hapticop.devices.sick.device_model import ANGLES_RAD
         from hapticop.devices.sick.simulator import TiMSimulator
-        from hapticop.sim.hallway import World
         from hapticop.sim.world_share import find_world
 
         world = self.params.world
-        geometry = find_world(self.run_dir, world)
-        if geometry is None:
+        found = find_world(self.run_dir, world)
+        if found is None:
             if not self.waiting_logged:
                 self.log.info("waiting for the world '%s' to open its hallway", world)
                 self.waiting_logged = True
             return False
         if self.device is not None:  # configured again (a patch): a new scanner, without faults
             self.device.close()
-        self.walls = World.from_geometry(geometry)
-        self.lidar = geometry.lidar
-        self.start_pose = np.asarray(geometry.start, dtype=float)
-        self.mount = np.asarray(geometry.lidar.mount, dtype=float)
         self.angles = np.asarray(ANGLES_RAD, dtype=float)
         self.ranges = np.zeros(len(self.angles))
-        self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=geometry.lidar.noise_sigma_m,
+        self.start_pose = np.asarray(found.start, dtype=float)
+        if hasattr(found, "xml"):  # a scene: MuJoCo casts the rays
+            from hapticop.sim.engine import Engine
+
+            self.engine, self.walls = Engine(found.xml, world), None
+            self.limits = (found.min_range_m, found.max_range_m, found.yaw_rad)
+            noise = found.noise_sigma_m
+        else:  # hallway_world's walls
+            from hapticop.sim.hallway import World
+
+            self.engine, self.walls = None, World.from_geometry(found)
+            self.lidar = found.lidar
+            self.mount = np.asarray(found.lidar.mount, dtype=float)
+            noise = found.lidar.noise_sigma_m
+        self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=noise,
                                    rng=self.rng, clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
         self.fault = "none"
         # The first step sets the scans' schedule. A thread at the scan rate may wake later for
@@ -80,16 +95,23 @@ class Tim561Simulator(Block):
         # scan at the step nearest its time instead of a whole period late.
         self.ahead_ns = round(0.5e9 / self.params.scan_rate_hz)
         publish_address(self.run_dir, self.name, self.device.host, self.device.port)
-        self.log.info("TiM561 in the hallway of '%s' on %s:%d", world, self.device.host, self.device.port)
+        self.log.info("TiM561 in the world of '%s' on %s:%d", world, self.device.host, self.device.port)
         return True
 
     def _scan(self, _now_ns: int) -> np.ndarray:
-        """The ranges of the scan leaving now: the hallway ray-cast from where the robot is."""
+        """The ranges of the scan leaving now: the world ray-cast from where the robot is."""
         where = self.inputs.pose_in_hallway
         pose = where.value if where.seq > 0 else self.start_pose  # at its start until the world says
-        lidar = self.lidar
-        self.walls.raycast(pose, self.mount, self.angles, self.ranges, max_range=lidar.max_range_m,
-                           min_range=lidar.min_range_m)
+        if self.engine is not None:
+            if self.params.bodies and self.inputs.body_poses.seq > 0:
+                self.engine.place_bodies(self.inputs.body_poses.value)
+            self.engine.place_robot(pose)
+            low, high, yaw = self.limits
+            self.engine.scan(self.angles, self.ranges, low, high, yaw)
+        else:
+            lidar = self.lidar
+            self.walls.raycast(pose, self.mount, self.angles, self.ranges, max_range=lidar.max_range_m,
+                               min_range=lidar.min_range_m)
         np.nan_to_num(self.ranges, copy=False, nan=0.0)  # no echo: the TiM reports 0
         return self.ranges
 

@@ -1,0 +1,178 @@
+"""Where a world's scene comes from, and what is wrong with it, located.
+
+A scene is written inline in the composition, or in a YAML file (a name alone, such as `H1`, is one of
+the scenes shipped in `hapticop/sim/scenes/`; a path is found beside the composition the way a block
+module beside it is), or is an MJCF file (`.xml`) for anything richer. Every finding names the file,
+line and field it blames: a material nobody defined, a movable body without mass, static geometry that
+overlaps, a robot that starts inside something, and a scene MuJoCo cannot load (its message, one line).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from hapticop.composition.diagnostics import Diagnostic
+from hapticop.composition.model_errors import diagnostics_from
+from hapticop.composition.yamlsource import SourceError, parse_text, read_text
+from hapticop.sim.scene import Scene, to_mjcf
+
+SHIPPED = Path(__file__).resolve().parent / "scenes"
+OVERLAP_M = 1e-4
+"""Static geometry may touch (walls meeting at a corner); deeper than this it overlaps."""
+
+
+@dataclass(frozen=True)
+class Loaded:
+    """A scene ready for the engine: its MJCF, and the scene model when it was written as one."""
+
+    xml: str
+    scene: Scene | None
+    file: str  # where it came from ("" inline)
+
+
+def find(name: str, folder: Path | None = None) -> Path | None:
+    """The file a scene reference names: absolute; a shipped name; beside the composition (`folder`, or
+    the folders on the search path, where `hapticop.blocks.registry.search_beside` puts it)."""
+    path = Path(name)
+    if path.is_absolute():
+        return path if path.exists() else None
+    if path.suffix == "" and (SHIPPED / f"{name}.yaml").is_file():
+        return SHIPPED / f"{name}.yaml"
+    folders = ([folder] if folder is not None else []) + [Path(p) for p in sys.path if p]
+    for place in folders:
+        candidate = place / path
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tuple[Loaded | None, list[Diagnostic]]:
+    """The scene `ref` names, checked; or None and the findings (paths under `prefix` for an inline one)."""
+    if isinstance(ref, Scene):
+        found = check(ref, prefix)
+        return (None if found else Loaded(to_mjcf(ref), ref, "")), found
+    path = find(ref, folder)
+    if path is None:
+        return None, [Diagnostic("scene-file", f"no scene '{ref}': not a shipped scene "
+                                 f"({', '.join(sorted(p.stem for p in SHIPPED.glob('*.yaml')))}) nor a file beside "
+                                 "the composition", prefix, hint="a path relative to the composition's folder")]
+    try:
+        text = read_text(path, "a scene")
+    except SourceError as error:
+        return None, [error.diagnostic]
+    if path.suffix.lower() == ".xml":
+        found = _loads(text, str(path), ())
+        return (None if found else Loaded(text, None, str(path))), found
+    try:
+        source = parse_text(text, str(path))
+    except SourceError as error:
+        return None, [error.diagnostic]
+    try:
+        scene = Scene.model_validate(source.tree)
+    except ValidationError as error:
+        return None, [source.place(d) for d in diagnostics_from(error, Scene)]
+    found = [source.place(d) for d in check(scene, ())]
+    return (None if found else Loaded(to_mjcf(scene, path.stem), scene, str(path))), found
+
+
+def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:
+    """What is wrong with a scene that its model alone cannot say."""
+    found = []
+    for kind in ("walls", "boxes", "cylinders", "bodies"):
+        for i, item in enumerate(getattr(scene, kind)):
+            if scene.material(item.material) is None:
+                known = sorted({*scene.materials, *_shipped_materials()})
+                found.append(Diagnostic("scene-material", f"unknown material '{item.material}'",
+                                        prefix + (kind, i, "material"), hint=f"one of {', '.join(known)}, or "
+                                        "define it under 'materials'"))
+    floor = scene.floor.material
+    if scene.material(floor) is None:
+        found.append(Diagnostic("scene-material", f"unknown material '{floor}'", prefix + ("floor", "material")))
+    for i, body in enumerate(scene.bodies):
+        if body.mass_kg is None or body.mass_kg <= 0:
+            found.append(Diagnostic("scene-mass", f"movable body '{body.name or i}' has no mass: a body that moves "
+                                    "needs mass_kg > 0", prefix + ("bodies", i), hint="mass_kg: 5.0; or make it a "
+                                    "static box under 'boxes'"))
+        if body.shape == "box" and body.size_m is None:
+            found.append(Diagnostic("scene-shape", "a movable box needs size_m", prefix + ("bodies", i)))
+        if body.shape == "cylinder" and (body.radius_m is None or body.height_m is None):
+            found.append(Diagnostic("scene-shape", "a movable cylinder needs radius_m and height_m",
+                                    prefix + ("bodies", i)))
+    if found:
+        return found
+    xml = to_mjcf(scene)
+    loading = _loads(xml, "", prefix)
+    return loading or _overlaps(scene, xml, prefix)
+
+
+def _shipped_materials() -> list[str]:
+    from hapticop.sim.scene import MATERIALS
+
+    return list(MATERIALS)
+
+
+def _loads(xml: str, file: str, prefix: tuple) -> list[Diagnostic]:
+    """MuJoCo's own word on the scene, as one line; nothing when it loads and has the robot."""
+    from hapticop.sim.engine import Engine
+
+    try:
+        Engine(xml)
+    except Exception as error:  # noqa: BLE001 - MuJoCo's errors are ValueError or its own: one finding
+        message = " ".join(str(error).split())
+        return [Diagnostic("scene-load", f"MuJoCo cannot load the scene: {message}", prefix, file=file)]
+    return []
+
+
+def _overlaps(scene: Scene, xml: str, prefix: tuple) -> list[Diagnostic]:
+    """Static geometry overlapping other static geometry; the robot or a body starting inside anything."""
+    import math
+
+    import mujoco
+    import numpy as np
+
+    from hapticop.sim.engine import Engine
+
+    engine = Engine(xml)
+    m, d = engine.model, engine.data
+    start = scene.robot.start
+    engine.place_robot(np.array([start[0], start[1], math.radians(start[2])]))
+    mujoco.mj_kinematics(m, d)
+    paths = {name: path for name, path in scene.static_names()}
+    geom = {name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name) for name in paths}
+    names = list(paths)
+    found = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            depth = mujoco.mj_geomDistance(m, d, geom[names[a]], geom[names[b]], 0.01, None)
+            if depth < -OVERLAP_M:
+                found.append(Diagnostic("scene-overlap", f"{_what(scene, paths[names[b]])} overlaps "
+                                        f"{_what(scene, paths[names[a]])} by {-depth * 1000:.0f} mm",
+                                        prefix + paths[names[b]], hint="static geometry may touch, not overlap"))
+    movers = [("robot", engine.robot_geom, ("robot", "start"))] + [
+        (f"body '{b.name or i}'", mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"bodies[{i}]"), ("bodies", i,
+                                                                                                  "position_m"))
+        for i, b in enumerate(scene.bodies)]
+    for what, g, path in movers:
+        for name in names:
+            depth = mujoco.mj_geomDistance(m, d, g, geom[name], 0.01, None)
+            if depth < -OVERLAP_M:
+                found.append(Diagnostic("scene-start-inside", f"the {what} starts inside "
+                                        f"{_what(scene, paths[name])} ({-depth * 1000:.0f} mm deep)", prefix + path,
+                                        hint="move it clear of the static geometry"))
+    for what, g, path in movers[1:]:
+        depth = mujoco.mj_geomDistance(m, d, g, engine.robot_geom, 0.01, None)
+        if depth < -OVERLAP_M:
+            found.append(Diagnostic("scene-start-inside", f"the {what} starts inside the robot "
+                                    f"({-depth * 1000:.0f} mm deep)", prefix + path, hint="move it clear of the "
+                                    "robot's start"))
+    return found
+
+
+def _what(scene: Scene, path: tuple) -> str:
+    kind, i = path
+    name = getattr(scene, kind)[i].name
+    return f"{kind}[{i}]" + (f" '{name}'" if name else "")
