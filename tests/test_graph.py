@@ -113,12 +113,15 @@ def test_an_unknown_view_lists_the_views():
 
 # -- the layout without graphviz: legible on the shipped systems ---------------------------------
 
-# Edge crossings the layered layout drew before it packed parts, chose its direction and kept its
-# best ordering (counted with `crossings` on that layout): it may not draw more.
+# Edge crossings the layered layout may draw at most (counted with `crossings`): what it drew before
+# it packed parts, chose its direction and kept its best ordering, and, for a composition changed
+# since, what it drew once the change came (the hallway's scene world feeds its contact force back
+# to the plant: one stream against the flow, 21 -> 38 crossings in the dataflow). A change to the
+# layout may not draw more.
 CROSSINGS_BEFORE = {
-    ("hallway", "dataflow"): 21, ("hallway", "nets"): 184, ("hallway", "all"): 248,
-    ("teleop", "dataflow"): 42, ("teleop", "nets"): 185, ("teleop", "all"): 284,
-    ("teleop_sim", "dataflow"): 87, ("teleop_sim", "nets"): 184, ("teleop_sim", "all"): 328,
+    ("hallway", "dataflow"): 38, ("hallway", "nets"): 184, ("hallway", "all"): 248,
+    ("teleop", "dataflow"): 50, ("teleop", "nets"): 185, ("teleop", "all"): 284,
+    ("teleop_sim", "dataflow"): 108, ("teleop_sim", "nets"): 184, ("teleop_sim", "all"): 328,
     ("wall", "dataflow"): 10, ("wall", "nets"): 1, ("wall", "all"): 11,
 }
 
