@@ -36,7 +36,8 @@ BEAMS = 181  # -90 to 90 degrees, one degree apart
 
 def say(**what) -> None:
     with LOCK:
-        print(json.dumps(what), flush=True)
+        sys.stdout.write(json.dumps(what) + "\n")  # the client's protocol, read by the tests, not a figure
+        sys.stdout.flush()
 
 
 def endpoint(kind, topic: str, ros_type: str, port: int, node: str, **extra):

@@ -17,7 +17,7 @@ from tests.test_ros2_bridge import Client, _free_port, router
 SYSTEM = Path(__file__).parent.parent / "systems" / "ros2_teleop.yaml"
 
 
-def test_the_falcon_drives_a_ros2_robot_down_the_corridor_to_a_stop(tmp_path, monkeypatch):
+def test_the_falcon_drives_a_ros2_robot_down_the_corridor_to_a_stop(tmp_path, monkeypatch, figure):
     import tests.runtime_helpers
 
     # the run itself takes some 20 s (start-up, 14 s of pushing, the stop): a wider bound on hangs
@@ -45,8 +45,7 @@ def test_the_falcon_drives_a_ros2_robot_down_the_corridor_to_a_stop(tmp_path, mo
                            f"the robot stopped near the corridor's end (last x {travelled['x']:.2f} m)", name="teleop")
         assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
         assert travelled["x"] > 4.0 and travelled["stopped_for"] >= 50  # not ended some other way
-        print(f"stopped at x = {travelled['x']:.3f} m, the end wall at 6 m")
+        figure(f"stopped at x = {travelled['x']:.3f} m, the end wall at 6 m")
     finally:
-        print("the robot's last odometry:", [line for line in robot.drain() if "odom" in line][-3:])
         robot.close()
         hub.close()
