@@ -176,7 +176,7 @@ def test_an_exploding_body_stops_the_run_with_one_message():
             engine.step()
 
 
-def _scans(tmp_path, world, count: int = 3) -> list[np.ndarray]:
+def _scans(tmp_path, world, count: int = 3) -> dict[int, np.ndarray]:
     clock = VirtualClock()
     scanner = standalone(Tim561Simulator, "lidar_sim", {"world": "world"}, tmp_path, clock, seed=3)
     scanner.create()
@@ -186,13 +186,14 @@ def _scans(tmp_path, world, count: int = 3) -> list[np.ndarray]:
     pose = scanner.inputs.pose_in_hallway
     pose.value[:] = (4.0, 0.25, 0.2)
     pose.meta[0] = 1
-    ranges, scans = np.zeros(811), []
+    ranges, scans = np.zeros(811), {}
     try:
         for _ in range(200):
             clock.advance_to(clock.now_ns() + 66_666_667)
             scanner.compute()
+            # by scan counter: on a busy machine a telegram may reach the client a step later
             if client.poll(clock.now_ns()) >= 1 and client.latest_scan(ranges):
-                scans.append(ranges.copy())
+                scans[client.header.scan_counter] = ranges.copy()
                 if len(scans) == count:
                     return scans
         raise AssertionError("no scans")
@@ -203,14 +204,16 @@ def _scans(tmp_path, world, count: int = 3) -> list[np.ndarray]:
 
 
 def test_the_scanner_on_a_scene_sends_what_it_sent_in_the_hallway(tmp_path):
-    from hapticop.sim.scene_world import PublishedScene
+    from hapticop.sim.world_share import PublishedScene
 
     loaded, _ = scene_files.load("H4")
     scene = PublishedScene(loaded.xml, (0.5, 0.0, 0.0), 0.01, 0.05, 10.0, 0.0)
-    hallway = _scans(tmp_path, HallwayGeometry.named("H4"))
-    on_scene = _scans(tmp_path, scene)
-    for a, b in zip(hallway, on_scene):
-        assert np.array_equal(a, b, equal_nan=True)  # the same telegrams' ranges, noise and all
+    hallway = _scans(tmp_path, HallwayGeometry.named("H4"), count=6)
+    on_scene = _scans(tmp_path, scene, count=6)
+    both = sorted(set(hallway) & set(on_scene))
+    assert len(both) >= 3, (sorted(hallway), sorted(on_scene))
+    for counter in both:  # the same telegrams' ranges, noise and all
+        assert np.array_equal(hallway[counter], on_scene[counter], equal_nan=True), counter
 
 
 def test_the_scene_world_publishes_contact_and_bodies(tmp_path):

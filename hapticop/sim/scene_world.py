@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -103,7 +102,7 @@ class SceneWorld(HallwayWorld):
 
     def create(self) -> None:
         from hapticop.sim.engine import Engine
-        from hapticop.sim.world_share import publish_world
+        from hapticop.sim.world_share import PublishedScene, publish_world
 
         loaded, found = _loaded(self.params)
         if loaded is None:
@@ -145,18 +144,6 @@ class SceneWorld(HallwayWorld):
             out.body_poses.publish()
         if inputs.operator_time.seq and not self.ended:
             self.judge(clearance, clearance <= 0.0)
-
-
-@dataclass(frozen=True)
-class PublishedScene:
-    """What the world tells the simulators in its scene: the compiled scene and the LIDAR's model."""
-
-    xml: str
-    start: tuple[float, float, float]
-    noise_sigma_m: float
-    min_range_m: float
-    max_range_m: float
-    yaw_rad: float
 
 
 def _judged_geometry(scene: Scene):

@@ -9,21 +9,37 @@ the operator says who it is (its variant), which the world's judge needs for the
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from hapticop.published import publish, published, withdraw
 from hapticop.sim.hallway import HallwayGeometry
 
 
-def publish_world(run_dir: Path, activity: str, geometry: HallwayGeometry) -> None:
-    """Write the world's geometry where its simulators look."""
+@dataclass(frozen=True)
+class PublishedScene:
+    """What a scene world tells the simulators in it: the compiled scene and the LIDAR's model."""
+
+    xml: str
+    start: tuple[float, float, float]
+    noise_sigma_m: float
+    min_range_m: float
+    max_range_m: float
+    yaw_rad: float
+
+
+def publish_world(run_dir: Path, activity: str, geometry: HallwayGeometry | PublishedScene) -> None:
+    """Write the world's geometry (a hallway's walls, or a scene) where its simulators look."""
     publish(run_dir, "worlds", activity, geometry)
 
 
-def find_world(run_dir: Path, activity: str) -> HallwayGeometry | None:
+def find_world(run_dir: Path, activity: str) -> HallwayGeometry | PublishedScene | None:
     """The geometry of the world `activity`, or None until it is open (a world left behind by an
-    ended run in a reused run directory does not count)."""
-    return published(run_dir, "worlds", activity, as_type=HallwayGeometry)
+    ended run in a reused run directory does not count). A scene is told by its compiled scene
+    (`xml`); read as a hallway, its other fields would quietly take a hallway's defaults."""
+    fact = published(run_dir, "worlds", activity)
+    kind = PublishedScene if isinstance(fact, dict) and "xml" in fact else HallwayGeometry
+    return None if fact is None else published(run_dir, "worlds", activity, as_type=kind)
 
 
 def withdraw_world(run_dir: Path, activity: str) -> None:
