@@ -146,6 +146,7 @@ def _r(yaw, pitch, roll):
     ([3.0, -4.0, 12.0], 0.3, -0.7, 1.1, 0.5, 5.0, 8.0),  # the dead-band takes 5 N of 13
     ([30.0, 40.0, 0.0], -math.pi, math.pi, 0.2, 2.0, 1.0, 8.0),  # limited
     ([0.3, 0.4, 0.0], 0.0, 0.0, 0.0, 10.0, 0.5, 8.0),  # at the dead-band's edge: nothing
+    ([0.3, 0.4, 0.0], 0.4, 0.0, 0.0, 10.0, 2.0, 8.0),  # inside the dead-band: nothing
     ([0.3, 0.4, 0.0], 0.0, 0.0, 0.0, 10.0, 0.49, 8.0),  # just past it: a little
 ])
 def test_a_world_force_reaches_the_handle_rotated_scaled_dead_banded_and_limited(f, yaw, pitch, roll, gain, dead,
