@@ -9,13 +9,14 @@ Without a valid handle position there is nothing to render against: the force is
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
-from hapticop.blocks.interface import Params, Port, RateRange
+from hapticop.blocks.bounds import Bounds
+from hapticop.blocks.interface import Interface, Params, Port, RateRange
 from hapticop.haptics.effects import (
     SphereLimitParams,
     SpringParams,
@@ -79,14 +80,69 @@ class VirtualWall(Effect):
 
 class SpringDamperParams(Params):
     spring: SpringParams = Field(default_factory=SpringParams)
+    anchor: Literal["parameter", "input"] = Field(
+        "parameter", description="where the spring's anchor comes from: 'parameter' is spring.anchor_m; 'input' adds "
+        "the inputs 'anchor' (and, optional, 'anchor_velocity'), e.g. another device's handle")
+
+
+ANCHOR_INPUTS = {
+    "anchor": Port("float64", (3,), "m", "where the spring pulls to, device frame (stale or out of range: no force)",
+                   range=(-10.0, 10.0)),
+    "anchor_velocity": Port("float64", (3,), "m/s", "the anchor's velocity, damped against the handle's "
+                            "(unconnected: at rest)", required=False, range=(-100.0, 100.0)),
+}
 
 
 class SpringDamper(Effect):
-    """A spring and damper pulling the handle to a point."""
+    """A spring and damper pulling the handle to a point: ``F = k·(a − q) − b·(v − v_a)``. The anchor a is
+    the parameter ``spring.anchor_m`` (v_a = 0), or with ``anchor: input`` what the input 'anchor' says."""
 
     Params = SpringDamperParams
     effect, render = "spring", staticmethod(render_spring)
     running_params = frozenset({"spring"})
+
+    @classmethod
+    def interface(cls, params: SpringDamperParams) -> Interface:
+        interface = super().interface(params)
+        if params.anchor == "input":
+            interface.inputs.update(ANCHOR_INPUTS)
+        return interface
+
+    def create(self) -> None:
+        super().create()
+        if self.params.anchor == "input":
+            self.bounds = {name: Bounds(port, f"{self.name}.{name}") for name, port in ANCHOR_INPUTS.items()}
+            self.seqs = dict.fromkeys(ANCHOR_INPUTS, -1)
+            self.good = dict.fromkeys(ANCHOR_INPUTS, True)
+
+    def _admitted(self, name: str) -> bool:
+        """Whether this anchor input's latest sample is in range and finite (each new sample checked once)."""
+        port = getattr(self.inputs, name)
+        if port.seq != self.seqs[name]:
+            self.seqs[name] = port.seq
+            good = self.good[name] = self.bounds[name].admits(port.value)
+            self.bounds[name].said(self.log, good)
+        return self.good[name]
+
+    def compute(self) -> None:
+        if self.params.anchor == "parameter":
+            super().compute()
+            return
+        inputs, force = self.inputs, self.outputs.force
+        anchor, anchor_velocity = inputs.anchor, inputs.anchor_velocity
+        va = self.at_rest
+        if anchor_velocity.valid:
+            va = anchor_velocity.value if self._admitted("anchor_velocity") else None
+        if inputs.position.valid and anchor.valid and self._admitted("anchor") and va is not None:
+            q, a, p = inputs.position.value, anchor.value, self.params.spring
+            v = inputs.velocity.value if inputs.velocity.valid else self.at_rest
+            k, b, out = p.kp_n_per_m, p.kd_ns_per_m, force.value
+            out[0] = k * (float(a[0]) - float(q[0])) - b * (float(v[0]) - float(va[0]))
+            out[1] = k * (float(a[1]) - float(q[1])) - b * (float(v[1]) - float(va[1]))
+            out[2] = k * (float(a[2]) - float(q[2])) - b * (float(v[2]) - float(va[2]))
+        else:
+            force.value.fill(0.0)
+        force.publish()
 
 
 class ViscousFieldParams(Params):

@@ -46,6 +46,8 @@ BUILTIN: dict[str, str] = {
     "spring_damper": "hapticop.blocks.effects:SpringDamper",
     "viscous_field": "hapticop.blocks.effects:ViscousField",
     "workspace_limit": "hapticop.blocks.effects:WorkspaceLimit",
+    "coupling": "hapticop.blocks.coupling:Coupling",
+    "contact_to_handle": "hapticop.blocks.coupling:ContactToHandle",
     "force_sum": "hapticop.blocks.forces:ForceSum",
     "force_limit": "hapticop.blocks.forces:ForceLimit",
     "button": "hapticop.blocks.button:Button",
