@@ -54,6 +54,7 @@ class Echo(Block):
     """Republishes every new input sample; counts what it received."""
 
     Params = EchoParams
+    received = 0  # a count to read from the first moment, also before its thread has created it
 
     @classmethod
     def interface(cls, params: EchoParams) -> Interface:
