@@ -14,17 +14,16 @@ version: 1
 name: handle_to_ros
 ros2: {node: operator, domain: 3, connect: [tcp/127.0.0.1:7447]}
 threads:
-  main: {period: 1ms, deploy: main, schedules: {0: [mediator, falcon_sim, falcon, spring]}}
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, falcon_sim, spring]}}
 activities:
   mediator: {block: mediator}
-  falcon: {block: falcon, params: {driver: sim, simulator: falcon_sim}}
   falcon_sim: {block: falcon_simulator}
   spring: {block: spring_damper}
 streams:
-  position: {from: falcon.position, to: [spring.position]}
-  force: {from: spring.force, to: [falcon.force]}
+  position: {from: falcon_sim.handle_position, to: [spring.position]}
+  force: {from: spring.force, to: [falcon_sim.hand_force]}
   handle_pose:
-    from: falcon.position
+    from: falcon_sim.handle_position
     ros2: {topic: /handle/pose, type: geometry_msgs/msg/PoseStamped, frame_id: falcon, rate_hz: 100}
   handle_force:
     from: spring.force
@@ -84,29 +83,30 @@ def _findings(text: str) -> list[str]:
 def test_a_port_that_does_not_fit_its_message_is_located_at_the_option():
     bad = SYSTEM.replace("geometry_msgs/msg/PoseStamped, frame_id", "geometry_msgs/msg/Twist, frame_id")
     found = _findings(bad)
-    assert len(found) == 1 and found[0].startswith("16 streams.handle_pose.ros2.type ros2-unit:"), found
+    assert len(found) == 1 and found[0].startswith("15 streams.handle_pose.ros2.type ros2-unit:"), found
     assert "carries [m/s, m/s, rad/s]" in found[0]
     bad = SYSTEM.replace("type: geometry_msgs/msg/WrenchStamped}", "type: geometry_msgs/msg/WrenchStamped, "
                          "shape: [6]}")
     found = _findings(bad)
-    assert len(found) == 1 and found[0].startswith("19 streams.handle_force.ros2.shape ros2-message:"), found
+    assert len(found) == 1 and found[0].startswith("18 streams.handle_force.ros2.shape ros2-message:"), found
     bad = SYSTEM.replace("type: geometry_msgs/msg/WrenchStamped}", "type: sensor_msgs/msg/LaserScan, shape: [3]}")
     found = _findings(bad)
-    assert len(found) == 1 and found[0].startswith("19 streams.handle_force.ros2.type ros2-message:"), found
+    assert len(found) == 1 and found[0].startswith("18 streams.handle_force.ros2.type ros2-message:"), found
     assert "does not fit sensor_msgs/msg/LaserScan" in found[0]
 
 
 def test_a_bad_option_or_node_is_a_located_finding_not_a_rewrite():
     found = _findings(SYSTEM.replace("topic: /goal", "topic: /2goal"))
-    assert any(f.startswith("22 streams.goal.ros2") and "not a ROS 2 name" in f for f in found), found
+    assert any(f.startswith("21 streams.goal.ros2") and "not a ROS 2 name" in f for f in found), found
     found = _findings(SYSTEM.replace("frame_id: falcon,", "frame_id: falcon, distro: humble,"))
-    assert found == ["16 streams.handle_pose.ros2.distro ros2-distro: distro 'humble' is not the node's 'jazzy'"]
-    found = _findings(SYSTEM.replace("    from: falcon.position\n", "    from: falcon.position\n    to: [x.y]\n"))
-    assert any(f.startswith("17 streams.handle_pose.ros2 ros2-sides") for f in found), found
+    assert found == ["15 streams.handle_pose.ros2.distro ros2-distro: distro 'humble' is not the node's 'jazzy'"]
+    writer = "    from: falcon_sim.handle_position\n"
+    found = _findings(SYSTEM.replace(writer, writer + "    to: [x.y]\n"))
+    assert any(f.startswith("16 streams.handle_pose.ros2 ros2-sides") for f in found), found
     found = _findings(SYSTEM.replace("connect: [tcp/127.0.0.1:7447]", "mode: client"))
     assert any(f.startswith("3 ros2") and "needs 'connect'" in f for f in found), found
     found = _findings(SYSTEM.replace("ros2: {node: operator, domain: 3, connect: [tcp/127.0.0.1:7447]}\n", ""))
-    assert any(f.startswith("15 streams.handle_pose.ros2 ros2-node") for f in found), found
+    assert any(f.startswith("14 streams.handle_pose.ros2 ros2-node") for f in found), found
 
 
 OPTION = """
@@ -134,3 +134,42 @@ def test_the_independent_client_sees_and_decodes_streams_declared_with_the_optio
     """The client lists the generated node and both topics, and its twist comes back through hapticop."""
     port = _free_port()
     _echo_through(tmp_path, port, f"listen: [tcp/127.0.0.1:{port}]", OPTION)
+
+
+def test_a_recording_holds_the_ros2_topics_as_rosbag2_channels_another_decoder_reads(tmp_path):
+    """`--record` writes each `ros2:` stream as rosbag2 does (topic, `ros2msg` schema, `cdr`); mcap-ros2-support,
+    which parses the schema text and the CDR itself, reads back the values of the stream's raw channel."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from hapticop.recording.reading import series
+    from tests.runtime_helpers import compose
+
+    port = _free_port()
+    text = SYSTEM.replace("connect: [tcp/127.0.0.1:7447]", f"listen: [tcp/127.0.0.1:{port}]")
+    path = tmp_path / "run.mcap"
+    result = compose(tmp_path, text, clock="realtime", duration="1500ms", record=str(path))
+    assert result.outcome.status.name == "SUCCESS", result.outcome.reasons
+    raw = {name: series(path, name) for name in ("handle_pose", "handle_force")}
+    seen = {"/handle/pose": [], "/handle/wrench": []}
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages(topics=list(seen)):
+            assert (schema.encoding, channel.message_encoding) == ("ros2msg", "cdr")
+            stamp = decoded.header.stamp.sec * 1_000_000_000 + decoded.header.stamp.nanosec
+            assert stamp == message.publish_time
+            if channel.topic == "/handle/pose":
+                assert schema.name == "geometry_msgs/msg/PoseStamped" and decoded.header.frame_id == "falcon"
+                p = decoded.pose.position
+                seen[channel.topic].append((stamp, [p.x, p.y, p.z]))
+            else:
+                assert schema.name == "geometry_msgs/msg/WrenchStamped"
+                w = decoded.wrench.force
+                seen[channel.topic].append((stamp, [w.x, w.y, w.z]))
+    for topic, stream, rate in (("/handle/pose", "handle_pose", 100), ("/handle/wrench", "handle_force", 50)):
+        by_stamp = dict(zip(raw[stream].publish_ns.tolist(), raw[stream].values.tolist(), strict=True))
+        assert len(seen[topic]) >= 10, topic
+        for stamp, value in seen[topic]:
+            assert by_stamp[stamp] == value, (topic, stamp)
+        gaps = [b[0] - a[0] for a, b in zip(seen[topic], seen[topic][1:], strict=False)]
+        assert min(gaps) >= 1e9 / rate, topic  # thinned to the topic's declared rate, as the node sends it
