@@ -116,7 +116,7 @@ streams:
 """
 
 
-def _echo_through(tmp_path, client_port: int, mode: str) -> None:
+def _echo_through(tmp_path, client_port: int, mode: str, system: str = SYSTEM) -> None:
     """hapticop's system echoes the client's /cmd_in to /cmd_out; the client sees the node and both topics."""
     client = Client(client_port, "probe")
     try:
@@ -133,7 +133,7 @@ def _echo_through(tmp_path, client_port: int, mode: str) -> None:
 
         seen = {"echoed": False, "listed": False}
         try:
-            result = run_until(tmp_path, SYSTEM.replace("MODE", mode), round_trip,
+            result = run_until(tmp_path, system.replace("MODE", mode), round_trip,
                                "the client's twist echoed back, and hapticop's node and topics listed")
         except AssertionError as error:
             raise AssertionError(f"{error} (seen: {seen}; the client's last lines: {client.drain()[-3:]})") from None
