@@ -30,7 +30,8 @@ def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name
 PATIENCE_S = 30.0  # what a condition may take on a loaded machine: a bound on hangs, never a speed requirement
 
 
-def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdown_timeout: str = "5s") -> RunResult:
+def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdown_timeout: str = "5s",
+              record: str | None = None) -> RunResult:
     """Run `text` on the wall clock until `condition(system)` holds, then shut it down: a test
     waits for what it checks to happen, not for a duration it hopes is long enough. The run
     fails the test if the condition does not hold within PATIENCE_S."""
@@ -52,7 +53,7 @@ def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdo
         threading.Thread(target=watch, daemon=True).start()
 
     result = compose(tmp_path, text, clock="realtime", duration=f"{PATIENCE_S * 4:g}s", on_start=operator, name=name,
-                     shutdown_timeout=shutdown_timeout)
+                     shutdown_timeout=shutdown_timeout, record=record)
     assert not missed, missed[0]
     return result
 

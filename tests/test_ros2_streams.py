@@ -143,12 +143,14 @@ def test_a_recording_holds_the_ros2_topics_as_rosbag2_channels_another_decoder_r
     from mcap_ros2.decoder import DecoderFactory
 
     from hapticop.recording.reading import series
-    from tests.runtime_helpers import compose
+    from tests.runtime_helpers import run_until, steps
 
     port = _free_port()
     text = SYSTEM.replace("connect: [tcp/127.0.0.1:7447]", f"listen: [tcp/127.0.0.1:{port}]")
     path = tmp_path / "run.mcap"
-    result = compose(tmp_path, text, clock="realtime", duration="1500ms", record=str(path))
+    # the node's cycles, not a duration: 300 of 5 ms once it runs, however long it took to start
+    result = run_until(tmp_path, text, lambda system: steps(system, "ros2") >= 300, "the node's 300th cycle",
+                       record=str(path))
     assert result.outcome.status.name == "SUCCESS", result.outcome.reasons
     raw = {name: series(path, name) for name in ("handle_pose", "handle_force")}
     seen = {"/handle/pose": [], "/handle/wrench": []}
