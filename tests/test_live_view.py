@@ -513,6 +513,8 @@ def test_no_socket_of_the_run_serves_the_view_without_the_token_and_hostile_clie
                 seen["served"] = {s: [asyncio.run(_served(f"ws://{s[0]}:{s[1]}{path}"))
                                       for path in ("/", f"/?token=x{token[1:]}", "/?token=")] for s in sockets}
                 seen["with token"] = asyncio.run(_served(address))
+                if any(any(tries) for tries in seen["served"].values()):
+                    return  # the hole: said below, before the rest is tried
                 seen["closes"] = [asyncio.run(_dropped_after(address, *sent)) for sent in (
                     ["not json"], [b"\x01\x00\x00\x00\x00"], ['{"op": "subscribe", "subscriptions": '
                                                             '[{"id": 1, "channelId": 999999}]}'],
@@ -533,9 +535,9 @@ def test_no_socket_of_the_run_serves_the_view_without_the_token_and_hostile_clie
     options = RunOptions(clock="realtime", duration_ns=int((PATIENCE_S * 4) * 1e9), run_dir=tmp_path / "run",
                          echo=False, view=LiveOptions(port=0))
     result = run_system(validate_path(path), options, on_start=probe)
+    assert not any(any(tries) for tries in seen.get("served", {}).values()), seen["served"]
     assert "error" not in seen, (seen["error"], seen.get("closes"))
     assert result.outcome.status == 0, result.outcome.reasons
     assert seen["gate"] in seen["sockets"] and seen["with token"]
-    assert not any(any(tries) for tries in seen["served"].values()), seen["served"]
     assert seen["closes"] == [1008, 1008, 1008, 1008, 1009]
     assert len(seen["messages"]["/streams/count"]) >= 5
