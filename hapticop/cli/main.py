@@ -46,6 +46,7 @@ from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.docpages import docs as _docs  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
+from hapticop.cli.experiments import experiment as _experiment  # noqa: E402
 from hapticop.cli.hosts import hosts as _hosts  # noqa: E402
 from hapticop.cli.new import new as _new  # noqa: E402
 from hapticop.cli.recordings import info as _info  # noqa: E402
@@ -63,6 +64,7 @@ app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
 app.add_typer(_hosts, name="hosts")
+app.add_typer(_experiment, name="experiment")
 app.command("blocks")(_blocks)
 app.command("new")(_new)
 app.command("info")(_info)
@@ -71,6 +73,13 @@ app.command("plot")(_plot)
 app.command("replay")(_replay)
 app.command("report")(_report)
 app.command("docs")(_docs)
+
+
+def _validate_one(path: Path, state_limit: int) -> Report:
+    """A composition, or an experiment file (its factors checked against its composition)."""
+    from hapticop.experiment.checks import is_experiment, load
+
+    return load(path).report if is_experiment(path) else validate_path(path, state_limit).report
 
 
 class OutputFormat(str, Enum):
@@ -106,7 +115,7 @@ def validate(
         typer.echo(f"no composition files given and none in {SYSTEMS_DIR}/", err=True)
         raise typer.Exit(2)
     with contextlib.nullcontext() if import_blocks else blocks_not_imported():
-        reports: list[Report] = [validate_path(p, state_limit).report for p in paths]
+        reports: list[Report] = [_validate_one(p, state_limit) for p in paths]
     if format is OutputFormat.json:
         typer.echo(reports_to_json(reports))
     else:
