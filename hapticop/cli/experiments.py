@@ -46,6 +46,8 @@ def run(
 def report(
     file: Path = typer.Argument(..., help="the experiment file"),
     out: Path | None = typer.Option(None, help="the results folder (default: results/NAME beside the file)"),
+    docs: bool = typer.Option(False, "--docs", help="also rewrite the tables of this experiment in README.md and "
+                              "docs/*.md (between their `<!-- experiment NAME SUMMARY -->` markers)"),
 ) -> None:
     """Judge each cell against the targets and draw the metrics: FOLDER/report/report.md and its PNGs."""
     from hapticop.experiment.report import write_report
@@ -57,5 +59,17 @@ def report(
     if not (folder / "manifest.json").exists():
         typer.echo(f"error: {folder}: no results (run `hapticop experiment run {file}` first)", err=True)
         raise typer.Exit(1)
-    page = write_report(loaded.experiment, read(folder), folder / "report")
+    table = read(folder)
+    page = write_report(loaded.experiment, table, folder / "report")
     typer.echo(f"report: {page}")
+    if docs:
+        from hapticop.experiment.regions import update
+        from hapticop.experiment.report import summary
+
+        root = Path(__file__).resolve().parents[2]
+        for doc in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+            text = doc.read_text()
+            new = update(text, loaded.experiment.name, lambda name: summary(name, table))
+            if new != text:
+                doc.write_text(new)
+                typer.echo(f"updated {doc.relative_to(root)}")

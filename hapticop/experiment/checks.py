@@ -15,8 +15,10 @@ from hapticop.composition.diagnostics import Diagnostic, Report
 from hapticop.composition.model_errors import diagnostics_from
 from hapticop.composition.yamlsource import Source, SourceError, plain, read_file
 from hapticop.experiment.description import Experiment
-from hapticop.experiment.grid import cells, setting
+from hapticop.experiment.grid import COMPOSITION, cells, runs, setting
 
+STATE_LIMIT = 300
+"""Markings explored per net for each value checked: the composition's own validation explores them fully."""
 MAX_CHECKED_VALUES = 64
 """Values per factor validated against the composition; a range's ends and a sample between them beyond."""
 
@@ -93,9 +95,12 @@ def _check_values(loaded: Loaded) -> list[Diagnostic]:
                                                           ("composition",)))]
     found: list[Diagnostic] = []
 
-    def check(patch: dict, where: tuple, what: str, sets: tuple = ()) -> bool:
-        tree = setting(apply_patch(base.tree, patch), sets)
-        report = validate_source(Source(base.file, tree, base.text), scripted=False).report
+    def check(patch: dict | tuple, where: tuple, what: str, sets: tuple = ()) -> bool:
+        tree = base.tree
+        for one in (patch,) if isinstance(patch, dict) else patch:
+            tree = apply_patch(tree, one)
+        tree = setting(tree, sets)
+        report = validate_source(Source(base.file, tree, base.text), STATE_LIMIT, scripted=False).report
         if report.ok:
             return True
         first = report.errors[0]
@@ -108,6 +113,14 @@ def _check_values(loaded: Loaded) -> list[Diagnostic]:
         return found
     for i, factor in enumerate(experiment.factors):
         levels = factor.levels()
+        if factor.path is None:
+            continue
+        if factor.path == COMPOSITION:
+            for j, name in enumerate(levels):
+                if not (loaded.path.parent / str(name)).exists():
+                    found.append(source.place(Diagnostic("experiment-composition", f"no composition file {name}",
+                                                         ("factors", i, "values", j))))
+            continue
         picked = range(len(levels)) if len(levels) <= MAX_CHECKED_VALUES else _spread(len(levels))
         for j in picked:
             where: tuple[Any, ...] = (("factors", i, "values", j) if factor.values is not None
@@ -119,6 +132,15 @@ def _check_values(loaded: Loaded) -> list[Diagnostic]:
             for bound in bounds:
                 if not check({}, ("latin_hypercube", "bounds", path), f"{path} = {bound!r}", ((path, bound),)):
                     break
+    checked: set[int] = set()
+    for run in runs(experiment):  # each cell patch once, with the first run it applies to and those it meets
+        chosen = [i for i, c in enumerate(experiment.cell_patches)
+                  if all(run.cell.labels.get(k) == v for k, v in c.where.items())]
+        if chosen and not set(chosen) <= checked:
+            checked.update(chosen)
+            if not check(run.patches, ("cell_patches", chosen[-1], "patch"),
+                         f"the cell patches {', '.join(map(str, chosen))} for {run.cell.labels}", run.sets):
+                break
     for path in experiment.seeds.paths:
         last = experiment.seeds.start + experiment.seeds.count - 1
         check({}, ("seeds", "paths"), f"{path} = {last}", ((path, last),))

@@ -27,7 +27,7 @@ class Run:
     id: str
     cell: Cell
     seed: int
-    patch: dict = field(hash=False)  # the experiment's merge patch on the composition
+    patches: tuple[dict, ...] = field(hash=False)  # merge patches on the composition, in order
     sets: tuple[tuple[str, Any], ...] = field(hash=False, default=())  # then each path set to its value
 
 
@@ -79,19 +79,32 @@ def cells(experiment: Experiment) -> list[Cell]:
     out = []
     for combination in itertools.product(*crossed):
         for point in points:
-            values = {f.path: f.levels()[i] for f, i in combination} | point
+            values = {f.path or f"label:{f.column}": f.levels()[i] for f, i in combination} | point
             labels = {f.column: f.label(i) for f, i in combination}
             labels |= {path.rsplit(".", 1)[-1]: f"{v:.6g}" for path, v in point.items()}
             out.append(Cell(_digest(values), values, labels))
     return out
 
 
+COMPOSITION = "composition"
+"""The factor path that chooses the composition file rather than a value in it."""
+
+
 def runs(experiment: Experiment) -> list[Run]:
     """Seed by seed, every cell before the next seed: a study stopped early has covered the cells evenly."""
     out = []
-    grid = cells(experiment)
-    for seed in range(experiment.seeds.start, experiment.seeds.start + experiment.seeds.count):
-        for cell in grid:
-            sets = tuple(cell.values.items()) + tuple((path, seed) for path in experiment.seeds.paths)
-            out.append(Run(f"{cell.id}-s{seed}", cell, seed, dict(experiment.patch), sets))
+    grid = [(cell, experiment.seeds.count_for(cell.labels)) for cell in cells(experiment)]
+    most = max((count for _, count in grid), default=0)
+    for seed in range(experiment.seeds.start, experiment.seeds.start + most):
+        for cell, count in grid:
+            if seed >= experiment.seeds.start + count:
+                continue
+            sets = tuple((p, v) for p, v in cell.values.items() if p != COMPOSITION and not p.startswith("label:"))
+            sets += tuple((path, seed) for path in experiment.seeds.paths)
+            sets += tuple((path, seed + offset) for path, offset in experiment.seeds.offsets.items())
+            sets += tuple((path, values[seed % len(values)]) for path, values in experiment.seeds.cycle.items())
+            patches = (experiment.patch,) + tuple(extra.patch for extra in experiment.cell_patches
+                                                  if all(cell.labels.get(k) == v for k, v in extra.where.items()))
+            out.append(Run(f"{cell.id}-s{seed}", cell, seed, tuple(p for p in patches if p), sets))
     return out
+

@@ -160,9 +160,26 @@ def page(experiment: Experiment, table: pa.Table, pictures: list[Path], folder: 
         out += ["## Failed runs", "", "| run | message |", "|---|---|"]
         out += [f"| {r['run_id']} | {r['message']} |" for r in _rows(table) if r["status"] != "done"]
         out.append("")
+    for name in experiment.summaries:
+        out += [f"## {name}", "", summary(name, table), ""]
     if pictures:
         out += ["## Metrics per cell", ""] + [f"![{p.stem}]({p.relative_to(folder)})" for p in pictures] + [""]
     return "\n".join(out)
+
+
+def summary(name: str, table: pa.Table) -> str:
+    """A named summary's tables; `NAME:SECTION` the one under its heading `### SECTION`."""
+    from hapticop.experiment.summaries import SUMMARIES
+
+    name, _, section = name.partition(":")
+    text = SUMMARIES[name](table.to_pylist())
+    if not section:
+        return text
+    for block in text.split("### ")[1:]:
+        heading, _, body = block.partition("\n")
+        if heading.strip() == section:
+            return body.strip("\n") + "\n"
+    raise KeyError(f"summary {name} has no section {section}")
 
 
 def write_report(experiment: Experiment, table: pa.Table, folder: Path) -> Path:

@@ -19,9 +19,9 @@ from typing import Any
 RESULT_MARK = "@@hapticop-experiment-result "
 
 
-def job(composition: Path, patch: dict, sets: list, seed: int, clock: str, duration_s: float | None,
+def job(composition: Path, patches: tuple, sets: tuple, seed: int, clock: str, duration_s: float | None,
         metrics: list[str] | None) -> dict:
-    return {"composition": str(composition), "patch": patch, "sets": [list(s) for s in sets], "seed": seed,
+    return {"composition": str(composition), "patches": list(patches), "sets": [list(s) for s in sets], "seed": seed,
             "clock": clock,
             "duration_s": duration_s, "metrics": metrics}
 
@@ -69,7 +69,10 @@ def compose(work: dict):
 
     search_beside(work["composition"])  # its own blocks may sit beside it
     source = resolve(read_file(work["composition"]))
-    tree = setting(apply_patch(source.tree, work["patch"]), work["sets"])
+    tree = source.tree
+    for patch in work["patches"]:
+        tree = apply_patch(tree, patch)
+    tree = setting(tree, work["sets"])
     digest = hashlib.sha256(json.dumps(tree, sort_keys=True, default=str).encode()).hexdigest()[:16]
     return Source(source.file, tree, source.text), digest
 
@@ -97,6 +100,9 @@ def run_here(work: dict) -> dict:
                                                   echo=False, duration_ns=duration))
         found = Path(run_dir) / "metrics.json"
         metrics: dict[str, Any] = json.loads(found.read_text()) if found.exists() else {}
+        judged = Path(run_dir) / "results.json"
+        if judged.exists():  # the targets the world judged the run to miss
+            metrics["missed"] = [r["metric"] for r in json.loads(judged.read_text())["rows"] if r["ok"] is False]
     wanted = work["metrics"]
     if wanted is not None:
         metrics = {name: metrics.get(name) for name in wanted}

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from hapticop import __version__
 from hapticop.experiment.checks import Loaded
-from hapticop.experiment.grid import runs
+from hapticop.experiment.grid import COMPOSITION, Run, runs
 from hapticop.experiment.progress import Progress
 from hapticop.experiment.runner import job
 from hapticop.experiment.table import append, finished, open_table, row
@@ -17,14 +17,22 @@ def default_out(loaded: Loaded) -> Path:
     return loaded.path.parent / "results" / loaded.path.stem
 
 
+def composition_of(loaded: Loaded, run: Run) -> Path:
+    """The run's composition file: the experiment's, or the one its `composition` factor names."""
+    chosen = run.cell.values.get(COMPOSITION)
+    return (loaded.path.parent / chosen).resolve() if chosen else loaded.composition
+
+
 def composition_text(loaded: Loaded) -> str:
-    """What the composition means after `extends:`: its resolved tree, so a comment edit changes nothing."""
+    """What the compositions mean after `extends:`: their resolved trees, so a comment edit changes nothing."""
     import json
 
     from hapticop.composition.layers import resolve
     from hapticop.composition.yamlsource import plain, read_file
 
-    return json.dumps(plain(resolve(read_file(loaded.composition)).tree), sort_keys=True, default=str)
+    files = [loaded.composition] + [(loaded.path.parent / v).resolve() for f in loaded.experiment.factors
+                                    if f.path == COMPOSITION for v in f.levels()]
+    return json.dumps([plain(resolve(read_file(f)).tree) for f in files], sort_keys=True, default=str)
 
 
 def run_study(loaded: Loaded, out: Path, *, workers: int = 2, ray: str | None = None,
@@ -37,8 +45,8 @@ def run_study(loaded: Loaded, out: Path, *, workers: int = 2, ray: str | None = 
     have = finished(out)
     todo = [r for r in every if r.id not in have]
     by_id = {r.id: r for r in todo}
-    jobs = [(r.id, job(loaded.composition, r.patch, r.sets, r.seed, experiment.clock, experiment.duration_s,
-                       experiment.metrics)) for r in todo]
+    jobs = [(r.id, job(composition_of(loaded, r), r.patches, r.sets, r.seed, experiment.clock,
+                       experiment.duration_s, experiment.metrics)) for r in todo]
     progress = progress or Progress(len(every), len(every) - len(todo))
     if ray:
         from hapticop.experiment.cluster import run_ray
