@@ -38,3 +38,18 @@ def test_the_generated_tables_in_the_readme_and_docs_are_up_to_date():
                 f"hapticop experiment report experiments/{name}.yaml --docs")
             found += 1
     assert found >= 7  # the README's hallway table and the six per hallway, at least
+
+
+def test_the_experiment_schema_is_current_and_every_experiment_file_satisfies_it():
+    import jsonschema
+
+    from hapticop.composition.yamlsource import plain, read_file
+    from hapticop.experiment.schema import SCHEMA_FILE, experiment_schema, schema_text
+
+    assert SCHEMA_FILE.read_text() == schema_text(), "run `hapticop schema --write`"
+    jsonschema.Draft202012Validator.check_schema(experiment_schema())
+    for file in [*EXPERIMENTS, *sorted((ROOT / "tests" / "experiments").glob("*study.yaml")),
+                 *sorted((ROOT / "docs" / "examples").glob("*.yaml"))]:
+        tree = plain(read_file(file).tree)
+        if "composition" in tree:
+            jsonschema.validate(tree, experiment_schema())

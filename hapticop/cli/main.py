@@ -379,25 +379,29 @@ def bench(
 
 @app.command()
 def schema(
-    check: bool = typer.Option(False, help="exit 1 if schemas/composition.schema.json is not current"),
-    write: bool = typer.Option(False, help="regenerate schemas/composition.schema.json"),
+    check: bool = typer.Option(False, help="exit 1 if the files in schemas/ are not current"),
+    write: bool = typer.Option(False, help="regenerate schemas/composition.schema.json and experiment.schema.json"),
 ) -> None:
-    """Print (or check, or write) the JSON Schema of composition files."""
-    from hapticop.composition.schema import SCHEMA_FILE, schema_text
+    """Print (or check, or write) the JSON Schema of composition files (and, with --check/--write, of
+    experiment files)."""
+    from hapticop.composition import schema as composition
+    from hapticop.experiment import schema as experiment
 
-    text = schema_text()
+    pairs = [(composition.SCHEMA_FILE, composition.schema_text()), (experiment.SCHEMA_FILE, experiment.schema_text())]
     if check:
-        current = SCHEMA_FILE.read_text() if SCHEMA_FILE.exists() else ""
-        if current != text:
-            typer.echo(f"{SCHEMA_FILE} is out of date; run `hapticop schema --write`", err=True)
-            raise typer.Exit(1)
-        typer.echo(f"{SCHEMA_FILE} is current")
+        for file, text in pairs:
+            current = file.read_text() if file.exists() else ""
+            if current != text:
+                typer.echo(f"{file} is out of date; run `hapticop schema --write`", err=True)
+                raise typer.Exit(1)
+            typer.echo(f"{file} is current")
     elif write:
-        SCHEMA_FILE.parent.mkdir(parents=True, exist_ok=True)
-        SCHEMA_FILE.write_text(text)
-        typer.echo(f"wrote {SCHEMA_FILE}")
+        for file, text in pairs:
+            file.parent.mkdir(parents=True, exist_ok=True)
+            file.write_text(text)
+            typer.echo(f"wrote {file}")
     else:
-        typer.echo(text, nl=False)
+        typer.echo(pairs[0][1], nl=False)
 
 
 OPTIONAL_VALUES = ("--record", "--view")  # options whose value may be left out: `--record`, `--view 9000`
