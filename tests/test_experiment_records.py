@@ -53,3 +53,28 @@ def test_the_experiment_schema_is_current_and_every_experiment_file_satisfies_it
         tree = plain(read_file(file).tree)
         if "composition" in tree:
             jsonschema.validate(tree, experiment_schema())
+
+
+def test_the_worked_example_validates_and_a_reduced_version_of_it_runs(tmp_path):
+    """docs/experiments.md's study, cut to one seed of four cells and three simulated seconds a run."""
+    from hapticop.experiment.report import write_report
+    from hapticop.experiment.study import run_study
+
+    example = ROOT / "docs" / "examples" / "force_models.yaml"
+    shown = (ROOT / "docs" / "experiments.md").read_text().split("## A worked example")[1].split("\n    hapticop")[0]
+    lines = {line.split("#")[0].rstrip() for line in example.read_text().splitlines()}
+    quoted = [line[4:].split("#")[0].rstrip() for line in shown.splitlines() if line.startswith("    ")]
+    assert len(quoted) > 20 and all(line in lines for line in quoted), "docs/experiments.md shows another file"
+    loaded = load(example)
+    assert loaded.report.ok, [d.to_text() for d in loaded.report.errors]
+    experiment = loaded.experiment
+    assert len(runs(experiment)) == 2 * 2 * 3 * 10
+    experiment.seeds.count = 1
+    experiment.factors[2].values = ["nominal"]
+    experiment.patch = {"activities": {"operator": {"params": {"time_limit_s": 3.0}},
+                                       "world": {"params": {"time_limit_s": 3.0, "plot": False}}}}
+    assert run_study(loaded, tmp_path / "out", workers=2) == (4, 0)
+    table = read(tmp_path / "out")
+    assert sorted(table.column("factor.force_model").to_pylist()) == ["M1", "M1", "thesis", "thesis"]
+    page = write_report(experiment, table, tmp_path / "report").read_text()
+    assert "mean peak force <= 8 N" in page and page.count("| nominal | 1 | 0 |") == 4

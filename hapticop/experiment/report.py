@@ -113,7 +113,8 @@ def cell_table(experiment: Experiment, table: pa.Table) -> str:
 
 
 def plots(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
-    """A picture per target metric: its value in every run, a column per cell, the target as a dashed line."""
+    """A picture per metric: its value in every run against each factor's levels (a panel per factor), the
+    median of each level and the metric's targets drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -124,27 +125,29 @@ def plots(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     metrics = list(dict.fromkeys([t.metric for t in experiment.targets] + (experiment.metrics or [])))
-    cells = sorted({tuple(str(r.get(c)) for c in factors) for r in rows})
     for metric in metrics:
-        values = [[r.get(f"metric.{metric}") for r in rows if tuple(str(r.get(c)) for c in factors) == cell]
-                  for cell in cells]
-        if not any(isinstance(v, int | float) for column in values for v in column):
+        key = f"metric.{metric}"
+        if not factors or not any(isinstance(r.get(key), int | float) for r in rows):
             continue
-        fig, ax = plt.subplots(figsize=(max(4.0, 0.9 * len(cells) + 2), 3.6))
-        for i, column in enumerate(values):
-            ys = [float(v) for v in column if isinstance(v, int | float)]
-            ax.scatter([i + 1] * len(ys), ys, s=12, alpha=0.6)
-            if ys:
-                ax.plot([i + 0.7, i + 1.3], [sorted(ys)[len(ys) // 2]] * 2, color="black", linewidth=1)
-        for target in experiment.targets:
-            if target.metric == metric and not isinstance(target.value, bool):
-                ax.axhline(float(target.value), color="tab:red", linestyle="--", linewidth=0.8)
-        ax.set_xticks(range(1, len(cells) + 1), [" / ".join(c) for c in cells], rotation=30, fontsize=7, ha="right")
-        ax.set_title(f"{metric} per cell (line: median, dashed: target)", fontsize=9)
-        ax.grid(alpha=0.3)
+        fig, axes = plt.subplots(1, len(factors), figsize=(3.6 * len(factors), 3.4), squeeze=False)
+        for ax, factor in zip(axes[0], factors):
+            levels = list(dict.fromkeys(str(r.get(factor)) for r in rows))
+            for i, level in enumerate(levels):
+                ys = [float(r[key]) for r in rows
+                      if str(r.get(factor)) == level and isinstance(r.get(key), int | float)]
+                ax.scatter([i + (j % 7 - 3) * 0.03 for j in range(len(ys))], ys, s=8, alpha=0.5)
+                if ys:
+                    ax.plot([i - 0.3, i + 0.3], [sorted(ys)[len(ys) // 2]] * 2, color="black", linewidth=1)
+            for target in experiment.targets:
+                if target.metric == metric and not isinstance(target.value, bool):
+                    ax.axhline(float(target.value), color="tab:red", linestyle="--", linewidth=0.8)
+            ax.set_xticks(range(len(levels)), levels, rotation=30, fontsize=7, ha="right")
+            ax.set_title(factor.removeprefix("factor."), fontsize=9)
+            ax.grid(alpha=0.3)
+        fig.suptitle(f"{metric}: every run by factor (line: median, dashed: target)", fontsize=9)
         fig.tight_layout()
         target_file = folder / f"{metric}.png"
-        fig.savefig(target_file, dpi=90)
+        fig.savefig(target_file, dpi=80)
         plt.close(fig)
         written.append(target_file)
     return written
@@ -163,7 +166,7 @@ def page(experiment: Experiment, table: pa.Table, pictures: list[Path], folder: 
     for name in experiment.summaries:
         out += [f"## {name}", "", summary(name, table), ""]
     if pictures:
-        out += ["## Metrics per cell", ""] + [f"![{p.stem}]({p.relative_to(folder)})" for p in pictures] + [""]
+        out += ["## Metrics by factor", ""] + [f"![{p.stem}]({p.relative_to(folder)})" for p in pictures] + [""]
     return "\n".join(out)
 
 
