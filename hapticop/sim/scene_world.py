@@ -6,7 +6,8 @@ steps the physics one period, and publishes what the plant and the others need: 
 scene (where the simulated LIDAR scans from), the contacts' wrench on the robot (the plant's external
 force: a pushed box slows it, a wall stops it) and the movable bodies' poses (the LIDAR sees them where
 they are). The robot touching static geometry is a collision; with the scene's `hallway` task the run is
-judged as hallway_world judges it (docs/hallway-experiment.md §5).
+judged as hallway_world judges it (docs/hallway-experiment.md §5), and by the `targets` declared on the
+world with the judge users configure (hapticop.sim.judge, docs/scenes.md §5).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pydantic import Field, model_validator
 
 from hapticop.blocks.interface import Display, Interface, Port
 from hapticop.composition.diagnostics import Diagnostic
+from hapticop.sim.judge import Targets
 from hapticop.sim.scene import Scene
 from hapticop.sim.world import HallwayWorld, HallwayWorldParams
 
@@ -33,6 +35,7 @@ class SceneWorldParams(HallwayWorldParams):
                                  "blind_operator): its variant sets the targets")
     scene: str | Scene = Field("H1", description="the scene: written here, or a scene file (a shipped name such as "
                                "'H1', or a path beside the composition; .yaml, or .xml for MJCF): docs/scenes.md")
+    targets: Targets = ()
 
     @model_validator(mode="after")
     def _hallway_names_the_scene(self) -> SceneWorldParams:
@@ -94,7 +97,13 @@ class SceneWorld(HallwayWorld):
             found.append(Diagnostic("scene-judge", "the run is judged by the hallway experiment's targets, but the "
                                     "scene has no 'hallway' task", ("params", "judge"),
                                     hint="judge: false, or a 'hallway:' section in the scene"))
+        if loaded is not None and params.targets:
+            found += _target_findings(params, loaded)
         return found
+
+    @classmethod
+    def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
+        return super().promises(params) + (("judge.json", "results.json") if params.targets else ())
 
     @classmethod
     def displays(cls, params: SceneWorldParams) -> tuple[Display, ...]:
@@ -123,6 +132,10 @@ class SceneWorld(HallwayWorld):
         self.bodies = out.body_poses.value if self.engine.bodies else None
         self.engine.place_robot(self.pose)
         self.twist = np.zeros(3)
+        capacity = self.recorder.capacity
+        self.contact = np.zeros(capacity)  # |contact force| on the robot, per recorded sample
+        self.body_track = np.zeros((capacity, self.engine.bodies, 3))
+        self.body_aliases = _body_aliases(scene if loaded.scene is not None else None, self.engine.body_names)
 
     def compute(self) -> None:
         inputs, engine, out = self.inputs, self.engine, self.outputs
@@ -142,8 +155,79 @@ class SceneWorld(HallwayWorld):
         if self.bodies is not None:
             engine.body_poses(self.bodies)
             out.body_poses.publish()
-        if inputs.operator_time.seq and not self.ended:
-            self.judge(clearance, clearance <= 0.0)
+        if (inputs.operator_time.seq or self.params.targets) and not self.ended:
+            if self.started_ns is None and not inputs.operator_time.seq:  # no operator: the run is the whole run
+                self.started_ns = self.clock.now_ns()
+            # a collision ends the run (a crash), unless the scene is judged by targets of its own: then it is counted
+            touching = clearance <= 0.0
+            self.judge(clearance, touching and (self.params.judge or not self.params.targets))
+            i = self.recorder.n - 1
+            wrench = self.wrench
+            self.contact[i] = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1])
+            if self.bodies is not None:
+                self.body_track[i] = self.bodies
+
+    def clean(self) -> None:
+        super().clean()
+        if self.params.targets and self.recorder.n >= 2:
+            self._judge_targets()
+
+    def _judge_targets(self) -> None:
+        """judge.json (the generic metrics and each target's verdict) and the rows `hapticop compose` prints."""
+        import json
+
+        from hapticop.sim.judge import Run, judge, metric_rows, run_metrics
+        from hapticop.sim.metrics import json_plain  # NaN as null: JSON has no such number
+        from hapticop.sim.recording import as_channels
+
+        n, d = self.recorder.n, as_channels(self.recorder)
+        zeros = np.zeros((n, 3))
+        r = self.scene.robot
+        run = Run(t=d["t"], pose=d["pose"], clearance=d["clearance"], contact_n=self.contact[:n],
+                  handle_force=d.get("force_device", zeros), handle_velocity=d.get("handle_velocity", zeros),
+                  bodies=self.body_track[:n], body_names=self.body_aliases, footprint=(r.length_m, r.width_m),
+                  ended=self.ended)
+        metrics = run_metrics(run)
+        rows = judge(run, self.params.targets, metrics)
+        ok = all(row["ok"] for row in rows)
+        (self.run_dir / "judge.json").write_text(json.dumps(json_plain({"metrics": metrics, "targets": rows, "ok": ok}),
+                                                            indent=2))
+        self.log.info("targets %s (%d of %d met)", "met" if ok else "missed", sum(r["ok"] for r in rows), len(rows))
+        results = self.run_dir / "results.json"
+        if self.params.judge and results.exists():  # the hallway's rows first, the scene's targets after
+            table = json.loads(results.read_text())
+            table["rows"] += rows
+        else:
+            table = {"title": f"scene {self.name}", "rows": metric_rows(metrics) + rows, "picture": None}
+        results.write_text(json.dumps(json_plain(table), indent=2))
+
+
+def _body_aliases(scene: Scene | None, mjcf_names: list[str]) -> tuple[tuple[str, ...], ...]:
+    """Each movable body's names a target may use: its scene name (if it has one) and its MJCF name."""
+    if scene is None:
+        return tuple((name,) for name in mjcf_names)
+    return tuple(((b.name,) if b.name else ()) + (f"bodies[{i}]",) for i, b in enumerate(scene.bodies))
+
+
+def _target_findings(params: SceneWorldParams, loaded) -> list[Diagnostic]:
+    """A target naming a body the scene does not have, located at the name."""
+    if loaded.scene is not None:
+        aliases = _body_aliases(loaded.scene, [])
+    else:
+        from hapticop.sim.engine import Engine
+
+        aliases = _body_aliases(None, Engine(loaded.xml).body_names)
+    from hapticop.sim.judge import body_index
+
+    found = []
+    for i, target in enumerate(params.targets):
+        push = target.push_body
+        if push is not None and body_index(aliases, push.body) is None:
+            known = ", ".join(a[0] for a in aliases) or "none"
+            found.append(Diagnostic("scene-target", f"push_body names {push.body!r}, which is no movable body of "
+                                    f"the scene", ("params", "targets", i, "push_body", "body"),
+                                    expected=f"one of: {known}"))
+    return found
 
 
 def _judged_geometry(scene: Scene):
