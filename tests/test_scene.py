@@ -254,3 +254,21 @@ def test_the_scene_world_judges_touching_a_wall_a_collision(tmp_path):
         touched.append(int(world.outputs.collision.value))
     assert touched == [0, 0, 1]
     assert world.outputs.contact_wrench.value[0] < 0.0  # the wall pushes back
+
+
+def test_a_composition_naming_hallway_world_is_told_to_use_the_scene_world(tmp_path):
+    path = tmp_path / "old.yaml"
+    path.write_text("""version: 1
+name: old
+threads:
+  sim:
+    period: 1ms
+    deploy: main
+    schedules: {0: [mediator, world]}
+activities:
+  mediator: {block: mediator}
+  world: {block: hallway_world, params: {hallway: H2, judge: false}}
+""")
+    (error,) = validate_path(str(path)).report.errors
+    assert error.rule == "unknown-block" and error.line == 10 and error.path[-1] == "block"
+    assert "scene_world" in error.hint and "scene: H1" in error.hint
