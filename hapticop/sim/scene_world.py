@@ -160,12 +160,9 @@ class SceneWorld(Block):
         self.scene = scene = loaded.scene or Scene()
         self.engine = Engine(loaded.xml, self.name)
         self.geometry = _judged_geometry(scene)
-        start = scene.robot.start
-        self.start = (start[0], start[1], math.radians(start[2]))
-        lidar = scene.robot.lidar
-        publish_world(self.run_dir, self.name, PublishedScene(loaded.xml, self.start, lidar.noise_sigma_m,
-                                                           lidar.min_range_m, lidar.max_range_m,
-                                                           math.radians(lidar.yaw_deg)))
+        shared = PublishedScene.of(scene, loaded.xml)
+        self.start = shared.start
+        publish_world(self.run_dir, self.name, shared)
         out = self.outputs
         self.prepare(out.pose_in_hallway.value)
         self.pose[:] = self.start
