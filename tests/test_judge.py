@@ -27,10 +27,10 @@ WALL = Scene(walls=(Block3(size_m=(0.1, 4.0, 1.0), position_m=(1.5, 0.0)),), rob
 
 
 def _run(tmp_path, scene: Scene, targets: list, travel_m: float, speed_mps: float = 0.5,
-         hold_s: float = 0.5) -> dict:
+         hold_s: float = 0.5, plot: bool = False) -> dict:
     """The robot driven straight ahead `travel_m` at `speed_mps`, then held still; the world's judge.json."""
     clock = VirtualClock()
-    world = standalone(SceneWorld, "world", {"scene": scene.model_dump(), "judge": False, "plot": False,
+    world = standalone(SceneWorld, "world", {"scene": scene.model_dump(), "judge": False, "plot": plot,
                                              "targets": targets}, tmp_path, clock)
     world.create()
     pose, twist = world.inputs.robot_pose, world.inputs.robot_twist
@@ -95,12 +95,25 @@ def test_the_generic_metrics_of_a_push(pushed):
 
 
 def test_a_run_into_a_wall_misses_no_collision(tmp_path):
-    judged = _run(tmp_path, WALL, ["no_collision", {"keep_clearance": {"min_m": 0.0}}], travel_m=0.7)
+    judged = _run(tmp_path, WALL, ["no_collision", {"keep_clearance": {"min_m": 0.0}}], travel_m=0.7, plot=True)
     assert judged["metrics"]["collisions"] == 1
     assert judged["metrics"]["least_clearance_m"] <= 0.0
     assert _verdicts(judged) == [False, False]
     results = json.loads((tmp_path / "results.json").read_text())
     assert [r["ok"] for r in results["rows"] if r["ok"] is not None] == [False, False]
+    assert results["picture"] == "run.png" and (tmp_path / "run.png").stat().st_size > 10_000  # path and walls
+
+
+def test_the_scenes_walls_are_drawn_from_the_compiled_scene():
+    from hapticop.sim import scene_files
+    from hapticop.sim.engine import Engine
+    from hapticop.sim.plot import scene_outlines
+
+    loaded, _ = scene_files.load("H4")
+    outlines = scene_outlines(Engine(loaded.xml))
+    assert len(outlines) == 4  # left, right, end, pillar
+    pillar = outlines[3]
+    assert pillar.min(axis=0).tolist() + pillar.max(axis=0).tolist() == pytest.approx([4.8, -1.0, 5.2, -0.75])
 
 
 def test_a_target_is_one_kind():

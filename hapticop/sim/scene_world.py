@@ -137,14 +137,15 @@ class SceneWorld(Block):
 
     @classmethod
     def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
-        return cls._hallway_promises(params) + (("judge.json", "results.json") if params.targets else ())
-
-    @classmethod
-    def _hallway_promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
-        if not params.judge:  # not a hallway run: the trajectory alone
-            return ("trajectory.npz",)
-        return ("trajectory.npz", "metrics.json", "results.json") + (("run.png",) if params.plot else ())
-
+        """The trajectory always; the hallway's metrics, the targets' verdicts and the picture when judged."""
+        promised = ["trajectory.npz"]
+        if params.judge:
+            promised += ["metrics.json", "results.json"]
+        if params.targets:
+            promised += ["judge.json", "results.json"]
+        if params.plot and (params.judge or params.targets):
+            promised.append("run.png")
+        return tuple(dict.fromkeys(promised))
 
     @classmethod
     def displays(cls, params: SceneWorldParams) -> tuple[Display, ...]:
@@ -314,6 +315,22 @@ class SceneWorld(Block):
                    "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
 
+    def _plot_scene(self) -> str | None:
+        """run.png: the path among the scene's static geometry (drawn from the compiled scene)."""
+        if not self.params.plot:
+            return None
+        from hapticop.devices.ropod.body import Footprint
+        from hapticop.sim.plot import plot_run, scene_outlines
+
+        r = self.scene.robot
+        try:
+            plot_run(self.recorder, None, self.run_dir / "run.png", walls=scene_outlines(self.engine),
+                     footprint=Footprint(length_m=r.length_m, width_m=r.width_m), title=f"scene of {self.name}")
+        except RuntimeError as error:  # matplotlib missing: the numbers are still there
+            self.log.warning("no picture of the run: %s", error)
+            return None
+        return "run.png"
+
     def _judge_targets(self) -> None:
         """judge.json (the generic metrics and each target's verdict) and the rows `hapticop compose` prints."""
         from hapticop.sim.judge import Run, judge, metric_rows, run_metrics
@@ -338,7 +355,8 @@ class SceneWorld(Block):
             table = json.loads(results.read_text())
             table["rows"] += rows
         else:
-            table = {"title": f"scene {self.name}", "rows": metric_rows(metrics) + rows, "picture": None}
+            table = {"title": f"scene {self.name}", "rows": metric_rows(metrics) + rows,
+                     "picture": self._plot_scene()}
         results.write_text(json.dumps(json_plain(table), indent=2))
 
 
