@@ -16,7 +16,9 @@ from .runtime_helpers import compose
 @pytest.mark.timeout(360)  # a whole run through the doorway: a bound on hangs on a busy machine, not a speed
 def test_the_operator_drives_through_the_doorway_past_the_pillar_to_a_stop_without_collision(tmp_path):
     (tmp_path / "hallway.yaml").write_text((SYSTEMS / "hallway.yaml").read_text())  # what room.yaml extends
-    (tmp_path / "room.scene.yaml").write_text((SYSTEMS / "room.scene.yaml").read_text())  # the scene beside it
+    (tmp_path / "scenes").mkdir()
+    scene = (SYSTEMS / "scenes" / "room.yaml").read_text()
+    (tmp_path / "scenes" / "room.yaml").write_text(scene)  # the scene beside it
     result = compose(tmp_path, (SYSTEMS / "room.yaml").read_text(), duration=None, name="room", seed=0)
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     run = tmp_path / "run-room"
