@@ -125,6 +125,12 @@ class SceneWorld(Block):
         return Interface(inputs=inputs, outputs=outputs, flags_written=base.flags_written, rate=base.rate)
 
     @classmethod
+    def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
+        if not params.judge and params.operator is None:  # no operator's clock to keep a trajectory by: the
+            return ()                                      # streams (--record) are the run's record
+        return super().promises(params)
+
+    @classmethod
     def findings(cls, params: SceneWorldParams, folder: Path | None) -> list[Diagnostic]:
         loaded, found = _loaded(params, folder)
         if loaded is not None and params.judge and (loaded.scene is None or loaded.scene.hallway is None):
