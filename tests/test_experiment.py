@@ -177,3 +177,12 @@ def test_the_same_study_on_a_local_ray_cluster_gives_the_same_metrics_bit_for_bi
 
     pool, cluster = metrics("pool"), metrics("ray-out")
     assert len(pool) == 6 and pool == cluster
+
+
+def test_a_marker_quoted_inside_a_line_is_text_not_a_region():
+    """The CLI reference quotes the marker in a table cell; only a marker that starts its line opens a region."""
+    from hapticop.experiment.regions import regions
+
+    text = ("| `--docs` | between their `<!-- experiment NAME SUMMARY -->` markers |\n"
+            "<!-- experiment hallway hallway_readme: generated -->\n| a | b |\n<!-- end experiment -->\n")
+    assert regions(text) == [("hallway", "hallway_readme", "| a | b |\n")]

@@ -11,8 +11,8 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 
-REGION = re.compile(r"(<!-- experiment (?P<name>[\w-]+) (?P<summary>\w+(?::\w+)?)[^\n]*-->\n)(?P<body>.*?)"
-                    r"(<!-- end experiment -->)", re.S)
+REGION = re.compile(r"^(<!-- experiment (?P<name>[\w-]+) (?P<summary>\w+(?::\w+)?)[^\n]*-->\n)(?P<body>.*?)"
+                    r"^(<!-- end experiment -->)", re.S | re.M)  # a marker starts its line: quoted, it is text
 
 
 def regions(text: str) -> list[tuple[str, str, str]]:

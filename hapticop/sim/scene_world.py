@@ -125,12 +125,6 @@ class SceneWorld(Block):
         return Interface(inputs=inputs, outputs=outputs, flags_written=base.flags_written, rate=base.rate)
 
     @classmethod
-    def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
-        if not params.judge and params.operator is None:  # no operator's clock to keep a trajectory by: the
-            return ()                                      # streams (--record) are the run's record
-        return super().promises(params)
-
-    @classmethod
     def findings(cls, params: SceneWorldParams, folder: Path | None) -> list[Diagnostic]:
         loaded, found = _loaded(params, folder)
         if loaded is not None and params.judge and (loaded.scene is None or loaded.scene.hallway is None):
@@ -143,7 +137,10 @@ class SceneWorld(Block):
 
     @classmethod
     def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
-        """The trajectory always; the hallway's metrics, the targets' verdicts and the picture when judged."""
+        """The trajectory (when an operator's clock or targets keep it); the hallway's metrics, the targets'
+        verdicts and the picture when judged."""
+        if not params.judge and not params.targets and params.operator is None:
+            return ()  # nothing keeps a trajectory: the streams (--record) are the run's record
         promised = ["trajectory.npz"]
         if params.judge:
             promised += ["metrics.json", "results.json"]
