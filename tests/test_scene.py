@@ -272,3 +272,97 @@ activities:
     (error,) = validate_path(str(path)).report.errors
     assert error.rule == "unknown-block" and error.line == 10 and error.path[-1] == "block"
     assert "scene_world" in error.hint and "scene: H1" in error.hint
+
+
+DESK = """walls:
+  - {name: wall, size_m: [0.6, 0.1, 0.6], position_m: [0.0, 0.075]}
+handles:
+  - {name: tip, origin_m: [0.0, 0.0, 0.3], axes: [-y, z, -x]}
+robot: {start: [-2.0, 0.0, 0.0]}
+"""
+
+
+@pytest.mark.parametrize("change, rule, line, field", [
+    (("axes: [-y, z, -x]}\n", "axes: [-y, z, -x]}\n  - {name: tip, origin_m: [0.0, -0.2, 0.3]}\n"), "scene-handle", 5,
+     "handles.1.name"),
+    (("origin_m: [0.0, 0.0, 0.3]", "origin_m: [0.0, 0.07, 0.3]"), "scene-start-inside", 4, "handles.0.origin_m"),
+    (("axes: [-y, z, -x]", "axes: [y, z, -x]"), "model", 4, "handles.0.axes"),
+    (("axes: [-y, z, -x]", "axes: [y, y, -x]"), "model", 4, "handles.0.axes"),
+    (("axes: [-y, z, -x]", "axes: [-y, z, w]"), "model", 4, "handles.0.axes"),
+    (("name: tip", "name: Tip-1"), "model", 4, "handles.0.name"),
+])
+def test_a_wrong_handle_is_one_finding_located_in_the_scene_file(tmp_path, change, rule, line, field):
+    old, new = change
+    path = tmp_path / "desk.yaml"
+    path.write_text(DESK.replace(old, new))
+    loaded, found = scene_files.load(str(path))
+    assert loaded is None and len(found) == 1, [d.to_text() for d in found]
+    [finding] = found
+    assert (finding.line, finding.dotted_path, finding.file) == (line, field, str(path)), finding.to_text()
+    assert rule == "model" or finding.rule == rule
+
+
+def test_the_desk_with_a_handle_loads():
+    path_found = scene_files.load("desk.yaml", _desk_folder())
+    assert path_found[1] == [] and path_found[0].scene.handles[0].name == "tip"
+
+
+def _desk_folder():
+    import tempfile
+    from pathlib import Path
+
+    folder = Path(tempfile.mkdtemp())
+    (folder / "desk.yaml").write_text(DESK)
+    return folder
+
+
+def test_a_handles_contact_is_the_declared_spring_and_damper_in_the_devices_frame():
+    """The wall's face is at scene y = 0.025, the handle's sphere (5 mm) at the device's origin when the device is
+    at its origin; the device is turned (its z is the scene's -x, its x the scene's -y): pushing the device
+    along its -x moves the tip into the wall, and the wall pushes back along the device's +x."""
+    from hapticop.sim.scene import Handle
+
+    handle = Handle(name="tip", origin_m=(0.0, 0.0, 0.3), axes=("-y", "z", "-x"), stiffness_n_per_m=3000.0,
+                    damping_ns_per_m=4.0, mass_kg=0.2)
+    scene = Scene(walls=(Block3(size_m=(0.6, 0.1, 0.6), position_m=(0.0, 0.075)),), handles=(handle,),
+                  robot=Robot(start=(-2.0, 0.0, 0.0)))
+    engine = Engine(to_mjcf(scene))
+    assert engine.handles == ["tip"]
+    force = np.zeros(3)
+    for x in (0.0, -0.019, -0.021, -0.025):
+        for vx in (-0.2, 0.0, 0.05, 0.5):
+            engine.place_handle(0, np.array([x, 0.0, 0.0]), np.array([vx, 0.0, 0.0]))
+            engine.step()
+            engine.handle_force(0, force)
+            depth = -0.02 - x
+            expected = max(3000.0 * depth + 4.0 * -vx, 0.0) if depth >= 0 else 0.0
+            assert force[0] == pytest.approx(expected, abs=1e-6), (x, vx)
+            assert abs(force[1]) < 1e-9 and abs(force[2]) < 1e-9
+    # without a velocity the handle is at rest: the spring alone
+    engine.place_handle(0, np.array([-0.022, 0.0, 0.0]))
+    engine.step()
+    assert engine.handle_force(0, force)[0] == pytest.approx(6.0, abs=1e-6)
+
+
+def test_the_scene_world_has_a_handles_ports_and_ignores_a_position_not_finite(tmp_path):
+    from hapticop.sim.scene import Handle
+
+    clock = VirtualClock()
+    scene = Scene(walls=(Block3(size_m=(0.6, 0.1, 0.6), position_m=(0.0, 0.075)),),
+                  handles=(Handle(name="tip", origin_m=(0.0, 0.0, 0.3), axes=("-y", "z", "-x")),),
+                  robot=Robot(start=(-2.0, 0.0, 0.0)))
+    declared = SceneWorld.declare(SceneWorldParams(scene=scene, judge=False))
+    assert {"tip_handle_position", "tip_handle_velocity"} <= set(declared.inputs)
+    assert not declared.inputs["tip_handle_velocity"].required and "tip_handle_force" in declared.outputs
+    world = standalone(SceneWorld, "world", {"scene": scene.model_dump(), "judge": False}, tmp_path, clock)
+    world.create()
+    position, force = world.inputs.tip_handle_position, world.outputs.tip_handle_force
+    felt = []
+    for i, x in enumerate((0.0, -0.021, float("nan"), 1e6)):  # free, 1 mm in, then two samples not taken
+        clock.advance_to(clock.now_ns() + 1_000_000)
+        position.value[:] = (x, 0.0, 0.0)
+        position.meta[0] = i + 1
+        world.compute()
+        felt.append(float(force.value[0]))
+    assert felt[0] == 0.0
+    assert felt[1] == pytest.approx(2.0, abs=1e-6) and felt[2:] == pytest.approx([2.0, 2.0], abs=1e-6)

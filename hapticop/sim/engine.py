@@ -56,6 +56,7 @@ class Engine:
         self.body_qpos = [int(m.jnt_qposadr[j]) for j in free]
         self.body_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.jnt_bodyid[j])) or f"body {j}"
                            for j in free]
+        self.handles, self.handle_qpos, self.handle_dofs = _handles(m)
         # views and buffers made once
         self.qpos, self.qvel = d.qpos, d.qvel
         self.qfrc_constraint = d.qfrc_constraint
@@ -92,6 +93,21 @@ class Engine:
                 raise SceneError(f"scene '{self.name}': body '{self.body_names[self.body_qpos.index(adr)]}' left the "
                                  f"scene or its state is not a number (x={x}, y={y}): the simulation exploded; "
                                  "look at its mass, size and damping, or the robot's speed")
+
+    def place_handle(self, i: int, position: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        """Handle i where its device is (its joints are the device's axes: the device's own coordinates)."""
+        qpos, qvel = self.qpos, self.qvel
+        for k, adr in enumerate(self.handle_qpos[i]):
+            qpos[adr] = position[k]
+        for k, adr in enumerate(self.handle_dofs[i]):
+            qvel[adr] = 0.0 if velocity is None else velocity[k]
+
+    def handle_force(self, i: int, out: np.ndarray) -> np.ndarray:
+        """The contacts' force on handle i in the last step, in its device's frame (N)."""
+        f = self.qfrc_constraint
+        for k, adr in enumerate(self.handle_dofs[i]):
+            out[k] = f[adr]
+        return out
 
     def contact_wrench(self, out: np.ndarray) -> np.ndarray:
         """The contacts' force and torque on the robot in the last step, in the robot's frame (N, N, N m)."""
@@ -157,3 +173,22 @@ class Engine:
         np.copyto(dist, np.nan, where=mask)
         np.copyto(out, dist, casting="same_kind")
         return out
+
+
+def _handles(m) -> tuple[list[str], list[list[int]], list[list[int]]]:
+    """The scene's handles: bodies `handle_NAME` with the slide joints `handle_NAME_x`, `_y`, `_z`
+    (hapticop.sim.scene.Handle compiles to them; an MJCF file may have its own)."""
+    names, qpos, dofs = [], [], []
+    for b in range(m.nbody):
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or ""
+        if not body.startswith("handle_"):
+            continue
+        joints = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{body}_{a}") for a in "xyz"]
+        if min(joints) < 0 or any(m.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE or m.jnt_bodyid[j] != b
+                                  for j in joints):
+            raise ValueError(f"body '{body}' is a handle by its name, but lacks its slide joints {body}_x, "
+                             f"{body}_y and {body}_z")
+        names.append(body.removeprefix("handle_"))
+        qpos.append([int(m.jnt_qposadr[j]) for j in joints])
+        dofs.append([int(m.jnt_dofadr[j]) for j in joints])
+    return names, qpos, dofs

@@ -102,6 +102,13 @@ def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:
         if body.shape == "cylinder" and (body.radius_m is None or body.height_m is None):
             found.append(Diagnostic("scene-shape", "a movable cylinder needs radius_m and height_m",
                                     prefix + ("bodies", i)))
+    seen: set[str] = set()
+    for i, handle in enumerate(scene.handles):
+        if handle.name in seen:
+            found.append(Diagnostic("scene-handle", f"a second handle named '{handle.name}': its ports would be "
+                                    "the first's", prefix + ("handles", i, "name"), hint="give each handle a name "
+                                    "of its own"))
+        seen.add(handle.name)
     if found:
         return found
     xml = to_mjcf(scene)
@@ -155,7 +162,9 @@ def _overlaps(scene: Scene, xml: str, prefix: tuple) -> list[Diagnostic]:
     movers = [("robot", engine.robot_geom, ("robot", "start"))] + [
         (f"body '{b.name or i}'", mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"bodies[{i}]"), ("bodies", i,
                                                                                                   "position_m"))
-        for i, b in enumerate(scene.bodies)]
+        for i, b in enumerate(scene.bodies)] + [
+        (f"handle '{h.name}'", mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"handle_{h.name}"),
+         ("handles", i, "origin_m")) for i, h in enumerate(scene.handles)]
     for what, g, path in movers:
         for name in names:
             depth = mujoco.mj_geomDistance(m, d, g, geom[name], 0.01, None)

@@ -62,16 +62,33 @@ def _loaded(params: SceneWorldParams, folder: Path | None = None):
 
 def _count_bodies(params: SceneWorldParams) -> int:
     """Movable bodies of the scene, for the shape of `body_poses` (0 when it cannot be read: validation says why)."""
+    return _scene_parts(params)[0]
+
+
+def _scene_parts(params: SceneWorldParams) -> tuple[int, tuple[str, ...]]:
+    """The scene's movable bodies (how many) and handles (their names), for the world's ports; none when it
+    cannot be read (validation says why)."""
     if isinstance(params.scene, Scene):
-        return len(params.scene.bodies)
+        return len(params.scene.bodies), tuple(h.name for h in params.scene.handles)
     loaded, _ = _loaded(params)
     if loaded is None:
-        return 0
+        return 0, ()
     if loaded.scene is not None:
-        return len(loaded.scene.bodies)
+        return len(loaded.scene.bodies), tuple(h.name for h in loaded.scene.handles)
     from hapticop.sim.engine import Engine
 
-    return Engine(loaded.xml).bodies
+    engine = Engine(loaded.xml)
+    return engine.bodies, tuple(engine.handles)
+
+
+def _handle_ports(name: str) -> tuple[dict[str, Port], dict[str, Port]]:
+    """A handle's ports on the world: its device's position and velocity in, the contacts' force out."""
+    return ({f"{name}_handle_position": Port("float64", (3,), "m", f"where handle '{name}' is: its device's "
+                                             "position, device frame"),
+             f"{name}_handle_velocity": Port("float64", (3,), "m/s", f"handle '{name}''s velocity, device frame "
+                                             "(unconnected: at rest)", required=False)},
+            {f"{name}_handle_force": Port("float64", (3,), "N", f"the contacts' force on handle '{name}', device "
+                                          "frame")})
 
 
 class SceneWorld(Block):
@@ -113,12 +130,16 @@ class SceneWorld(Block):
                                    "frame (the plant's external force)"),
             "collision": Port("uint8", (), "1", "1 while the robot touches static geometry"),
         }
-        bodies = _count_bodies(params)
+        bodies, handles = _scene_parts(params)
         if bodies:
             outputs["body_poses"] = Port("float64", (bodies, 3), "m, m, rad", "each movable body's x, y and yaw, "
                                          "in the order the scene lists them")
         base = super().interface(params)
         inputs = dict(base.inputs)
+        for name in handles:
+            handle_in, handle_out = _handle_ports(name)
+            inputs.update(handle_in)
+            outputs.update(handle_out)
         if not params.judge:  # nobody's run to judge: the operator's ports may stay unconnected
             for name in ("operator_time", "operator_done"):
                 inputs[name] = dataclasses.replace(inputs[name], required=False)
@@ -178,12 +199,15 @@ class SceneWorld(Block):
         self.contact = np.zeros(capacity)  # |contact force| on the robot, per recorded sample
         self.body_track = np.zeros((capacity, self.engine.bodies, 3))
         self.body_aliases = _body_aliases(scene if loaded.scene is not None else None, self.engine.body_names)
+        self.handles = [(getattr(self.inputs, f"{n}_handle_position"), getattr(self.inputs, f"{n}_handle_velocity"),
+                         getattr(out, f"{n}_handle_force"), np.zeros(3)) for n in self.engine.handles]
 
     def compute(self) -> None:
         inputs, engine, out = self.inputs, self.engine, self.outputs
         if inputs.robot_pose.seq:
             place(self.start, inputs.robot_pose.value, self.pose)
         engine.place_robot(self.pose, inputs.robot_twist.value if inputs.robot_twist.seq else None)
+        self._place_handles()
         engine.step()
         engine.place_robot(self.pose)  # the step moved the robot's joints; the plant moves the robot
         clearance = engine.clearance()
@@ -195,6 +219,9 @@ class SceneWorld(Block):
         if self.bodies is not None:
             engine.body_poses(self.bodies)
             out.body_poses.publish()
+        for i, (_, _, force, _) in enumerate(self.handles):
+            engine.handle_force(i, force.value)
+            force.publish()
         if (inputs.operator_time.seq or self.params.targets) and not self.ended:
             if self.started_ns is None and not inputs.operator_time.seq:  # no operator: the run is the whole run
                 self.started_ns = self.clock.now_ns()
@@ -206,6 +233,19 @@ class SceneWorld(Block):
             self.contact[i] = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1])
             if self.bodies is not None:
                 self.body_track[i] = self.bodies
+
+    def _place_handles(self) -> None:
+        """Each handle where its device last said, moving at its velocity; a position that is not finite or
+        beyond 10 m is not taken (the handle stays where it was)."""
+        for i, (position, velocity, _, last) in enumerate(self.handles):
+            if position.seq:
+                p = position.value
+                x, y, z = float(p[0]), float(p[1]), float(p[2])
+                if abs(x) < 10.0 and abs(y) < 10.0 and abs(z) < 10.0:  # also false for NaN
+                    last[0], last[1], last[2] = x, y, z
+            v = velocity.value
+            moving = velocity.valid and abs(float(v[0])) + abs(float(v[1])) + abs(float(v[2])) < 100.0
+            self.engine.place_handle(i, last, v if moving else None)
 
     def clean(self) -> None:
         self._hallway_clean()
