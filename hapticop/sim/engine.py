@@ -25,7 +25,17 @@ FAR_M = 1e3
 
 
 class SceneError(RuntimeError):
-    """The engine found the scene broken while running (NaN state, a body flown off)."""
+    """The engine found the scene broken while running (NaN state, a body flown off); `body` is the MJCF name of
+    the body it blames ("" when none), for the world to say where the scene declares it."""
+
+    def __init__(self, message: str, body: str = ""):
+        super().__init__(message)
+        self.body = body
+
+
+_UNSTABLE = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+             int(mujoco.mjtWarning.mjWARN_BADQACC))
+"""MuJoCo's warnings that it found NaN, infinite or huge values in the state and reset the simulation."""
 
 
 class Engine:
@@ -60,6 +70,7 @@ class Engine:
         # views and buffers made once
         self.qpos, self.qvel = d.qpos, d.qvel
         self.qfrc_constraint = d.qfrc_constraint
+        self._warned, self._warned_at = d.warning.number, d.warning.lastinfo  # live views of MuJoCo's counters
         self._fromto = np.zeros(6)
         self._rays: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._origin = np.zeros(3)
@@ -84,15 +95,32 @@ class Engine:
         qvel[vx_], qvel[vy_], qvel[wz_] = c * vx - s * vy, s * vx + c * vy, float(twist[2])
 
     def step(self) -> None:
-        """One physics step of `timestep`; a state gone non-finite or a body flown off stops the run."""
+        """One physics step of `timestep`; a state gone non-finite (MuJoCo resets it and counts a warning) or
+        a body flown off stops the run."""
         mujoco.mj_step(self.model, self.data)
+        warned = self._warned
+        for kind in _UNSTABLE:
+            if warned[kind]:
+                self._unstable(kind)
         qpos = self.qpos
-        for adr in self.body_qpos:
-            x, y = qpos[adr], qpos[adr + 1]
-            if not (abs(x) < FAR_M and abs(y) < FAR_M):  # also false for NaN
-                raise SceneError(f"scene '{self.name}': body '{self.body_names[self.body_qpos.index(adr)]}' left the "
-                                 f"scene or its state is not a number (x={x}, y={y}): the simulation exploded; "
-                                 "look at its mass, size and damping, or the robot's speed")
+        for i, adr in enumerate(self.body_qpos):
+            x, y, z = qpos[adr], qpos[adr + 1], qpos[adr + 2]
+            if not (abs(x) < FAR_M and abs(y) < FAR_M and abs(z) < FAR_M):  # also false for NaN
+                name = self.body_names[i]
+                raise SceneError(f"scene '{self.name}': body '{name}' left the scene or its state is not a number "
+                                 f"(x={x:.3g}, y={y:.3g}, z={z:.3g}): the simulation exploded; look at its mass, "
+                                 "size and damping, or the robot's speed", name)
+
+    def _unstable(self, kind: int) -> None:
+        m = self.model
+        dof = int(self._warned_at[kind])
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.dof_bodyid[dof])) if 0 <= dof < m.nv else None
+        what = {"QPOS": "position", "QVEL": "velocity", "QACC": "acceleration"}[
+            mujoco.mjtWarning(kind).name.removeprefix("mjWARN_BAD")]
+        blamed = f"body '{body}'" if body else f"degree of freedom {dof}"
+        raise SceneError(f"scene '{self.name}': {blamed} went to a value not a number, infinite or huge (its {what}) "
+                         f"at {self.data.time:.3f} s of simulation: the simulation exploded (MuJoCo reset it); look at "
+                         "its mass, size, damping and the forces on it", body or "")
 
     def place_handle(self, i: int, position: np.ndarray, velocity: np.ndarray | None = None) -> None:
         """Handle i where its device is (its joints are the device's axes: the device's own coordinates)."""

@@ -10,7 +10,7 @@ overlaps, a robot that starts inside something, and a scene MuJoCo cannot load (
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -32,6 +32,29 @@ class Loaded:
     xml: str
     scene: Scene | None
     file: str  # where it came from ("" inline)
+    places: dict[str, tuple[tuple, int]] = field(default_factory=dict)
+    """A movable body's or handle's MJCF name: its path in the scene (and a body's name, if it has one) and its
+    line in `file` (0: unknown)."""
+
+    def where(self, mjcf_name: str, inline: str = "scene") -> str:
+        """`file:line: path` of what the scene calls `mjcf_name` (what is known of it), for a message at run time;
+        an inline scene's path starts with `inline`, where the composition has it."""
+        path, line = self.places.get(mjcf_name, ((mjcf_name,) if mjcf_name else (), 0))
+        if len(path) == 3:  # a named body: its name after its path
+            path, called = path[:2], f" '{path[2]}'"
+        else:
+            called = ""
+        dotted = ".".join(str(part) for part in (() if self.file else (inline,)) + path) + called
+        return f"{self.file}{f':{line}' if line else ''}: {dotted}" if self.file else dotted
+
+
+def _places(scene: Scene, line) -> dict[str, tuple[tuple, int]]:
+    """Where a scene declares each body the engine may blame at run time; `line(path)` finds its line."""
+    named = {f"bodies[{i}]": ("bodies", i) for i in range(len(scene.bodies))}
+    named.update({f"handle_{h.name}": ("handles", i) for i, h in enumerate(scene.handles)})
+    named["robot"] = ("robot",)
+    called = {f"bodies[{i}]": b.name for i, b in enumerate(scene.bodies) if b.name}
+    return {name: (path + ((called[name],) if name in called else ()), line(path)) for name, path in named.items()}
 
 
 def find(name: str, folder: Path | None = None) -> Path | None:
@@ -54,7 +77,7 @@ def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tu
     """The scene `ref` names, checked; or None and the findings (paths under `prefix` for an inline one)."""
     if isinstance(ref, Scene):
         found = check(ref, prefix)
-        return (None if found else Loaded(to_mjcf(ref), ref, "")), found
+        return (None if found else Loaded(to_mjcf(ref), ref, "", _places(ref, lambda path: 0))), found
     path = find(ref, folder)
     if path is None:
         return None, [Diagnostic("scene-file", f"no scene '{ref}': not a shipped scene "
@@ -76,7 +99,10 @@ def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tu
     except ValidationError as error:
         return None, [source.place(d) for d in diagnostics_from(error, Scene)]
     found = [source.place(d) for d in check(scene, ())]
-    return (None if found else Loaded(to_mjcf(scene, path.stem), scene, str(path))), found
+    if found:
+        return None, found
+    places = _places(scene, lambda at: source.locate(at)[0] or 0)
+    return Loaded(to_mjcf(scene, path.stem), scene, str(path), places), found
 
 
 def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:

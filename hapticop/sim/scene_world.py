@@ -119,7 +119,7 @@ class SceneWorld(Block):
         "operator_done": Port("uint8", (), "1", "the operator believes the task is over"),
     }
     outputs = {}
-    flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
+    flags_written = {"finished": "the operator is done, the robot crashed, time is up, or the simulation exploded"}
 
     @classmethod
     def interface(cls, params: SceneWorldParams) -> Interface:
@@ -182,6 +182,7 @@ class SceneWorld(Block):
         loaded, found = _loaded(self.params)
         if loaded is None:
             raise ValueError("; ".join(d.to_text() for d in found))
+        self.loaded = loaded
         self.scene = scene = loaded.scene or Scene()
         self.engine = Engine(loaded.xml, self.name)
         self.geometry = _judged_geometry(scene)
@@ -208,7 +209,10 @@ class SceneWorld(Block):
             place(self.start, inputs.robot_pose.value, self.pose)
         engine.place_robot(self.pose, inputs.robot_twist.value if inputs.robot_twist.seq else None)
         self._place_handles()
-        engine.step()
+        try:
+            engine.step()
+        except RuntimeError as error:  # SceneError: said where the scene declares what exploded
+            raise self._located(error) from None
         engine.place_robot(self.pose)  # the step moved the robot's joints; the plant moves the robot
         clearance = engine.clearance()
         engine.contact_wrench(self.wrench)
@@ -233,6 +237,18 @@ class SceneWorld(Block):
             self.contact[i] = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1])
             if self.bodies is not None:
                 self.body_track[i] = self.bodies
+
+    def _located(self, error: RuntimeError) -> RuntimeError:
+        """A scene's explosion said once, where the scene declares what exploded, and `finished` raised (a
+        running failure alone does not end a run); anything else as it is."""
+        from hapticop.sim.engine import SceneError
+
+        if not isinstance(error, SceneError):
+            return error
+        where = self.loaded.where(error.body, f"activities.{self.name}.params.scene")
+        self.ended = "the simulation exploded"
+        self.flags["finished"] = True  # nothing simulated is real any more: the composition ends the run on it
+        return SceneError(f"{where}: {error}", error.body)
 
     def _place_handles(self) -> None:
         """Each handle where its device last said, moving at its velocity; a position that is not finite or
