@@ -47,7 +47,8 @@ def report(
     file: Path = typer.Argument(..., help="the experiment file"),
     out: Path | None = typer.Option(None, help="the results folder (default: results/NAME beside the file)"),
     docs: bool = typer.Option(False, "--docs", help="also rewrite the tables of this experiment in README.md and "
-                              "docs/*.md (between their `<!-- experiment NAME SUMMARY -->` markers)"),
+                              "docs/*.md (between their `<!-- experiment NAME SUMMARY -->` markers) and "
+                              "redraw its summaries' pictures in docs/figures/"),
 ) -> None:
     """Judge each cell against the targets and draw the metrics: FOLDER/report/report.md and its PNGs."""
     from hapticop.experiment.report import write_report
@@ -64,7 +65,7 @@ def report(
     typer.echo(f"report: {page}")
     if docs:
         from hapticop.experiment.regions import update
-        from hapticop.experiment.report import summary
+        from hapticop.experiment.report import summary, summary_figures
 
         root = Path(__file__).resolve().parents[2]
         for doc in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
@@ -73,3 +74,5 @@ def report(
             if new != text:
                 doc.write_text(new)
                 typer.echo(f"updated {doc.relative_to(root)}")
+        for picture in summary_figures(loaded.experiment, table, root / "docs" / "figures"):
+            typer.echo(f"drew {picture.relative_to(root)}")

@@ -185,9 +185,17 @@ def summary(name: str, table: pa.Table) -> str:
     raise KeyError(f"summary {name} has no section {section}")
 
 
+def summary_figures(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
+    """The pictures of the experiment's named summaries that draw some (`figures.FIGURES`)."""
+    from hapticop.experiment.figures import FIGURES
+
+    rows = table.to_pylist()
+    return [p for name in experiment.summaries if name in FIGURES for p in FIGURES[name](rows, folder)]
+
+
 def write_report(experiment: Experiment, table: pa.Table, folder: Path) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    pictures = plots(experiment, table, folder / "plots")
+    pictures = plots(experiment, table, folder / "plots") + summary_figures(experiment, table, folder / "plots")
     target = folder / "report.md"
     target.write_text(page(experiment, table, pictures, folder))
     return target
