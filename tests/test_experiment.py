@@ -261,30 +261,81 @@ def test_the_report_judges_each_cell_against_the_targets_and_draws_them(tmp_path
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "plots/force_peak_n.png" in page
 
 
-def test_the_same_study_on_a_local_ray_cluster_gives_the_same_metrics_bit_for_bit(tmp_path):
+@pytest.fixture(scope="module")
+def local_ray():
+    """A Ray cluster of two CPUs on this machine, started as the tests' driver."""
     try:
         import ray
     except ImportError:
         if os.environ.get("CI"):
             pytest.fail("ray is missing under CI: install hapticop[cluster]")
         pytest.skip("ray is not installed (hapticop[cluster])")
-    loaded = load(STUDY)
-    run_study(loaded, tmp_path / "pool", workers=2)
     short = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # Ray's socket paths must stay under 108 bytes
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, _temp_dir=short)
     try:
-        run_study(loaded, tmp_path / "ray-out", ray="auto")
+        yield ray
     finally:
         ray.shutdown()
         shutil.rmtree(short, ignore_errors=True)
 
+
+def test_the_same_study_on_a_local_ray_cluster_gives_the_same_metrics_bit_for_bit(tmp_path, local_ray):
+    loaded = load(STUDY)
+    run_study(loaded, tmp_path / "pool", workers=2)
+    run_study(loaded, tmp_path / "ray-out", ray="auto")
+
     def metrics(folder: str) -> dict:
-        kept = ("status", "composition_hash")
+        kept = ("status", "composition_hash", "tries")
         return {r["run_id"]: {k: v for k, v in r.items() if k.startswith("metric.") or k in kept}
                 for r in read(tmp_path / folder).to_pylist()}
 
     pool, cluster = metrics("pool"), metrics("ray-out")
     assert len(pool) == 6 and pool == cluster
+
+
+def _kill_the_first_ray_worker_running_a_run(killed: list) -> None:
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        for runner in _runners(os.getpid()):
+            worker = _parent(runner)
+            try:
+                is_worker = Path(f"/proc/{worker}/cmdline").read_bytes().startswith(b"ray::")
+            except OSError:
+                continue
+            if is_worker:
+                os.kill(worker, signal.SIGKILL)
+                killed.append(runner)
+                return
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("retries", [1, 0])
+def test_a_run_lost_with_its_ray_worker_is_tried_again_and_reported(tmp_path, local_ray, capsys, retries):
+    """The worker running the run is killed (as a node lost): the run is submitted again and its row says
+    it took two tries and what was lost; with no retries left it is a failed row, and the study goes on."""
+    import threading
+
+    path = write(tmp_path, f"version: 1\nname: lost\ncomposition: COMPOSITION\nretries: {retries}\n"
+                 "factors:\n  - {path: activities.spring.params.kp_n_per_m, values: [100.0]}\n")
+    killed: list[int] = []
+    killer = threading.Thread(target=_kill_the_first_ray_worker_running_a_run, args=(killed,))
+    killer.start()
+    try:
+        done, failed = run_study(load(path), tmp_path / "out", ray="auto")
+    finally:
+        killer.join()
+    assert killed, "no run was seen on a Ray worker"
+    assert not _wait_gone(killed), "the run outlived its lost worker"
+    [row] = read(tmp_path / "out").to_pylist()
+    said = capsys.readouterr().err
+    if retries:
+        assert (done, failed) == (1, 0) and row["status"] == "done" and row["tries"] == 2
+        assert row["metric.force_peak_n"] > 0 and "lost before: " in row["message"]
+        assert "lost on the cluster" in said and "trying again (2 of 2)" in said
+    else:
+        assert (done, failed) == (1, 1) and row["status"] == "failed" and row["tries"] == 1
+        assert row["message"].startswith("lost on the cluster 1 times: ")
+        assert "recorded as failed" in said
 
 
 def test_a_marker_quoted_inside_a_line_is_text_not_a_region():
