@@ -77,6 +77,27 @@ def test_validate_refuses_a_bad_factor_with_file_line_and_field(tmp_path, factor
     assert cli.returncode == 1 and f"{path}:{line}:" in cli.stdout and "Traceback" not in cli.stdout + cli.stderr
 
 
+KP = "{path: activities.spring.params.kp_n_per_m, name: kp, values: [100.0, 200.0]}"
+
+
+@pytest.mark.parametrize("tail, line, field", [
+    (f"factors:\n  - {KP}\nlatin_hypercube:\n  n: 3\n  bounds:\n    activities.spring.params.mode_x: [0, 1]\n",
+     9, "latin_hypercube.bounds.activities.spring.params.mode_x"),
+    (f"factors:\n  - {KP}\nlatin_hypercube:\n  n: 3\n  bounds:\n    activities.spring.params.kp_n_per_m: [1, 9000]\n",
+     9, "latin_hypercube.bounds.activities.spring.params.kp_n_per_m"),
+    (f"factors:\n  - {KP}\ncell_patches:\n  - where: {{kp: '200.0'}}\n"
+     "    patch: {activities: {spring: {params: {mode: explode}}}}\n", 8, "cell_patches.0.patch"),
+    (f"factors:\n  - {KP}\npaths: hallway\n", 6, "paths"),
+    ("factors:\n  - {path: activities.nothing_here.params.kp, values: [1.0]}\n", 5, "factors.0.values.0"),
+])
+def test_validate_refuses_a_bad_bound_cell_patch_or_paths_with_file_line_and_field(tmp_path, tail, line, field):
+    path = write(tmp_path, "version: 1\nname: bad\ncomposition: COMPOSITION\n" + tail)
+    report = load(path).report
+    assert not report.ok
+    found = report.errors[0]
+    assert (found.file, found.line, found.dotted_path) == (str(path), line, field), found.to_text()
+
+
 def test_the_shipped_experiment_files_validate():
     for path in [STUDY, HERE / "tiny.yaml"]:
         assert load(path).report.ok, [d.to_text() for d in load(path).report.errors]

@@ -27,11 +27,14 @@ _live: set[subprocess.Popen] = set()
 _live_lock = threading.Lock()
 
 
+PATH_STEP_S = 0.1
+"""A kept path's sampling: enough to draw a run, small enough for a row."""
+
+
 def job(composition: Path, patches: tuple, sets: tuple, seed: int, clock: str, duration_s: float | None,
-        metrics: list[str] | None) -> dict:
+        metrics: list[str] | None, path: bool = False) -> dict:
     return {"composition": str(composition), "patches": list(patches), "sets": [list(s) for s in sets], "seed": seed,
-            "clock": clock,
-            "duration_s": duration_s, "metrics": metrics}
+            "clock": clock, "duration_s": duration_s, "metrics": metrics, "path": path}
 
 
 def execute(work: dict, time_limit_s: float) -> dict:
@@ -127,6 +130,7 @@ def run_here(work: dict) -> dict:
         judged = Path(run_dir) / "results.json"
         if judged.exists():  # the targets the world judged the run to miss
             metrics["missed"] = [r["metric"] for r in json.loads(judged.read_text())["rows"] if r["ok"] is False]
+        path = _path(Path(run_dir) / "trajectory.npz") if work.get("path") else None
     wanted = work["metrics"]
     if wanted is not None:
         metrics = {name: metrics.get(name) for name in wanted}
@@ -134,7 +138,24 @@ def run_here(work: dict) -> dict:
     failed = int(outcome.status) != 0
     return {"status": "failed" if failed else "done",
             "message": f"{outcome.status.name}: {'; '.join(outcome.reasons)}" if failed else "",
-            "composition_hash": digest, "metrics": metrics}
+            "composition_hash": digest, "metrics": metrics, **({"path": path} if path else {})}
+
+
+def _path(trajectory: Path) -> list[list[float]] | None:
+    """The robot's x and y every PATH_STEP_S from the trajectory its world wrote (None without one)."""
+    if not trajectory.exists():
+        return None
+    import numpy as np
+
+    with np.load(trajectory) as data:
+        if "t" not in data or "pose" not in data:
+            return None
+        t, pose = data["t"], data["pose"]
+    if len(t) == 0:
+        return None
+    picked = np.searchsorted(t, np.arange(t[0], t[-1], PATH_STEP_S))
+    picked = np.append(picked, len(t) - 1)
+    return [pose[picked, 0].round(4).tolist(), pose[picked, 1].round(4).tolist()]
 
 
 def _orphan_watch(parent: int) -> None:

@@ -47,7 +47,7 @@ def run_study(loaded: Loaded, out: Path, *, workers: int = 2, ray: str | None = 
     todo = [r for r in every if r.id not in have]
     by_id = {r.id: r for r in todo}
     jobs = [(r.id, job(composition_of(loaded, r), r.patches, r.sets, r.seed, experiment.clock,
-                       experiment.duration_s, experiment.metrics)) for r in todo]
+                       experiment.duration_s, experiment.metrics, experiment.paths is not None)) for r in todo]
     progress = progress or Progress(len(every), len(every) - len(todo))
     if ray:
         from hapticop.experiment.cluster import run_ray

@@ -57,6 +57,8 @@ def row(run_id: str, cell: str, factors: dict[str, Any], seed: int, version: str
     data = {"run_id": run_id, "cell": cell, "seed": seed, "composition_hash": outcome.get("composition_hash", ""),
             "software_version": version, "wall_s": float(outcome.get("wall_s", 0.0)), "status": outcome["status"],
             "message": outcome.get("message", ""), "tries": int(outcome.get("tries", 1))}
+    if outcome.get("path"):  # the robot's path, [xs, ys] as JSON (`paths:` in the experiment file)
+        data["path"] = json.dumps(outcome["path"])
     data |= {f"factor.{k}": v for k, v in factors.items()}
     for name, value in outcome.get("metrics", {}).items():
         data[f"metric.{name}"] = (json.dumps(value) if isinstance(value, dict | list) else
