@@ -116,7 +116,7 @@ activities:
       subscribe:
         cmd_in: {topic: /cmd_in, type: geometry_msgs/msg/Twist, qos: {reliability: best_effort, depth: 1}}
       publish:
-        cmd_out: {topic: /cmd_out, type: geometry_msgs/msg/Twist, rate_hz: 50}
+        cmd_out: {topic: /cmd_out, type: geometry_msgs/msg/Twist, rate: 50Hz}
 streams:
   cmd_in: {from: ros2.cmd_in, to: [echo.input], max_age: 200ms}
   cmd_out: {from: echo.output, to: [ros2.cmd_out], max_age: 200ms}
@@ -176,7 +176,7 @@ class Hostile:
         self.hub = router(port)
         self.harness = BlockHarness("ros2_bridge", {
             "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
-            "subscribe": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "max_age_ms": 300.0},
+            "subscribe": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "max_age": "300ms"},
                           "scan": {"topic": "/scan", "type": "sensor_msgs/msg/LaserScan", "shape": [4]}}},
             name="ros2", run_dir=tmp_path)
         self.harness.block.create()
@@ -269,7 +269,7 @@ def test_a_stale_command_is_published_as_a_stop(tmp_path):
     hub = router(port)
     harness = BlockHarness("ros2_bridge", {
         "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
-        "publish": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "rate_hz": 100}}}, name="ros2", run_dir=tmp_path)
+        "publish": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "rate": "100Hz"}}}, name="ros2", run_dir=tmp_path)
     listener = transport.session([], [f"tcp/127.0.0.1:{port}"], mode="client")
     try:
         receiver = transport.Receiver(listener, names.data_key(0, "/cmd_vel", TWIST, "jazzy"), 16)
@@ -330,7 +330,7 @@ def test_a_sample_is_sent_at_the_rate_with_its_own_stamp_each_time(tmp_path):
     hub = router(port)
     harness = BlockHarness("ros2_bridge", {
         "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
-        "publish": {"cmd": {"topic": "/cmd_vel", "type": "geometry_msgs/msg/TwistStamped", "rate_hz": 100}}},
+        "publish": {"cmd": {"topic": "/cmd_vel", "type": "geometry_msgs/msg/TwistStamped", "rate": "100Hz"}}},
         name="ros2", run_dir=tmp_path)
     listener = transport.session([], [f"tcp/127.0.0.1:{port}"], mode="client")
     try:

@@ -24,7 +24,7 @@ streams:
   force: {from: spring.force, to: [falcon_sim.hand_force]}
   handle_pose:
     from: falcon_sim.handle_position
-    ros2: {topic: /handle/pose, type: geometry_msgs/msg/PoseStamped, frame_id: falcon, rate_hz: 100}
+    ros2: {topic: /handle/pose, type: geometry_msgs/msg/PoseStamped, frame_id: falcon, rate: 100Hz}
   handle_force:
     from: spring.force
     ros2: {topic: /handle/wrench, type: geometry_msgs/msg/WrenchStamped}
@@ -42,7 +42,7 @@ EXPANDED = {
         "params": {"domain": 3, "node": "operator", "connect": ["tcp/127.0.0.1:7447"],
                    "publish": {
                        "handle_pose": {"topic": "/handle/pose", "type": "geometry_msgs/msg/PoseStamped",
-                                       "rate_hz": 100.0, "frame_id": "falcon"},
+                                       "rate": "10ms", "frame_id": "falcon"},
                        "handle_force": {"topic": "/handle/wrench", "type": "geometry_msgs/msg/WrenchStamped"}},
                    "subscribe": {
                        "goal": {"topic": "/goal", "type": "geometry_msgs/msg/PoseStamped",
@@ -126,7 +126,7 @@ streams:
   cmd_out:
     from: echo.output
     max_age: 200ms
-    ros2: {topic: /cmd_out, type: geometry_msgs/msg/Twist, rate_hz: 50}
+    ros2: {topic: /cmd_out, type: geometry_msgs/msg/Twist, rate: 50Hz}
 """
 
 
@@ -175,3 +175,18 @@ def test_a_recording_holds_the_ros2_topics_as_rosbag2_channels_another_decoder_r
             assert by_stamp[stamp] == value, (topic, stamp)
         gaps = [b[0] - a[0] for a, b in zip(seen[topic], seen[topic][1:], strict=False)]
         assert min(gaps) >= 1e9 / rate, topic  # thinned to the topic's declared rate, as the node sends it
+
+
+def test_rates_and_ages_are_written_as_every_period_and_duration_of_a_composition():
+    """`rate: 100Hz` and `rate: 10ms` are one period; a bare number or a rate above 1 kHz is a located finding."""
+    expanded = [_plain(expand(YAML(typ="rt").load(SYSTEM.replace("rate: 100Hz", spelling)))[0])
+                for spelling in ("rate: 100Hz", "rate: 10ms", "rate: 0.1kHz")]
+    assert all(e["activities"]["ros2"]["params"]["publish"]["handle_pose"]["rate"] == "10ms" for e in expanded)
+    found = _findings(SYSTEM.replace("max_age: 300ms\n    ros2: {", "max_age: 300ms\n    ros2: {max_age: 250ms, "))
+    assert found == []
+    found = _findings(SYSTEM.replace("rate: 100Hz", "rate: 100"))
+    assert len(found) == 1 and found[0].startswith("15 streams.handle_pose.ros2.rate") and "needs a unit" in found[0]
+    found = _findings(SYSTEM.replace("rate: 100Hz", "rate: 2kHz"))
+    assert len(found) == 1 and found[0].startswith("15 streams.handle_pose.ros2") and "faster than 1kHz" in found[0]
+    found = _findings(SYSTEM.replace("rate: 100Hz", "rate_hz: 100"))
+    assert len(found) == 1 and "rate_hz" in found[0], found

@@ -140,7 +140,7 @@ class Ros2Bridge(Block):
         for name, t in self.params.publish.items():
             if now < self.next_ns[name]:
                 continue
-            self.next_ns[name] = max(self.next_ns[name] + int(1e9 / t.rate_hz), now)
+            self.next_ns[name] = max(self.next_ns[name] + t.rate, now)
             port = getattr(self.inputs, name)
             if port.valid:
                 if port.seq != self.sent_seq[name]:  # a sample sent again keeps its stamp, to the nanosecond
@@ -181,7 +181,7 @@ class Ros2Bridge(Block):
         source = meta[1]
         if source > wall + FUTURE_NS:
             return "source time in the future"
-        if wall - source > t.max_age_ms * 1e6:
+        if wall - source > t.max_age:
             return "stale"
         if source < self.last_source[name]:
             return "older than the last one delivered"

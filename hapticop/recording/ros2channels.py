@@ -22,9 +22,9 @@ from hapticop.ros2.topics import Ros2Topic
 @dataclass
 class Ros2Channels:
     """Channels `ros2msg`/`cdr` for the recorded streams with `ros2:` (by stream: its topic's full name, its
-    option, and the rate it is thinned to, 0 for a subscription: every sample that arrived)."""
+    option, and the period in ns it is thinned to, 0 for a subscription: every sample that arrived)."""
 
-    topics: dict[str, tuple[str, Ros2Topic, float]]
+    topics: dict[str, tuple[str, Ros2Topic, int]]
     distro: str = "jazzy"
     streams: frozenset[str] = frozenset()
     ids: dict[str, int] = field(default_factory=dict)
@@ -44,7 +44,7 @@ class Ros2Channels:
             self.ids[name] = file.channel(topic, "cdr", schema, {"from_stream": name})  # not a raw stream's
 
     def samples(self, stream: StreamInfo, samples: np.ndarray, log_time_ns: int) -> None:
-        period_ns = int(1e9 / self.topics[stream.name][2]) if self.topics[stream.name][2] else 0
+        period_ns = self.topics[stream.name][2]
         values = samples["payload"].view(np.dtype(stream.dtype)).reshape((len(samples), *stream.shape))
         for sample, value in zip(samples, values, strict=True):
             stamp = int(sample["stamp_ns"])
@@ -67,7 +67,7 @@ def ros2_channels(composition: Composition, recorded: list[str]) -> list[Ros2Cha
         if option is not None:
             published = composition.streams[name].writer.split(".", 1)[0] != "ros2"
             namespace = composition.ros2.namespace if composition.ros2 else "/"
-            topics[name] = (option.fully_qualified(namespace), option, option.rate_hz if published else 0.0)
+            topics[name] = (option.fully_qualified(namespace), option, option.rate if published else 0)
     if not topics:
         return []
     return [Ros2Channels(topics, composition.ros2.distro if composition.ros2 else "jazzy")]
