@@ -175,6 +175,50 @@ def test_a_recording_holds_the_ros2_topics_as_rosbag2_channels_another_decoder_r
             assert by_stamp[stamp] == value, (topic, stamp)
         gaps = [b[0] - a[0] for a, b in zip(seen[topic], seen[topic][1:], strict=False)]
         assert min(gaps) >= 1e9 / rate, topic  # thinned to the topic's declared rate, as the node sends it
+    assert_bag_reads_back(path, {"/handle/pose": seen["/handle/pose"], "/handle/wrench": seen["/handle/wrench"],
+                                 "/goal": []})
+
+
+def assert_bag_reads_back(recording, expected: dict[str, list] | None = None, at_least: int = 1) -> dict:
+    """The bag beside a recording opens in rosbags' rosbag2 readers (the directory with its metadata.yaml, and
+    its MCAP file alone), lists every ROS 2 topic with its type and QoS, and every message decodes: to the
+    `(stamp, values)` expected, or, without them, to at least `at_least` messages a topic. Returns the
+    decoded messages by topic."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import Reader
+
+    from hapticop.recording.ros2channels import bag_of
+
+    bag = bag_of(recording)
+    assert (bag / "metadata.yaml").is_file() and not list(bag.glob("*.part")), sorted(bag.iterdir())
+    decoded: dict[str, list] = {}
+    with Reader(bag) as directory:
+        assert directory.ros_distro == "jazzy" and directory.message_count == sum(
+            c.msgcount for c in directory.connections)
+    with AnyReader([bag]) as reader:
+        topics = {c.topic: c for c in reader.connections}
+        if expected is not None:
+            assert set(topics) == set(expected), topics
+        for connection, time_ns, raw in reader.messages(connections=reader.connections):
+            message = reader.deserialize(raw, connection.msgtype)
+            stamp = getattr(message, "header", None)
+            assert stamp is None or stamp.stamp.sec * 1_000_000_000 + stamp.stamp.nanosec == time_ns
+            decoded.setdefault(connection.topic, []).append((time_ns, message))
+        for topic, connection in topics.items():
+            assert connection.digest.startswith("RIHS01_") and connection.ext.offered_qos_profiles, topic
+            count = len(decoded.get(topic, []))
+            assert connection.msgcount == count, topic  # metadata.yaml's count is the file's
+            assert count == len(expected[topic]) if expected is not None else count >= at_least, (topic, count)
+    for topic, values in (expected or {}).items():
+        got = []
+        for stamp, message in decoded.get(topic, []):
+            v = message.pose.position if topic == "/handle/pose" else message.wrench.force
+            got.append((stamp, [v.x, v.y, v.z]))
+        assert got == values, topic
+    with Reader(next(bag.glob("*_0.mcap"))) as alone:  # the bag's file opens by itself too (profile ros2)
+        assert {c.topic for c in alone.connections} == set(topics)
+        assert sum(1 for _ in alone.messages()) == sum(map(len, decoded.values()))
+    return decoded
 
 
 def test_rates_and_ages_are_written_as_every_period_and_duration_of_a_composition():
