@@ -2,7 +2,8 @@
 rmw_zenoh on its own), not with hapticop's code: it runs in a process of its own and says what it sees as
 JSON lines on its standard output.
 
-    python tests/ros2_client.py PORT probe   # publishes /cmd_in (Twist, 20 Hz), prints /cmd_out and the graph
+    python tests/ros2_client.py PORT probe   # publishes /cmd_in (Twist, 20 Hz), prints /cmd_out, /hapticop/flags
+                                             # and the graph
     python tests/ros2_client.py PORT robot   # a planar robot in a corridor: cmd_vel in; odom and scan out
     python tests/ros2_client.py PORT latency # /cmd_in at 20 Hz; the age of each /cmd_stamped on arrival
 
@@ -72,6 +73,8 @@ def probe(port: int, types) -> None:
     endpoint(ROS2Subscriber, "/wrench", "geometry_msgs/msg/WrenchStamped", port, "probe",
              callback=lambda m: say(wrench=[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z],
                                     frame=m.header.frame_id, stamp=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9))
+    endpoint(ROS2Subscriber, "/hapticop/flags", "std_msgs/msg/String", port, "probe",
+             callback=lambda m: say(flags=json.loads(m.data)))
     next_graph = 0.0
     while True:
         cmd_in.publish(linear=vector(x=0.25, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=0.5))

@@ -234,3 +234,44 @@ def test_rates_and_ages_are_written_as_every_period_and_duration_of_a_compositio
     assert len(found) == 1 and found[0].startswith("15 streams.handle_pose.ros2") and "faster than 1kHz" in found[0]
     found = _findings(SYSTEM.replace("rate: 100Hz", "rate_hz: 100"))
     assert len(found) == 1 and "rate_hz" in found[0], found
+
+
+FLAGS = """
+version: 1
+name: ros2_flags
+ros2: {node: hapticop, listen: [tcp/127.0.0.1:PORT], flags: {rate: 20Hz}}
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, counter]}}
+activities:
+  mediator: {block: mediator}
+  counter: {block: counter, params: {stop_after: 5000}}
+"""
+
+
+def test_the_runs_flags_are_a_string_topic_the_independent_client_lists_and_reads(tmp_path):
+    """`ros2: {flags: ...}` alone makes the node: the client lists its std_msgs/msg/String publisher and reads
+    every flag of the run as JSON, 'counter.reached' false and then, 5 s in, true."""
+    from tests.runtime_helpers import run_until
+    from tests.test_ros2_bridge import Client
+
+    port = _free_port()
+    client = Client(port, "probe")
+    client.wait(lambda line: line.get("ready"), "the client's node up")
+    string_hash = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+    seen = {"before": False, "after": False, "listed": False}
+
+    def reached(system) -> bool:
+        for line in client.lines_since():
+            if "flags" in line:
+                seen["after" if line["flags"]["counter.reached"] else "before"] = True
+            publishers = line.get("endpoints", {}).get("/hapticop/flags", [])
+            seen["listed"] |= ["hapticop", "MP", string_hash, "::,10:,:,:,,"] in publishers
+        return all(seen.values())
+
+    try:
+        run_until(tmp_path, FLAGS.replace("PORT", str(port)), reached, "the flags read before and after the count")
+    except AssertionError as error:
+        raise AssertionError(f"{error} (seen {seen}; the client's last lines: {client.drain()[-3:]}; "
+                             f"its errors: {client.errors()!r})") from None
+    finally:
+        client.close()

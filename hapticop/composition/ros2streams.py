@@ -21,6 +21,9 @@ from hapticop.ros2.topics import Ros2Node, Ros2Topic
 
 ROS2 = "ros2"
 """The generated node's activity and thread."""
+HOSTS_BRIDGE = "bridge"  # placement.BRIDGE: the hosts' bridge (placement imports the description, which imports this)
+GENERATED = "the streams with 'ros2:', as the ROS 2 node this system is (generated)"
+"""The generated activity's doc, by which a tree already rewritten (a host's share of one) is known."""
 
 
 class Ros2Stream(Ros2Topic):
@@ -35,11 +38,25 @@ class Ros2System(Ros2Node):
 
     period: Duration = Field(5_000_000, description="the node's cycle (topics are published at their own "
                              "rates, taken each cycle)")
+    host: str | None = Field(None, description="with 'hosts:', the host the node runs on; a stream between it "
+                             "and a port on another host crosses the link like any other (it needs 'network:')")
 
 
 def has_ros2(tree: Any) -> bool:
-    streams = tree.get("streams") if isinstance(tree, dict) else None
-    return isinstance(streams, dict) and any(isinstance(e, dict) and "ros2" in e for e in streams.values())
+    """Streams with `ros2:`, or the system's node publishing the run's flags."""
+    if not isinstance(tree, dict):
+        return False
+    streams, node = tree.get("streams"), tree.get("ros2")
+    return (isinstance(streams, dict) and any(isinstance(e, dict) and "ros2" in e for e in streams.values())) or (
+        isinstance(node, dict) and node.get("flags") is not None)
+
+
+def _across_hosts(entry: dict) -> bool:
+    """In a host's share (`placement.for_host`), the stream runs between a local port and the hosts' bridge:
+    its ROS 2 side is the node's, on another host."""
+    sides = [entry.get("from"), *(entry.get("to") or [])]
+    return "from" in entry and bool(entry.get("to")) and any(
+        isinstance(side, str) and side.startswith(f"{HOSTS_BRIDGE}.") for side in sides)
 
 
 def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
@@ -49,6 +66,10 @@ def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
     located, and the stream (which then lacks a side) is set aside."""
     if not has_ros2(tree):
         return tree, []
+    activities = tree.get("activities")
+    if isinstance(activities, dict) and isinstance(activities.get(ROS2), dict) and (
+            activities[ROS2].get("doc") == GENERATED):
+        return tree, []  # rewritten already: a host's share of a composition with 'hosts:' is loaded again
     out, found = copy.deepcopy(tree), []
     try:
         system = Ros2System.model_validate(out.get("ros2") or {})
@@ -57,13 +78,15 @@ def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
             return out, []  # reported by the schema, at `ros2`
         system = None
     publish, subscribe = {}, {}
-    for name, entry in out["streams"].items():
+    for name, entry in (out.get("streams") or {}).items():
         if not isinstance(entry, dict) or "ros2" not in entry:
             continue
         try:
             option = Ros2Stream.model_validate(entry["ros2"])
         except ValidationError:
             continue
+        if _across_hosts(entry) and f"{ROS2}.{name}" not in [entry.get("from"), *(entry.get("to") or [])]:
+            continue  # a host's share of a composition with 'hosts:': the node is on another host, over the link
         path = ("streams", name, "ros2")
         if system is None:
             found.append(Diagnostic("ros2-node", "a stream with 'ros2:' needs the system's ROS 2 node", path,
@@ -74,7 +97,11 @@ def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
                                     path + ("distro",), hint="one node speaks one distribution: drop it or match"))
             continue
         spec = option.model_dump(mode="json", exclude={"distro"}, exclude_defaults=True)
-        if "from" not in entry:
+        if entry.get("from") == f"{ROS2}.{name}":  # wired already, to a host's bridge (placement.for_host)
+            subscribe[name] = spec
+        elif f"{ROS2}.{name}" in (entry.get("to") or []):
+            publish[name] = spec
+        elif "from" not in entry:
             subscribe[name] = spec
             entry["from"] = f"{ROS2}.{name}"
         elif not entry.get("to"):
@@ -84,19 +111,23 @@ def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
             found.append(Diagnostic("ros2-sides", "a stream with 'ros2:' has one side in hapticop: 'from' (published "
                                     "to ROS 2) or 'to' (subscribed from it), not both", path,
                                     hint="split it: one stream to the readers, one with 'ros2:' and the same 'from'"))
-    if not (publish or subscribe):
+    if not (publish or subscribe or (system is not None and system.flags is not None)):
         return out, found
     for collection in ("activities", "threads"):
         if isinstance(out.get(collection), dict) and ROS2 in out[collection]:
             found.append(Diagnostic("ros2-name", f"'{ROS2}' is the name of the generated ROS 2 node's "
                                     f"{collection[:-1]}", (collection, ROS2), hint="rename this one"))
             return tree, found
-    params = system.model_dump(mode="json", exclude={"period"}, exclude_defaults=True)
+    if isinstance(out.get("hosts"), dict) and system.host is None:
+        found.append(Diagnostic("ros2-host", "with 'hosts:', the ROS 2 node runs on one of them: it names none",
+                                ("ros2",), hint=f"add 'host:' ({', '.join(map(str, out['hosts']))})"))
+    params = system.model_dump(mode="json", exclude={"period", "host"}, exclude_defaults=True)
     out.setdefault("activities", {})[ROS2] = {
-        "block": "ros2_bridge", "doc": "the streams with 'ros2:', as the ROS 2 node this system is (generated)",
+        "block": "ros2_bridge", "doc": GENERATED,
         "params": {**params, **({"publish": publish} if publish else {}),
                    **({"subscribe": subscribe} if subscribe else {})}}
     out.setdefault("threads", {})[ROS2] = {
         "period": f"{system.period}ns", "deploy": "process", "schedules": {0: [ROS2]},
-        "doc": "normal scheduling, its own process: Zenoh never shares a GIL with a real-time loop"}
+        "doc": "normal scheduling, its own process: Zenoh never shares a GIL with a real-time loop",
+        **({"host": system.host} if system.host is not None else {})}
     return out, found

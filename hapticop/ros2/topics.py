@@ -96,6 +96,28 @@ class Ros2Topic(BaseModel):
         return self.topic if self.topic.startswith("/") else f"{namespace.rstrip('/')}/{self.topic}"
 
 
+class Ros2Flags(BaseModel):
+    """The run's flags as a `std_msgs/msg/String` topic: a JSON object of every flag by its full name."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    topic: str = Field("/hapticop/flags", description="the topic's name")
+    rate: Duration = Field(100_000_000, description="sent this often, and at once when a flag changes ('10Hz')")
+    qos: Ros2Qos = Field(default_factory=Ros2Qos, description="reliability, durability, history and depth")
+
+    @model_validator(mode="after")
+    def _fits(self) -> Ros2Flags:
+        if not TOPIC.match(self.topic):
+            raise PydanticCustomError("ros2_topic", "topic '{topic}' is not a ROS 2 name (letters, digits and "
+                                      "'_' in chunks between '/')", {"topic": self.topic})
+        if self.rate < 1_000_000:
+            raise PydanticCustomError("ros2_rate", "rate {rate} is faster than 1kHz",
+                                      {"rate": format_duration(self.rate)})
+        return self
+
+    def fully_qualified(self, namespace: str) -> str:
+        return self.topic if self.topic.startswith("/") else f"{namespace.rstrip('/')}/{self.topic}"
+
+
 class Ros2Node(BaseModel):
     """The ROS 2 node hapticop is on the ROS graph: its domain, name, distribution and Zenoh endpoints."""
 
@@ -110,6 +132,8 @@ class Ros2Node(BaseModel):
                                             "through the Zenoh routers in 'connect' (rmw_zenohd)")
     listen: list[str] = Field(default_factory=list, description="this node's Zenoh endpoints (peer mode)")
     connect: list[str] = Field(default_factory=list, description="the endpoints of the peers or routers")
+    flags: Ros2Flags | None = Field(None, description="the run's flags published as a std_msgs/msg/String topic "
+                                    "(JSON: every flag by its full name), e.g. '{topic: /hapticop/flags}'")
 
     @model_validator(mode="after")
     def _endpoints(self) -> Ros2Node:
