@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from ruamel.yaml import YAML
 
+from hapticop.composition.loader import declared_port
 from hapticop.composition.ros2streams import expand
 from hapticop.validation import validate_text
 from tests.test_ros2_bridge import _echo_through, _free_port
@@ -42,8 +43,9 @@ EXPANDED = {
         "params": {"domain": 3, "node": "operator", "connect": ["tcp/127.0.0.1:7447"],
                    "publish": {
                        "handle_pose": {"topic": "/handle/pose", "type": "geometry_msgs/msg/PoseStamped",
-                                       "rate": "10ms", "frame_id": "falcon"},
-                       "handle_force": {"topic": "/handle/wrench", "type": "geometry_msgs/msg/WrenchStamped"}},
+                                       "shape": [3], "rate": "10ms", "frame_id": "falcon"},  # shapes: the ports'
+                       "handle_force": {"topic": "/handle/wrench", "type": "geometry_msgs/msg/WrenchStamped",
+                                        "shape": [3]}},
                    "subscribe": {
                        "goal": {"topic": "/goal", "type": "geometry_msgs/msg/PoseStamped",
                                 "qos": {"reliability": "best_effort", "depth": 1}}}}}},
@@ -62,7 +64,7 @@ def _plain(node):
 
 def test_the_loader_writes_the_ros2_node_for_the_streams_that_declare_a_topic():
     tree = YAML(typ="rt").load(SYSTEM)
-    expanded, found = expand(tree)
+    expanded, found = expand(tree, declared_port)
     assert found == []
     out = _plain(expanded)
     assert out["threads"]["ros2"] == EXPANDED["threads"]["ros2"]
@@ -223,7 +225,7 @@ def assert_bag_reads_back(recording, expected: dict[str, list] | None = None, at
 
 def test_rates_and_ages_are_written_as_every_period_and_duration_of_a_composition():
     """`rate: 100Hz` and `rate: 10ms` are one period; a bare number or a rate above 1 kHz is a located finding."""
-    expanded = [_plain(expand(YAML(typ="rt").load(SYSTEM.replace("rate: 100Hz", spelling)))[0])
+    expanded = [_plain(expand(YAML(typ="rt").load(SYSTEM.replace("rate: 100Hz", spelling)), declared_port)[0])
                 for spelling in ("rate: 100Hz", "rate: 10ms", "rate: 0.1kHz")]
     assert all(e["activities"]["ros2"]["params"]["publish"]["handle_pose"]["rate"] == "10ms" for e in expanded)
     found = _findings(SYSTEM.replace("max_age: 300ms\n    ros2: {", "max_age: 300ms\n    ros2: {max_age: 250ms, "))
@@ -275,3 +277,37 @@ def test_the_runs_flags_are_a_string_topic_the_independent_client_lists_and_read
                              f"its errors: {client.errors()!r})") from None
     finally:
         client.close()
+
+
+INFER = """\
+version: 1
+name: inferred
+ros2: {node: hapticop, listen: [tcp/127.0.0.1:7447]}
+threads:
+  main: {period: 1ms, deploy: main, schedules: {0: [mediator, ranges, twist]}}
+activities:
+  mediator: {block: mediator}
+  ranges: {block: echo, params: {dtype: float32, shape: [7], unit: m}}
+  twist: {block: echo, params: {dtype: float64, shape: [6], unit: "m/s, m/s, m/s, rad/s, rad/s, rad/s"}}
+streams:
+  scan:
+    to: [ranges.input]
+    ros2: {topic: /scan, type: sensor_msgs/msg/LaserScan}
+  cmd_in:
+    to: [twist.input]
+    ros2: {topic: /cmd_in, type: geometry_msgs/msg/Twist}
+  cmd:
+    from: twist.output
+    ros2: {topic: /cmd_vel, type: geometry_msgs/msg/Twist}
+"""
+
+
+def test_a_topics_shape_is_taken_from_the_port_it_carries():
+    """A scan's length and a full (not planar) twist come from the hapticop port; with no port, a scan's
+    length is a located finding."""
+    params = _plain(expand(YAML(typ="rt").load(INFER), declared_port)[0])["activities"]["ros2"]["params"]
+    assert params["subscribe"]["scan"]["shape"] == [7] and params["publish"]["cmd"]["shape"] == [6]
+    assert params["subscribe"]["cmd_in"]["shape"] == [6]
+    assert _findings(INFER) == []
+    found = _findings(INFER.replace("    to: [ranges.input]\n", ""))
+    assert any(f.startswith("12 streams.scan.ros2") and "needs 'shape: [N]'" in f for f in found), found

@@ -10,6 +10,7 @@ findings on the streams stay located in the file.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from typing import Any
 
 from pydantic import Field, ValidationError
@@ -17,6 +18,7 @@ from pydantic import Field, ValidationError
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.units import Duration
 from hapticop.ros2 import names
+from hapticop.ros2.messages import LAYOUTS, layout_of
 from hapticop.ros2.topics import Ros2Node, Ros2Topic
 
 ROS2 = "ros2"
@@ -51,6 +53,23 @@ def has_ros2(tree: Any) -> bool:
         isinstance(node, dict) and node.get("flags") is not None)
 
 
+PortOf = Callable[[dict, str], Any]
+"""The port an `activity.port` reference names in a tree, from its block's declaration (the loader's), or None."""
+
+
+def _infer_shape(tree: dict, entry: dict, port_of: PortOf) -> None:
+    """A `ros2:` option without `shape` takes it from the hapticop port it carries, when that port fits one of
+    the message's layouts (a scan's length, a planar or a full twist): the port is the reference."""
+    option = entry.get("ros2")
+    if not isinstance(option, dict) or "shape" in option or option.get("type") not in LAYOUTS:
+        return
+    for ref in [entry.get("from"), *(entry.get("to") or [])]:
+        port = port_of(tree, ref) if isinstance(ref, str) and not ref.startswith(f"{ROS2}.") else None
+        if port is not None and layout_of(option["type"], port.dtype, tuple(port.shape)) is not None:
+            option["shape"] = list(port.shape)
+            return
+
+
 def _across_hosts(entry: dict) -> bool:
     """In a host's share (`placement.for_host`), the stream runs between a local port and the hosts' bridge:
     its ROS 2 side is the node's, on another host."""
@@ -59,7 +78,7 @@ def _across_hosts(entry: dict) -> bool:
         isinstance(side, str) and side.startswith(f"{HOSTS_BRIDGE}.") for side in sides)
 
 
-def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
+def expand(tree: Any, port_of: PortOf | None = None) -> tuple[Any, list[Diagnostic]]:
     """The tree with each valid `ros2:` stream wired to the generated node, and why any was not.
 
     An option or node that does not validate is left as it is: the composition's own schema reports it,
@@ -81,6 +100,8 @@ def expand(tree: Any) -> tuple[Any, list[Diagnostic]]:
     for name, entry in (out.get("streams") or {}).items():
         if not isinstance(entry, dict) or "ros2" not in entry:
             continue
+        if port_of is not None:
+            _infer_shape(out, entry, port_of)
         try:
             option = Ros2Stream.model_validate(entry["ros2"])
         except ValidationError:

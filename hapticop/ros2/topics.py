@@ -76,7 +76,8 @@ class Ros2Topic(BaseModel):
             raise PydanticCustomError("ros2_shape", "shape {shape} does not fit {type}: it takes {fits}",
                                       {"shape": list(self.shape), "type": self.type, "fits": describe(self.type)})
         if self.shape is None and LAYOUTS[self.type][0].size is None:
-            raise PydanticCustomError("ros2_shape", "{type} needs 'shape: [N]' (its length)", {"type": self.type})
+            raise PydanticCustomError("ros2_shape", "{type} needs 'shape: [N]' (its length), or a port to take it "
+                                      "from", {"type": self.type})
         return self
 
     @property
