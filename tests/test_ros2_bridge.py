@@ -263,6 +263,29 @@ def test_bad_samples_are_refused_counted_and_the_next_good_one_delivered(hostile
     assert h.harness.outputs.refused.value == sum(r.total for r in h.harness.block.refusals.values())
 
 
+def test_a_late_sample_arrives_as_old_as_it_is_so_a_readers_max_age_counts_its_time_in_ros2(hostile):
+    """A twist (or a scan, an odometry) sent 250 ms ago is accepted (the option's max_age is 300 ms) but stamped
+    with its source time on this host's clock: a reader's stream with `max_age: 200ms` finds it stale, so a
+    late scan is no force and a late odometry no motion, however fast the bridge took it."""
+    h = hostile
+    h.follows([0.1, 0.0, 0.2])
+    h.harness.advance(1_000_000_000)  # this host's clock well past the sample's age (stamps are not negative)
+    stamps: list[int] = []
+
+    class Stamps:  # a reader's end of the stream: the stamp each sample is published with
+        def push(self, value, stamp_ns: int, origins) -> None:
+            stamps.append(stamp_ns)
+
+    h.harness.outputs.cmd.transports.append(Stamps())
+    deadline = time.monotonic() + PATIENCE_S
+    while h.delivered[-1] != [0.5, 0.0, 0.0]:
+        assert time.monotonic() < deadline, "the late twist was never delivered"
+        h.put(h.key, h.twist.encode(np.array([0.5, 0.0, 0.0]), 0), stamp_ns=time.time_ns() - 250_000_000)
+        h.step()
+        time.sleep(0.002)
+    assert h.harness.clock.now_ns() - stamps[-1] >= 250_000_000
+
+
 def test_a_stale_command_is_published_as_a_stop(tmp_path):
     """With no valid sample on its input, a command topic carries zeros at its rate (`stale: zero`)."""
     port = _free_port()
