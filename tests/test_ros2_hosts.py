@@ -21,7 +21,7 @@ security: {insecure: true}
 hosts:
   a: {endpoints: [tcp/127.0.0.1:PORT_A]}
   b: {endpoints: [tcp/127.0.0.1:PORT_B]}
-ros2: {node: hapticop, host: b, listen: [tcp/127.0.0.1:PORT_ROS]}
+ros2: {node: hapticop, host: b, listen: [tcp/127.0.0.1:PORT_ROS], flags: {}}
 threads:
   main_a: {period: 1ms, deploy: main, host: a, schedules: {0: [mediator, echo]}}
   main_b: {period: 1ms, deploy: main, host: b, schedules: {0: [mediator]}}
@@ -46,6 +46,10 @@ def test_a_ros2_node_on_one_host_is_validated_with_the_hosts():
     text = SYSTEM.replace("PORT_A", "7461").replace("PORT_B", "7462").replace("PORT_ROS", "7463")
     validated = validate_text(text)
     assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]
+    shares = {host: part.graph.loaded.composition for host, part in validated.hosts.items()}
+    assert "ros2" not in shares["a"].activities and shares["a"].ros2 is None  # one node, b's, flags and all
+    params = shares["b"].activities["ros2"].params
+    assert set(params["publish"]) == {"cmd_out"} and set(params["subscribe"]) == {"cmd_in"} and "flags" in params
     found = validate_text(text.replace(" host: b,", ""), file="sys.yaml").report.diagnostics
     assert any(d.rule == "ros2-host" and d.line == 7 and "add 'host:' (a, b)" in d.to_text() for d in found), [
         d.to_text() for d in found]
