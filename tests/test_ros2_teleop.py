@@ -51,7 +51,8 @@ def test_the_falcon_drives_a_ros2_robot_down_the_corridor_to_a_stop(tmp_path, mo
         figure(f"stopped at x = {travelled['x']:.3f} m, the end wall at 6 m")
         # the run's ROS 2 topics, both ways, as a rosbag2 bag that rosbags reads back
         bag = assert_bag_reads_back(recording, at_least=10)
-        assert set(bag) == {"/scan", "/odom", "/cmd_vel"}
+        assert set(bag) == {"/scan", "/odom", "/cmd_vel", "/handle/pose", "/handle/wrench"}
+        assert min(m.pose.position.z for _, m in bag["/handle/pose"]) < -0.005  # the handle pushed forward
         assert all(len(m.ranges) == 181 for _, m in bag["/scan"])
         assert max(m.linear.x for _, m in bag["/cmd_vel"]) > 0.1  # it drove
         assert max(m.pose.pose.position.x for _, m in bag["/odom"]) > 4.0
