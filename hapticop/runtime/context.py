@@ -185,11 +185,16 @@ class OutputPort:
 class FlagView:
     """An activity's own declared flags, by name: `flags["new_scan"] = True`."""
 
-    __slots__ = ("_flags", "_index", "_activity")
+    __slots__ = ("_flags", "_index", "_activity", "_run")
 
     def __init__(self, flags: np.ndarray, index: dict[str, int], activity: str, names: list[str]):
-        self._flags, self._activity = flags, activity
+        self._flags, self._activity, self._run = flags, activity, index
         self._index = {name: index[f"{activity}.{name}"] for name in names}
+
+    def run_flags(self) -> dict[str, bool]:
+        """Every flag of the run, by its full name, read only: what a block reporting the run's state
+        sends (the ROS 2 bridge's flags topic). Allocates: not for a 1 kHz compute."""
+        return {name: bool(self._flags[i]) for name, i in self._run.items()}
 
     def __getitem__(self, name: str) -> bool:
         return bool(self._flags[self._index[name]])
