@@ -102,6 +102,14 @@ def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:
         if body.shape == "cylinder" and (body.radius_m is None or body.height_m is None):
             found.append(Diagnostic("scene-shape", "a movable cylinder needs radius_m and height_m",
                                     prefix + ("bodies", i)))
+    if scene.hallway is not None:
+        names = {mjcf for mjcf, _ in scene.static_names()} | {getattr(scene, kind)[i].name
+                                                                for _, (kind, i) in scene.static_names()}
+        for j, wall in enumerate(scene.hallway.end_wall):
+            if wall not in names:
+                known = ", ".join(sorted(n for n in names if n)) or "none"
+                found.append(Diagnostic("scene-task", f"the hallway's end wall '{wall}' is no static geometry of "
+                                        "the scene", prefix + ("hallway", "end_wall", j), expected=f"one of: {known}"))
     if found:
         return found
     xml = to_mjcf(scene)
