@@ -65,19 +65,17 @@ def hallway_metrics(record: dict) -> dict:
 @functools.cache
 def reference_time_s(profile: str, variation: int, hallway: str) -> float:
     """§5's autonomous reference for this operator, as the world computes it (`autonomous_reference_s` at the
-    varied profile's cruise speed over the distance from the robot's start to dist2 before the end wall), so
-    both experiments judge completion time alike. Only for a hallway whose robot starts facing the end wall
-    (H1, H4, H6; the delay records are all H1), where the footprint's front is its centre plus half its length."""
-    from hapticop.sim import scene_files
+    varied profile's cruise speed over the robot's start clearance to the end wall less dist2), so both
+    experiments judge completion time alike."""
+    import numpy as np
+
+    from hapticop.sim.hallway_task import Hallway
     from hapticop.sim.metrics import autonomous_reference_s
     from hapticop.sim.operator import BlindOperator
 
-    scene = scene_files.load(hallway)[0].scene
-    x, _, heading_deg = scene.robot.start
-    if heading_deg != 0:
-        raise ValueError(f"{hallway}: the robot starts at {heading_deg} deg, not facing the end wall")
-    front_m = scene.hallway.length_m - (x + scene.robot.length_m / 2)
-    return autonomous_reference_s(front_m - scene.hallway.dist2_m,
+    task = Hallway.named(hallway)
+    front_m = float(task.clearances(np.array([task.start]))[0, 1])
+    return autonomous_reference_s(front_m - task.dist2_m,
                                   BlindOperator.variant(profile, seed=variation).profile.cruise_speed())
 
 

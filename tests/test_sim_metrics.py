@@ -5,13 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from hapticop.sim.hallway import HallwayGeometry
+from hapticop.sim.hallway_task import Hallway
 from hapticop.sim.metrics import compute_metrics
 from hapticop.sim.recording import CHANNELS, TrajectoryRecorder
 from hapticop.sim.targets import Targets, success_rates, targets_met
 from hapticop.testing import grown_bytes
 
-H1 = HallwayGeometry.named("H1")
+H1 = Hallway.named("H1")
+END_WALL_X = 10.0
+"""Where the end wall of H1, H2 and H4 stands (docs/hallway-experiment.md §2)."""
 DT = 1e-3
 HALF_LENGTH = 0.35
 
@@ -20,7 +22,7 @@ def straight_run(g=H1, front_at_stop=0.60, v=0.5, a=0.5, hold=2.0, y=None):
     """A trapezoidal run along the centre line from the start pose to rest with the footprint's front
     `front_at_stop` from the end wall, then standing still for `hold` s. Optional lateral offsets y(t)."""
     x0 = g.start[0]
-    dist = g.length_m - front_at_stop - HALF_LENGTH - x0
+    dist = END_WALL_X - front_at_stop - HALF_LENGTH - x0
     ta, da = v / a, v * v / (2 * a)
     tc = (dist - 2 * da) / v
     t_move = 2 * ta + tc
@@ -105,7 +107,7 @@ def test_timeout_and_a_stop_in_the_near_half():
 
 
 def test_side_keeping_recovery_time_in_h2():
-    h2 = HallwayGeometry.named("H2")
+    h2 = Hallway.named("H2")
     # Starting 0.35 m from the wall, closing to 0.30 m, back at 0.40 m after 2.5 s.
     y = lateral([0.35, 0.30, 0.40, 0.70, 0.70], [0.0, 1.0, 2.5, 5.0, 100.0])
     m = compute_metrics(straight_run(g=h2, y=y)[0], h2)
@@ -325,7 +327,7 @@ def test_drift_while_stopped_and_the_autonomous_reference_time():
     still, _ = straight_run()
     m = compute_metrics(still, H1, v_cruise_mps=0.5)
     assert m.hold_speed_mps == pytest.approx(0.0, abs=1e-9) and targets_met(m, Targets()).checks["hold_speed"]
-    travel = float(H1.length_m - (H1.start[0] + 0.5 * H1.footprint.length_m)) - H1.dist2_m
+    travel = float(END_WALL_X - (H1.start[0] + 0.5 * H1.footprint.length_m)) - H1.dist2_m
     assert m.t_ref_s == pytest.approx(travel / 0.5 + 0.5 / (2 * 0.5) + 0.15, rel=1e-6)
     assert m.t_norm == pytest.approx(m.completion_time_s / m.t_ref_s)
     drifting = dict(still)

@@ -60,6 +60,7 @@ class Engine:
         # static geoms: on the world body, except the floor (a plane the robot rides above)
         self.static = np.array([g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] !=
                                 mujoco.mjtGeom.mjGEOM_PLANE], dtype=np.int32)
+        self.static_ids = [int(g) for g in self.static]
         self.static_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(g)) or f"geom {g}" for g in self.static]
         # movable bodies: those with a free joint; their poses as x, y, yaw
         free = [j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
@@ -146,17 +147,38 @@ class Engine:
         out[0], out[1], out[2] = c * fx + s * fy, -s * fx + c * fy, float(f[it])
         return out
 
-    def clearance(self, reach_m: float = 10.0) -> float:
+    def clearance(self, reach_m: float = 100.0) -> float:
         """The smallest distance from the robot's geom to static geometry at its current placement
         (0 or less: touching or inside); `reach_m` when nothing is nearer."""
+        return self.clearances(None, reach_m)[0]
+
+    def clearances(self, front: tuple[bool, ...] | None, reach_m: float = 100.0) -> tuple[float, float, float]:
+        """The robot's least distance (as `clearance`) to all static geometry, to the static geoms marked in
+        `front` (one flag per geom of `static`) and to the others: a hallway's end wall and its sides."""
         m, d = self.model, self.data
         mujoco.mj_kinematics(m, d)
-        best = reach_m
-        for g in self.static:
-            dist = mujoco.mj_geomDistance(m, d, self.robot_geom, int(g), reach_m, None)
+        best = ahead = beside = reach_m
+        robot = self.robot_geom
+        for i, g in enumerate(self.static_ids):
+            dist = mujoco.mj_geomDistance(m, d, robot, g, reach_m, None)
             if dist < best:
                 best = dist
-        return best
+            if front is not None and front[i]:
+                if dist < ahead:
+                    ahead = dist
+            elif dist < beside:
+                beside = dist
+        return best, ahead, beside
+
+    def trajectory_clearances(self, poses: np.ndarray, front: tuple[bool, ...] | None,
+                              reach_m: float = 100.0) -> np.ndarray:
+        """`clearances` with the robot at each of `poses` (n, 3) in turn: (n, 3) of all, front, side; for a
+        run's log after the run (the world records them as it goes)."""
+        out = np.empty((len(poses), 3))
+        for i, pose in enumerate(np.asarray(poses, dtype=np.float64)):
+            self.place_robot(pose)
+            out[i] = self.clearances(front, reach_m)
+        return out
 
     def body_poses(self, out: np.ndarray) -> np.ndarray:
         """Each movable body's x, y and yaw (rows of out)."""

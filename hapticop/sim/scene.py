@@ -165,26 +165,17 @@ class Robot(_Strict):
     lidar: Lidar = Field(default_factory=Lidar, description="the scanner on it")
 
 
-class Pillar(_Strict):
-    """A pillar against a side wall, for the judge's side clearance (the scene's boxes are its geometry)."""
-
-    x_m: float = Field(description="its centre along the hallway")
-    along_m: float = Field(description="its length along the hallway")
-    depth_m: float = Field(description="how far it stands out of the wall")
-    side: Literal["left", "right"] = Field("right", description="the wall it stands against")
-
-
 class HallwayTask(_Strict):
-    """What the hallway experiment's judge measures against (docs/hallway-experiment.md §2, §5)."""
+    """What the hallway experiment's metrics measure against (docs/hallway-experiment.md §2, §5): the
+    clearances themselves are MuJoCo's, from the robot's geom to the scene's static geometry."""
 
-    name: str = Field(description="H1..H6 of docs/hallway-experiment.md §2")
-    width_m: float = Field(gt=0, description="between the side walls")
-    length_m: float = Field(gt=0, description="x of the end wall's face")
-    entrance_x_m: float = Field(0.0, description="x of the open entrance")
+    name: str = Field(description="H1..H6 of docs/hallway-experiment.md §2, or a name of the user's own")
+    end_wall: tuple[str, ...] = Field(("end",), min_length=1, description="the static geometry (names of walls, "
+                                      "boxes or cylinders) the stop is measured against; all the rest is the sides")
+    middle_x_m: float = Field(description="a standstill ends the run only past this x (the hallway's middle)")
     dist1_m: float = Field(0.40, description="side clearance to keep")
     dist2_m: float = Field(0.50, description="where the front should stop before the end wall")
     dist3_m: float = Field(0.10, description="virtual bumper: nearer counts as a collision")
-    pillars: tuple[Pillar, ...] = Field((), description="pillars against the side walls")
 
 
 class Scene(_Strict):

@@ -135,6 +135,14 @@ def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:
                                     "the first's", prefix + ("handles", i, "name"), hint="give each handle a name "
                                     "of its own"))
         seen.add(handle.name)
+    if scene.hallway is not None:
+        names = {mjcf for mjcf, _ in scene.static_names()} | {getattr(scene, kind)[i].name
+                                                                for _, (kind, i) in scene.static_names()}
+        for j, wall in enumerate(scene.hallway.end_wall):
+            if wall not in names:
+                known = ", ".join(sorted(n for n in names if n)) or "none"
+                found.append(Diagnostic("scene-task", f"the hallway's end wall '{wall}' is no static geometry of "
+                                        "the scene", prefix + ("hallway", "end_wall", j), expected=f"one of: {known}"))
     if found:
         return found
     xml = to_mjcf(scene)

@@ -26,8 +26,11 @@ from pydantic import Field, model_validator
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Display, Interface, Params, Port
 from hapticop.composition.diagnostics import Diagnostic
-from hapticop.sim.judge import Targets
+from hapticop.sim.judge import STILL_MPS, Targets
 from hapticop.sim.scene import Scene
+
+STILL_S = 1.0
+"""The robot still this long, with the operator done, ends the run (docs/hallway-experiment.md §2)."""
 
 
 class SceneWorldParams(Params):
@@ -177,6 +180,7 @@ class SceneWorld(Block):
 
     def create(self) -> None:
         from hapticop.sim.engine import Engine
+        from hapticop.sim.hallway_task import Hallway
         from hapticop.sim.world_share import PublishedScene, publish_world
 
         loaded, found = _loaded(self.params)
@@ -185,7 +189,8 @@ class SceneWorld(Block):
         self.loaded = loaded
         self.scene = scene = loaded.scene or Scene()
         self.engine = Engine(loaded.xml, self.name)
-        self.geometry = _judged_geometry(scene)
+        self.hallway = Hallway.of(scene, loaded.xml) if scene.hallway is not None else None
+        self.front = self.hallway.front if self.hallway is not None else None  # the end wall, for its clearance
         shared = PublishedScene.of(scene, loaded.xml)
         self.start = shared.start
         publish_world(self.run_dir, self.name, shared)
@@ -214,7 +219,7 @@ class SceneWorld(Block):
         except RuntimeError as error:  # SceneError: said where the scene declares what exploded
             raise self._located(error) from None
         engine.place_robot(self.pose)  # the step moved the robot's joints; the plant moves the robot
-        clearance = engine.clearance()
+        clearance, self.front_clearance, self.side_clearance = engine.clearances(self.front)
         engine.contact_wrench(self.wrench)
         out.collision.value[...] = clearance <= 0.0
         out.pose_in_hallway.publish()
@@ -269,13 +274,13 @@ class SceneWorld(Block):
             self._judge_targets()
 
     def prepare(self, pose: np.ndarray) -> None:
-        """The judge's state, once `geometry` is known; `pose` is the output the robot's pose goes to."""
+        """The judge's state; `pose` is the output the robot's pose goes to."""
         from hapticop.sim.recording import TrajectoryRecorder
 
         p = self.params
-        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": self.geometry.name})
+        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000,
+                                           meta={"hallway": self.hallway.name if self.hallway else "scene"})
         self.pose = pose
-        self.pose[:] = self.geometry.start
         self.started_ns: int | None = None  # when the operator started driving, on the system's clock
         self.ended = ""
         self.still_since: float | None = None
@@ -319,11 +324,12 @@ class SceneWorld(Block):
                              cmd_exec=self.executed if executed.seq else None,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
                              force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
-                             force_device=inputs.device_force.value, clearance=clearance)
-        g = self.geometry
-        moving = abs(vx) >= g.still_speed_mps or abs(vy) >= g.still_speed_mps
+                             force_device=inputs.device_force.value, clearance=clearance,
+                             front_clearance=self.front_clearance if self.front is not None else None,
+                             side_clearance=self.side_clearance if self.front is not None else None)
+        moving = abs(vx) >= STILL_MPS or abs(vy) >= STILL_MPS
         self.still_since = None if moving else (t if self.still_since is None else self.still_since)
-        still = self.still_since is not None and t - self.still_since >= g.still_time_s
+        still = self.still_since is not None and t - self.still_since >= STILL_S
         if crashed:
             self.ended = "crash"
         elif inputs.operator_done.value and still:  # the judge's rule: stopped, and still for a while
@@ -349,7 +355,7 @@ class SceneWorld(Block):
         if not self.params.judge:
             self.log.info("not a hallway run: trajectory kept, nothing judged")
             return
-        metrics = compute_metrics(self.recorder, self.geometry, v_cruise_mps=_cruise_speed(operator))
+        metrics = compute_metrics(self.recorder, self.hallway, v_cruise_mps=_cruise_speed(operator))
         extra = {key: value for key, value in self.extremes.items() if math.isfinite(value)}
         (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra or None))
         self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
@@ -358,8 +364,8 @@ class SceneWorld(Block):
             try:
                 from hapticop.sim.plot import plot_run
 
-                plot_run(self.recorder, self.geometry, self.run_dir / "run.png",
-                         title=f"{self.geometry.name}, {self.variant} operator")
+                plot_run(self.recorder, self.hallway, self.run_dir / "run.png",
+                         title=f"{self.hallway.name}, {self.variant} operator")
             except RuntimeError as error:  # matplotlib missing: the numbers are still there
                 self.log.warning("no picture of the run: %s", error)
         self._results(metrics)
@@ -369,8 +375,8 @@ class SceneWorld(Block):
         """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
         from hapticop.sim.targets import judged_rows
 
-        results = {"title": f"hallway {self.geometry.name}, {self.variant} operator",
-                   "rows": judged_rows(m, self.geometry, self.variant, end_time_s(m, self.recorder)),
+        results = {"title": f"hallway {self.hallway.name}, {self.variant} operator",
+                   "rows": judged_rows(m, self.hallway, self.variant, end_time_s(m, self.recorder)),
                    "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
 
@@ -445,25 +451,6 @@ def _target_findings(params: SceneWorldParams, loaded) -> list[Diagnostic]:
                                     f"the scene", ("params", "targets", i, "push_body", "body"),
                                     expected=f"one of: {known}"))
     return found
-
-
-def _judged_geometry(scene: Scene):
-    """The hallway experiment's task constants for the judge (metrics and targets) from the scene."""
-    from hapticop.devices.ropod.body import Footprint
-    from hapticop.sim.hallway import HallwayGeometry, LidarModel, Pillar, SensorMount
-
-    r, task = scene.robot, scene.hallway
-    lidar = LidarModel(mount=SensorMount(x_m=r.lidar.x_m, y_m=r.lidar.y_m, yaw_rad=math.radians(r.lidar.yaw_deg)),
-                       noise_sigma_m=r.lidar.noise_sigma_m, min_range_m=r.lidar.min_range_m,
-                       max_range_m=r.lidar.max_range_m)
-    common = dict(start=(r.start[0], r.start[1], math.radians(r.start[2])), lidar=lidar,
-                  footprint=Footprint(length_m=r.length_m, width_m=r.width_m))
-    if task is None:
-        return HallwayGeometry(name="scene", **common)
-    return HallwayGeometry(name=task.name, width_m=task.width_m, length_m=task.length_m,
-                           entrance_x_m=task.entrance_x_m, dist1_m=task.dist1_m, dist2_m=task.dist2_m,
-                           dist3_m=task.dist3_m, pillars=tuple(Pillar(p.x_m, p.along_m, p.depth_m, p.side)
-                                                               for p in task.pillars), **common)
 
 
 def end_time_s(metrics, recorder) -> float:

@@ -9,10 +9,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-from hapticop.sim.hallway import HallwayGeometry
 from hapticop.sim.metrics import RunMetrics
+
+if TYPE_CHECKING:
+    from hapticop.sim.hallway_task import Hallway
 
 
 @dataclass(frozen=True)
@@ -122,7 +124,7 @@ def success_rates(runs: Sequence[RunMetrics]) -> dict[str, float]:
             "collision_free_rate": sum(r.n_collisions == 0 and not r.crash for r in runs) / n}
 
 
-def judged_rows(m: RunMetrics, geometry: HallwayGeometry, variant: str, end_s: float | None = None) -> list[dict]:
+def judged_rows(m: RunMetrics, geometry: Hallway, variant: str, end_s: float | None = None) -> list[dict]:
     """Every metric of the run as a row of the end-of-run table: value, unit, target, verdict (None: no
     target, or not measured in this run). `hapticop compose --check` fails a run with a row whose verdict
     is False."""
