@@ -63,7 +63,9 @@ def test_scans_follow_the_world_and_faults_switch(tmp_path):
 
     try:
         start = ahead(scan())  # no pose from the world yet: the robot stands at its start
-        assert abs(start - (scene.hallway.length_m - scene.robot.start[0] - scene.robot.lidar.x_m)) < 0.1
+        end = next(w for w in scene.walls if w.name == scene.hallway.end_wall[0])
+        face_x = end.position_m[0] - end.size_m[0] / 2  # the end wall's face towards the robot
+        assert abs(start - (face_x - scene.robot.start[0] - scene.robot.lidar.x_m)) < 0.1
         pose.value[:] = shared.start
         pose.value[0] += 3.0  # the world streams the robot 3 m further: the end wall is closer
         pose.meta[0] = 1
