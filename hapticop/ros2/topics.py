@@ -44,6 +44,20 @@ class ScanParams(BaseModel):
     range_max_m: float = Field(10.0, gt=0, description="the longest range measured")
 
 
+def _check_name_and_rate(topic: str, rate: int) -> None:
+    """A topic's name and send period, as every published or subscribed topic must have them."""
+    if not TOPIC.match(topic):
+        raise PydanticCustomError("ros2_topic", "topic '{topic}' is not a ROS 2 name (letters, digits and "
+                                  "'_' in chunks between '/')", {"topic": topic})
+    if rate < 1_000_000:
+        raise PydanticCustomError("ros2_rate", "rate {rate} is faster than 1kHz", {"rate": format_duration(rate)})
+
+
+def _qualified(topic: str, namespace: str) -> str:
+    """A relative topic under the node's namespace; an absolute one as it is."""
+    return topic if topic.startswith("/") else f"{namespace.rstrip('/')}/{topic}"
+
+
 class Ros2Topic(BaseModel):
     """One ROS 2 topic and the port that carries it."""
 
@@ -66,12 +80,7 @@ class Ros2Topic(BaseModel):
 
     @model_validator(mode="after")
     def _fits(self) -> Ros2Topic:
-        if not TOPIC.match(self.topic):
-            raise PydanticCustomError("ros2_topic", "topic '{topic}' is not a ROS 2 name (letters, digits and "
-                                      "'_' in chunks between '/')", {"topic": self.topic})
-        if self.rate < 1_000_000:
-            raise PydanticCustomError("ros2_rate", "rate {rate} is faster than 1kHz",
-                                      {"rate": format_duration(self.rate)})
+        _check_name_and_rate(self.topic, self.rate)
         if self.shape is not None and layout_of(self.type, LAYOUTS[self.type][0].dtype, self.shape) is None:
             raise PydanticCustomError("ros2_shape", "shape {shape} does not fit {type}: it takes {fits}",
                                       {"shape": list(self.shape), "type": self.type, "fits": describe(self.type)})
@@ -94,7 +103,7 @@ class Ros2Topic(BaseModel):
                      tuple(self.joints))
 
     def fully_qualified(self, namespace: str) -> str:
-        return self.topic if self.topic.startswith("/") else f"{namespace.rstrip('/')}/{self.topic}"
+        return _qualified(self.topic, namespace)
 
 
 class Ros2Flags(BaseModel):
@@ -107,16 +116,11 @@ class Ros2Flags(BaseModel):
 
     @model_validator(mode="after")
     def _fits(self) -> Ros2Flags:
-        if not TOPIC.match(self.topic):
-            raise PydanticCustomError("ros2_topic", "topic '{topic}' is not a ROS 2 name (letters, digits and "
-                                      "'_' in chunks between '/')", {"topic": self.topic})
-        if self.rate < 1_000_000:
-            raise PydanticCustomError("ros2_rate", "rate {rate} is faster than 1kHz",
-                                      {"rate": format_duration(self.rate)})
+        _check_name_and_rate(self.topic, self.rate)
         return self
 
     def fully_qualified(self, namespace: str) -> str:
-        return self.topic if self.topic.startswith("/") else f"{namespace.rstrip('/')}/{self.topic}"
+        return _qualified(self.topic, namespace)
 
 
 class Ros2Node(BaseModel):
