@@ -62,12 +62,18 @@ def hallway_sweep(rows: list[dict], folder: Path) -> list[Path]:
             ax.grid(alpha=0.3)
         axes[0].legend(fontsize=8)
         fig.suptitle(f"hallway {hallway}: every run (dashed: the target)", fontsize=10)
-        fig.tight_layout()
-        target = folder / f"hallway-sweep-{hallway}.png"
-        fig.savefig(target, dpi=90)
-        plt.close(fig)
-        written.append(target)
+        written.append(save_figure(fig, folder / f"hallway-sweep-{hallway}.png", dpi=90))
     return written
+
+
+def save_figure(fig, target: Path, dpi: int = 80) -> Path:
+    """Lay the figure out, write it to `target` as PNG and free it (pyplot keeps every open figure)."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(target, dpi=dpi)
+    plt.close(fig)
+    return target
 
 
 FIGURES: dict[str, Callable[[list[dict], Path], list[Path]]] = {"hallway_sweep": hallway_sweep}

@@ -14,6 +14,7 @@ from pathlib import Path
 import pyarrow as pa
 
 from hapticop.experiment.description import Experiment, Target
+from hapticop.experiment.figures import save_figure
 
 COMPARE = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge, "==": operator.eq,
            "!=": operator.ne}
@@ -145,11 +146,7 @@ def plots(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
             ax.set_title(factor.removeprefix("factor."), fontsize=9)
             ax.grid(alpha=0.3)
         fig.suptitle(f"{metric}: every run by factor (line: median, dashed: target)", fontsize=9)
-        fig.tight_layout()
-        target_file = folder / f"{metric}.png"
-        fig.savefig(target_file, dpi=80)
-        plt.close(fig)
-        written.append(target_file)
+        written.append(save_figure(fig, folder / f"{metric}.png"))
     return written
 
 
@@ -189,11 +186,7 @@ def path_plots(experiment: Experiment, table: pa.Table, folder: Path) -> list[Pa
         if any(groups):
             ax.legend(fontsize=7, title=" ".join(c.removeprefix("factor.") for c in others), title_fontsize=7)
         ax.set_title(f"{experiment.paths} {level}: every run's path", fontsize=9)
-        fig.tight_layout()
-        target = folder / f"paths-{_file_part(level)}.png"
-        fig.savefig(target, dpi=80)
-        plt.close(fig)
-        written.append(target)
+        written.append(save_figure(fig, folder / f"paths-{_file_part(level)}.png"))
     return written
 
 
