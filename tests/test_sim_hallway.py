@@ -109,6 +109,8 @@ def test_the_scene_files_carry_the_notes_numbers():
     for name, width, length in (("H1", 2.0, 10.0), ("H3", 1.5, 8.0), ("H6", 2.0, 20.0)):
         front_side = h[name].clearances(np.array([[length - 1.5, 0.0, 0.0]]))[0]
         assert front_side == pytest.approx([min(1.15, width / 2 - 0.3), 1.15, width / 2 - 0.3], abs=1e-9)
+    # H6's end wall is beyond the scanner's range, not beyond the clearances' (T_ref is measured from it)
+    assert h["H6"].clearances(np.array([h["H6"].start]))[0, 1] == pytest.approx(20.0 - 0.5 - 0.35, abs=1e-9)
     assert sum(h["H4"].front) == 1 and len(h["H4"].front) == 4  # the end wall; the sides and the pillar
     with pytest.raises(ValueError, match="H9"):
         Hallway.named("H9")

@@ -147,12 +147,12 @@ class Engine:
         out[0], out[1], out[2] = c * fx + s * fy, -s * fx + c * fy, float(f[it])
         return out
 
-    def clearance(self, reach_m: float = 100.0) -> float:
+    def clearance(self, reach_m: float = FAR_M) -> float:
         """The smallest distance from the robot's geom to static geometry at its current placement
         (0 or less: touching or inside); `reach_m` when nothing is nearer."""
         return self.clearances(None, reach_m)[0]
 
-    def clearances(self, front: tuple[bool, ...] | None, reach_m: float = 100.0) -> tuple[float, float, float]:
+    def clearances(self, front: tuple[bool, ...] | None, reach_m: float = FAR_M) -> tuple[float, float, float]:
         """The robot's least distance (as `clearance`) to all static geometry, to the static geoms marked in
         `front` (one flag per geom of `static`) and to the others: a hallway's end wall and its sides."""
         m, d = self.model, self.data
@@ -171,7 +171,7 @@ class Engine:
         return best, ahead, beside
 
     def trajectory_clearances(self, poses: np.ndarray, front: tuple[bool, ...] | None,
-                              reach_m: float = 100.0) -> np.ndarray:
+                              reach_m: float = FAR_M) -> np.ndarray:
         """`clearances` with the robot at each of `poses` (n, 3) in turn: (n, 3) of all, front, side; for a
         run's log after the run (the world records them as it goes)."""
         out = np.empty((len(poses), 3))

@@ -19,6 +19,7 @@ from xml.sax.saxutils import quoteattr
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from hapticop.devices.ropod.body import Body
+from hapticop.sim.judge import Target
 
 _ROBOT = Body()
 
@@ -190,7 +191,10 @@ class Scene(_Strict):
     bodies: tuple[Movable, ...] = Field((), description="movable bodies")
     handles: tuple[Handle, ...] = Field((), description="devices' handles in the scene, each moved by its device")
     robot: Robot = Field(default_factory=Robot, description="the ropod: its start, body and LIDAR")
-    hallway: HallwayTask | None = Field(None, description="the hallway experiment's task, for its judge")
+    hallway: HallwayTask | None = Field(None, description="the hallway experiment's task, for its metrics")
+    targets: tuple[Target, ...] | str = Field((), description="task targets a run in the scene is judged by "
+                                              "(docs/scenes.md, the judge), or a file of them beside the scene "
+                                              "('hallway': the hallway experiment's, shipped)")
     timestep_s: float = Field(0.001, gt=0, le=0.01, description="the engine's step: the simulators' period")
 
     def material(self, name: str) -> Material | None:

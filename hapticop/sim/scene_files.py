@@ -13,11 +13,12 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.model_errors import diagnostics_from
 from hapticop.composition.yamlsource import SourceError, parse_text, read_text
+from hapticop.sim.judge import Target
 from hapticop.sim.scene import Scene, to_mjcf
 
 SHIPPED = Path(__file__).resolve().parent / "scenes"
@@ -77,6 +78,8 @@ def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tu
     """The scene `ref` names, checked; or None and the findings (paths under `prefix` for an inline one)."""
     if isinstance(ref, Scene):
         found = check(ref, prefix)
+        if isinstance(ref.targets, str) and not found:
+            ref, found = with_targets(ref, folder, Diagnostic("", "", prefix + ("targets",)))
         return (None if found else Loaded(to_mjcf(ref), ref, "", _places(ref, lambda path: 0))), found
     path = find(ref, folder)
     if path is None:
@@ -99,10 +102,41 @@ def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tu
     except ValidationError as error:
         return None, [source.place(d) for d in diagnostics_from(error, Scene)]
     found = [source.place(d) for d in check(scene, ())]
+    if isinstance(scene.targets, str) and not found:
+        scene, found = with_targets(scene, path.parent, source.place(Diagnostic("", "", ("targets",))))
     if found:
         return None, found
     places = _places(scene, lambda at: source.locate(at)[0] or 0)
     return Loaded(to_mjcf(scene, path.stem), scene, str(path), places), found
+
+
+class TargetsFile(BaseModel):
+    """A file of targets: what it is, and the targets."""
+
+    model_config = ConfigDict(extra="forbid")
+    doc: str = ""
+    targets: tuple[Target, ...]
+
+
+def with_targets(scene: Scene, folder: Path | None, named_at: Diagnostic) -> tuple[Scene, list[Diagnostic]]:
+    """The scene with the targets of the file its `targets` names (a shipped name such as 'hallway', or a
+    path beside the scene), or the findings located in that file (`named_at`: where the scene names it)."""
+    name = str(scene.targets)
+    shipped = SHIPPED / "targets" / f"{name}.yaml"
+    path = shipped if Path(name).suffix == "" and shipped.is_file() else find(name, folder)
+    if path is None:
+        known = ", ".join(sorted(p.stem for p in (SHIPPED / "targets").glob("*.yaml")))
+        return scene, [Diagnostic("scene-targets", f"no targets file '{name}': not a shipped one ({known}) nor a "
+                                  "file beside the scene", named_at.path, file=named_at.file, line=named_at.line,
+                                  column=named_at.column)]
+    try:
+        source = parse_text(read_text(path, "a targets file"), str(path))
+        listed = TargetsFile.model_validate(source.tree)
+    except SourceError as error:
+        return scene, [error.diagnostic]
+    except ValidationError as error:
+        return scene, [source.place(d) for d in diagnostics_from(error, TargetsFile)]
+    return scene.model_copy(update={"targets": listed.targets}), []
 
 
 def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:

@@ -7,9 +7,9 @@ scene (where the simulated LIDAR scans from), the contacts' wrench on the robot 
 force: a pushed box slows it, a wall stops it) and the movable bodies' poses (the LIDAR sees them where
 they are). The robot touching static geometry is a collision. Once the operator drives it records the run
 (robot pose and velocity, handle, forces, clearance) and raises `finished` when the operator is done and
-the robot still, the robot crashes, or time is up. With the scene's `hallway` task the run is judged by
-the hallway experiment's metrics and targets (docs/hallway-experiment.md §5, §6), and by the `targets`
-declared on the world with the judge users configure (hapticop.sim.judge, docs/scenes.md §5).
+the robot still, the robot crashes, or time is up. It is judged by the targets its scene and its params
+declare, with the judge users configure (hapticop.sim.judge, docs/scenes.md §5); with the scene's
+`hallway` task, on the hallway experiment's metrics among them (docs/hallway-experiment.md §5, §6).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pydantic import Field, model_validator
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Display, Interface, Params, Port
 from hapticop.composition.diagnostics import Diagnostic
-from hapticop.sim.judge import STILL_MPS, Targets
+from hapticop.sim.judge import STILL_MPS, Target, Targets
 from hapticop.sim.scene import Scene
 
 STILL_S = 1.0
@@ -44,9 +44,10 @@ class SceneWorldParams(Params):
     targets: Targets = ()
     time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
     plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
-    judge: bool = Field(True, description="judge the run by the hallway experiment's targets; false for an "
-                        "application that does not drive the robot down the hallway (the desk): its "
-                        "trajectory is kept, but nothing is judged")
+    judge: bool = Field(True, description="judge the run as a hallway run: the scene's hallway task's metrics "
+                        "(metrics.json) with the verdicts of the targets on them; false for an application that "
+                        "does not drive the robot down a hallway (the desk): its trajectory is kept, the scene's "
+                        "targets do not apply, only the world's own `targets` are judged")
 
     @model_validator(mode="after")
     def _hallway_names_the_scene(self) -> SceneWorldParams:
@@ -163,14 +164,15 @@ class SceneWorld(Block):
     def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
         """The trajectory (when an operator's clock or targets keep it); the hallway's metrics, the targets'
         verdicts and the picture when judged."""
-        if not params.judge and not params.targets and params.operator is None:
+        targets = _scene_targets(params)
+        if not params.judge and not targets and params.operator is None:
             return ()  # nothing keeps a trajectory: the streams (--record) are the run's record
         promised = ["trajectory.npz"]
         if params.judge:
             promised += ["metrics.json", "results.json"]
-        if params.targets:
+        if targets:
             promised += ["judge.json", "results.json"]
-        if params.plot and (params.judge or params.targets):
+        if params.plot and (params.judge or targets):
             promised.append("run.png")
         return tuple(dict.fromkeys(promised))
 
@@ -191,6 +193,10 @@ class SceneWorld(Block):
         self.engine = Engine(loaded.xml, self.name)
         self.hallway = Hallway.of(scene, loaded.xml) if scene.hallway is not None else None
         self.front = self.hallway.front if self.hallway is not None else None  # the end wall, for its clearance
+        # the scene's targets and the world's: the hallway's table judges the bounds on its metrics, the rest
+        # are the judge's rows (judge.json)
+        self.targets = _all_targets(self.params, scene)
+        self.scene_targets = _generic(self.params, scene, self.targets)
         shared = PublishedScene.of(scene, loaded.xml)
         self.start = shared.start
         publish_world(self.run_dir, self.name, shared)
@@ -231,12 +237,12 @@ class SceneWorld(Block):
         for i, (_, _, force, _) in enumerate(self.handles):
             engine.handle_force(i, force.value)
             force.publish()
-        if (inputs.operator_time.seq or self.params.targets) and not self.ended:
+        if (inputs.operator_time.seq or self.scene_targets) and not self.ended:
             if self.started_ns is None and not inputs.operator_time.seq:  # no operator: the run is the whole run
                 self.started_ns = self.clock.now_ns()
             # a collision ends the run (a crash), unless the scene is judged by targets of its own: then it is counted
             touching = clearance <= 0.0
-            self.judge(clearance, touching and (self.params.judge or not self.params.targets))
+            self.judge(clearance, touching and (self.params.judge or not self.scene_targets))
             i = self.recorder.n - 1
             wrench = self.wrench
             self.contact[i] = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1])
@@ -270,7 +276,7 @@ class SceneWorld(Block):
 
     def clean(self) -> None:
         self._hallway_clean()
-        if self.params.targets and self.recorder.n >= 2:
+        if self.scene_targets and self.recorder.n >= 2:
             self._judge_targets()
 
     def prepare(self, pose: np.ndarray) -> None:
@@ -376,7 +382,7 @@ class SceneWorld(Block):
         from hapticop.sim.targets import judged_rows
 
         results = {"title": f"hallway {self.hallway.name}, {self.variant} operator",
-                   "rows": judged_rows(m, self.hallway, self.variant, end_time_s(m, self.recorder)),
+                   "rows": judged_rows(m, self.hallway, self.variant, self.targets, end_time_s(m, self.recorder)),
                    "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
 
@@ -410,7 +416,7 @@ class SceneWorld(Block):
                   bodies=self.body_track[:n], body_names=self.body_aliases, footprint=(r.length_m, r.width_m),
                   ended=self.ended)
         metrics = run_metrics(run)
-        rows = judge(run, self.params.targets, metrics)
+        rows = judge(run, self.scene_targets, metrics, self.variant)
         ok = all(row["ok"] for row in rows)
         (self.run_dir / "judge.json").write_text(json.dumps(json_plain({"metrics": metrics, "targets": rows, "ok": ok}),
                                                             indent=2))
@@ -423,6 +429,33 @@ class SceneWorld(Block):
             table = {"title": f"scene {self.name}", "rows": metric_rows(metrics) + rows,
                      "picture": self._plot_scene()}
         results.write_text(json.dumps(json_plain(table), indent=2))
+
+
+def _all_targets(params: SceneWorldParams, scene: Scene) -> tuple[Target, ...]:
+    """The targets the scene declares (its file's, resolved when loaded), unless the world is not to judge the
+    run by them (`judge: false`), and the world's own."""
+    declared = scene.targets if params.judge and isinstance(scene.targets, tuple) else ()
+    return declared + tuple(params.targets)
+
+
+def _generic(params: SceneWorldParams, scene: Scene, targets: tuple[Target, ...]) -> tuple[Target, ...]:
+    """The targets the generic judge gives rows (judge.json): all but the bounds on the hallway's metrics of a
+    judged hallway run, which its table shows."""
+    if not (params.judge and scene.hallway is not None):
+        return targets
+    from hapticop.sim.targets import hallway_metric
+
+    return tuple(t for t in targets if t.metric is None or not hallway_metric(t.metric.name))
+
+
+def _scene_targets(params: SceneWorldParams) -> tuple[Target, ...]:
+    """`_generic` of the params' scene, when it can be read (validation says why not)."""
+    if isinstance(params.scene, Scene) and not isinstance(params.scene.targets, str):
+        scene = params.scene
+    else:
+        loaded, _ = _loaded(params)
+        scene = loaded.scene if loaded is not None and loaded.scene is not None else Scene()
+    return _generic(params, scene, _all_targets(params, scene))
 
 
 def _body_aliases(scene: Scene | None, mjcf_names: list[str]) -> tuple[tuple[str, ...], ...]:
@@ -444,6 +477,12 @@ def _target_findings(params: SceneWorldParams, loaded) -> list[Diagnostic]:
 
     found = []
     for i, target in enumerate(params.targets):
+        bound = target.metric
+        if bound is not None and bound.relative_to and (loaded.scene is None or loaded.scene.hallway is None):
+            found.append(Diagnostic("scene-target", f"the bound on {bound.name} is relative to {bound.relative_to}, "
+                                    "a distance of the scene's hallway task, which the scene has not",
+                                    ("params", "targets", i, "metric", "relative_to"),
+                                    hint="absolute bounds, or a 'hallway:' task in the scene"))
         push = target.push_body
         if push is not None and body_index(aliases, push.body) is None:
             known = ", ".join(a[0] for a in aliases) or "none"
