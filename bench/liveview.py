@@ -62,14 +62,17 @@ def layout_topics() -> set[str]:
     return topics
 
 
-async def _watch(port: int, counts: dict, stop: threading.Event, only: set[str] | None = None) -> None:
-    """Connect as soon as the server listens, subscribe to every channel (or those `only` names),
-    count messages by topic."""
+async def _watch(port: int, run_dir: Path, counts: dict, stop: threading.Event, only: set[str] | None = None) -> None:
+    """Connect as soon as the server listens (with the token the run writes to its run directory, as
+    its owner would), subscribe to every channel (or those `only` names), count messages by topic."""
     from websockets.asyncio.client import connect
 
+    token_file = run_dir / f"live-view-{port}.token"
     while not stop.is_set():
         try:
-            socket_ = await connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None)
+            token = token_file.read_text().strip()
+            socket_ = await connect(f"ws://127.0.0.1:{port}/?token={token}", subprotocols=["foxglove.sdk.v1"],
+                                    max_size=None)
             break
         except OSError:
             await asyncio.sleep(0.1)
@@ -111,7 +114,8 @@ def run(duration: str, viewed: bool, recorded: bool = False, layout: bool = Fals
             port = _free_port()
             command += ["--view", str(port)] + (["--view-rate", f"{rate:g}"] if rate else [])
             only = layout_topics() if layout else None
-            client = threading.Thread(target=lambda: asyncio.run(_watch(port, counts, stop, only)), daemon=True)
+            watch = _watch(port, run_dir, counts, stop, only)
+            client = threading.Thread(target=lambda: asyncio.run(watch), daemon=True)
             client.start()
         process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         _, errors = process.communicate()

@@ -98,7 +98,7 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
     """Run systems/hallway.yaml on the virtual clock; µs of every haptic and world compute, by kind of cycle."""
     from hapticop.blocks.haptic import HapticController
     from hapticop.runtime.system import RunOptions, run_system
-    from hapticop.sim.world import HallwayWorld
+    from hapticop.sim.scene_world import SceneWorld
     from hapticop.validation import validate_path
 
     samples: dict[str, list[int]] = {"haptic block, no new scan": [], "haptic block, new scan": [],
@@ -111,15 +111,15 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
         compute(self)
         samples["haptic block, new scan" if new_scan else "haptic block, no new scan"].append(clock() - started)
 
-    def world(self: HallwayWorld, compute=HallwayWorld.compute) -> None:
+    def world(self: SceneWorld, compute=SceneWorld.compute) -> None:
         driving = self.started_ns is not None
         started = clock()
         compute(self)
         if driving:
             samples["world block, operator driving"].append(clock() - started)
 
-    originals = HapticController.compute, HallwayWorld.compute
-    HapticController.compute, HallwayWorld.compute = haptic, world  # type: ignore[method-assign]
+    originals = HapticController.compute, SceneWorld.compute
+    HapticController.compute, SceneWorld.compute = haptic, world  # type: ignore[method-assign]
     try:
         path = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
         validated = validate_path(path)
@@ -127,7 +127,7 @@ def block_computes(seconds: float) -> dict[str, np.ndarray]:
             run_system(validated, RunOptions(clock="virtual", duration_ns=int(seconds * 1e9), run_dir=Path(run_dir),
                                              echo=False))
     finally:
-        HapticController.compute, HallwayWorld.compute = originals  # type: ignore[method-assign]
+        HapticController.compute, SceneWorld.compute = originals  # type: ignore[method-assign]
     return {k: np.array(v, dtype=np.float64) / 1e3 for k, v in samples.items()}
 
 

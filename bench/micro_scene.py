@@ -1,6 +1,6 @@
-"""Benchmark: the simulated world's cost per cycle, hand-written hallway against the scene on MuJoCo.
+"""Benchmark: the scene world's cost per cycle on MuJoCo, and the LIDAR's scan.
 
-Each world steps alone under a virtual clock (as the simulators' thread steps it), the robot driving
+The world steps alone under a virtual clock (as the simulators' thread steps it), the robot driving
 down H4 at 0.5 m/s and the operator driving (so each cycle is recorded and judged), its compute
 timed per call; the LIDAR's scan (811 beams) is timed the same way,
 the hand-written ray caster against `mj_multiRay`. Figures in microseconds (p50, p99, max).
@@ -77,12 +77,9 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=20000)
     args = parser.parse_args()
     from hapticop.sim.scene_world import SceneWorld
-    from hapticop.sim.world import HallwayWorld
 
     print("| what | us per call |")
     print("|---|---|")
-    old = _world(HallwayWorld, {"hallway": "H4", "plot": False}, args.cycles)
-    print(f"| hallway_world compute (H4) | {_stats(old)} |")
     print(f"| scene_world compute (H4: place, mj_step, clearance, contact) | "
           f"{_stats(_world(SceneWorld, {'scene': 'H4', 'plot': False}, args.cycles))} |")
     old, new = _scans(max(args.cycles // 20, 200))

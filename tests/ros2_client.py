@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import threading
 import time
+import traceback
 from pathlib import Path
 
 from rosbags.typesys import get_types_from_msg
@@ -51,6 +53,8 @@ def graph(port: int) -> None:
     endpoints = {}
     for topic, _ in topics:
         info = get_topic_info(topic, router_port=port, timeout=0.5, verbose=True)
+        if info is None:  # listed a moment ago, not found now (a query that timed out): the next pass lists it
+            continue
         endpoints[topic] = sorted([e.node_name, "MP", e.type_hash, e.qos] for e in info.publishers) + sorted(
             [e.node_name, "MS", e.type_hash, e.qos] for e in info.subscribers)
     session = ZenohSession.get_instance("127.0.0.1", port)
@@ -171,4 +175,9 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except Exception:  # noqa: BLE001 - said on stderr, and the process ends: the SDK's threads would keep it up
+        traceback.print_exc()
+        sys.stderr.flush()
+        os._exit(1)

@@ -30,7 +30,8 @@ def compose(tmp_path, text: str, *, clock="virtual", duration="1s", seed=0, name
 PATIENCE_S = 30.0  # what a condition may take on a loaded machine: a bound on hangs, never a speed requirement
 
 
-def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdown_timeout: str = "5s") -> RunResult:
+def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdown_timeout: str = "5s",
+              record: str | None = None) -> RunResult:
     """Run `text` on the wall clock until `condition(system)` holds, then shut it down: a test
     waits for what it checks to happen, not for a duration it hopes is long enough. The run
     fails the test if the condition does not hold within PATIENCE_S."""
@@ -52,7 +53,7 @@ def run_until(tmp_path, text: str, condition, what: str, name: str = "c", shutdo
         threading.Thread(target=watch, daemon=True).start()
 
     result = compose(tmp_path, text, clock="realtime", duration=f"{PATIENCE_S * 4:g}s", on_start=operator, name=name,
-                     shutdown_timeout=shutdown_timeout)
+                     shutdown_timeout=shutdown_timeout, record=record)
     assert not missed, missed[0]
     return result
 
@@ -133,3 +134,31 @@ coordination:
   flag_maps:
     ignore: {net: ignore, tracking_sources: {system.shutdown_requested: S}}
 """
+
+
+def step_thread(run_dir, path, cycles: int, sample, thread: str = "main", gate: str | None = None) -> list:
+    """The composition at `path` on the virtual clock, its one thread `thread` cycled by hand for `cycles`
+    milliseconds: `sample(blocks)` (the thread's blocks by activity name) is kept each cycle once the activity
+    `gate` runs (from the first cycle without one)."""
+    from hapticop.runtime.system import RunOptions, System
+    from hapticop.validation import validate_path
+
+    validated = validate_path(path)
+    assert validated.report.ok, validated.report.diagnostics
+    system = System(validated, RunOptions(clock="virtual", run_dir=run_dir, echo=False))
+    loop = system.built.threads[thread]
+    rows = []
+    try:
+        system.start_threads()
+        for i in range(cycles):
+            system.clock.advance_to(i * 1_000_000)
+            loop.cycle()
+            if gate is None or system.state(gate).flag_name == "running":
+                rows.append(sample({name: runner.block for name, runner in loop.runners.items()}))
+    finally:
+        for runner in loop.runners.values():
+            runner.block.clean()
+        system.writer.stop()
+        system.built = system.main = None
+        system.region.close()
+    return rows

@@ -85,7 +85,7 @@ CASES = [
     ("invalid-lidar-sim-no-simulator.yaml", "missing-need", 16,
      "'lidar' needs an activity 'lidar_sim' that provides 'tim561'", "built-in: tim561_simulator"),
     ("invalid-tim561-no-world.yaml", "missing-need", 17,
-     "'lidar_sim' needs an activity 'hallway' that provides 'hallway'", "built-in: hallway_world"),
+     "'lidar_sim' needs an activity 'hallway' that provides 'hallway'", "built-in: scene_world"),
     ("invalid-ethercat-sim-no-plant.yaml", "missing-need", 19,
      "'ethercat' needs an activity 'ropod_plnt' that provides 'ropod_wheels'", "did you mean 'ropod_plant'?"),
     # schema: streams

@@ -152,22 +152,33 @@ def _r(yaw, pitch, roll):
 def test_a_world_force_reaches_the_handle_rotated_scaled_dead_banded_and_limited(f, yaw, pitch, roll, gain, dead,
                                                                                limit):
     params = {"yaw_rad": yaw, "pitch_rad": pitch, "roll_rad": roll, "gain": gain, "dead_band_n": dead, "max_n": limit}
-    harness = _running("contact_to_handle", params, force=f)
+    harness = _running("contact_to_handle", params, world_force=f)
     f = np.array(f)
     n = np.linalg.norm(f)
     expected = _clip(gain * max(n - dead, 0.0) / n * (_r(yaw, pitch, roll) @ f), limit)
     np.testing.assert_allclose(harness.outputs.force.value, expected, rtol=1e-12, atol=1e-12)
 
 
+def test_a_planar_wrench_is_felt_by_its_force_and_not_its_torque():
+    """`measured: planar_wrench` takes scene_world's contact wrench [fx, fy, torque] (its unit says so): the
+    robot's x to the handle's -z and y to -x, as systems/push_box.yaml turns it, and no torque felt."""
+    from hapticop.blocks.coupling import ContactToHandle, ContactToHandleParams
+
+    params = {"measured": "planar_wrench", "pitch_rad": math.pi / 2, "roll_rad": -math.pi / 2, "max_n": 100.0}
+    assert ContactToHandle.interface(ContactToHandleParams(**params)).inputs["world_force"].unit == "N, N, N m"
+    harness = _running("contact_to_handle", params, world_force=[-3.0, 4.0, 50.0])
+    np.testing.assert_allclose(harness.outputs.force.value, [-4.0, 0.0, 3.0], atol=1e-12)
+
+
 def test_a_world_force_not_finite_is_felt_as_nothing_and_said_once():
-    harness = _running("contact_to_handle", {"gain": 1.0}, force=[1.0, 0.0, 0.0])
+    harness = _running("contact_to_handle", {"gain": 1.0}, world_force=[1.0, 0.0, 0.0])
     np.testing.assert_allclose(harness.outputs.force.value, [1.0, 0.0, 0.0])
     for bad in ([math.nan, 0.0, 0.0], [0.0, math.inf, 0.0], [0.0, 0.0, -math.inf]):
-        harness.feed("force", bad)
+        harness.feed("world_force", bad)
         harness.step()
         np.testing.assert_array_equal(harness.outputs.force.value, 0.0)
     assert harness.block.refused == 3
-    harness.feed("force", [0.0, 2.0, 0.0])
+    harness.feed("world_force", [0.0, 2.0, 0.0])
     harness.step()
     np.testing.assert_allclose(harness.outputs.force.value, [0.0, 2.0, 0.0])
     lines = harness.log_lines()
@@ -175,7 +186,7 @@ def test_a_world_force_not_finite_is_felt_as_nothing_and_said_once():
 
 
 def test_a_retuned_rotation_applies_at_the_next_cycle():
-    harness = _running("contact_to_handle", {}, force=[1.0, 0.0, 0.0])
+    harness = _running("contact_to_handle", {}, world_force=[1.0, 0.0, 0.0])
     harness.retune({"yaw_rad": math.pi / 2})
     harness.step()
     np.testing.assert_allclose(harness.outputs.force.value, [0.0, 1.0, 0.0], atol=1e-15)
@@ -188,7 +199,7 @@ def test_a_retuned_rotation_applies_at_the_next_cycle():
                                             "anchor": [0.0, 0.02, 0.0], "anchor_velocity": [0.0, 0.1, 0.0]}),
     ("coupling", {"kp_n_per_m": 1000.0}, {"leader_position": [0.05, 0.0, 0.0], "leader_velocity": [0.1, 0.0, 0.0],
                                           "follower_position": [0.0, 0.0, 0.0], "follower_velocity": [0.0] * 3}),
-    ("contact_to_handle", {"yaw_rad": 0.5, "dead_band_n": 0.1}, {"force": [20.0, 0.0, 3.0]}),
+    ("contact_to_handle", {"yaw_rad": 0.5, "dead_band_n": 0.1}, {"world_force": [20.0, 0.0, 3.0]}),
 ])
 def test_the_new_blocks_compute_without_allocating(block, params, feeds):
     harness = _running(block, params, **feeds)

@@ -152,6 +152,20 @@ def test_tables_print_fixed_point_and_a_ceiling_as_a_floor(tmp_path):
     assert "0.00001234 m" in text and "12350000 s" in text
 
 
+def test_a_simulation_that_falls_behind_is_said_to_be_the_simulations_lateness():
+    """A late simulated thread is named as the simulation's lateness; a late real loop is not, nor a
+    simulated thread within its periods (so a device fault seen beside it is read for what it is)."""
+    from hapticop.cli.report import simulation_lateness
+
+    def thread(missed, simulation):
+        return {"missed_percent": missed, "simulation": simulation}
+
+    data = {"threads": {"simulators": thread(38.8, True), "main": thread(5.0, False),
+                        "simulation": thread(0.2, True), "quiet": thread(None, True)}}
+    lines = simulation_lateness(data)
+    assert len(lines) == 1 and "thread simulators missed 38.8 %" in lines[0] and "simulation's" in lines[0]
+
+
 def test_tests_keep_their_figures_out_of_the_output():
     """A test's measured figure goes to the `figure` fixture (listed by `pytest -v`), never printed
     into the suite's output: no print() and no capsys.disabled() in a test module."""

@@ -34,7 +34,7 @@ def _tick(clock):
 def test_the_simulator_answers_each_command_frame_with_a_status_frame(tmp_path):
     clock = VirtualClock()
     device = _block(FalconSimulator, "falcon_sim", FalconSimulatorParams(), clock, tmp_path)
-    host = DatagramFalconLink(DatagramLink.host(tmp_path, "falcon_sim"))
+    host = DatagramFalconLink(DatagramLink.host(tmp_path, "falcon_sim", memory=clock.virtual))
     codec, homing, command, status = FrameCodec(), Homing(), new_frame(), Status()
     codec.encode_command((0, 0, 0), homing.command_flags(), command)
     _tick(clock)
@@ -53,7 +53,7 @@ def test_the_simulator_answers_each_command_frame_with_a_status_frame(tmp_path):
 def test_the_simulated_faults_silence_or_corrupt_the_replies(tmp_path):
     clock = VirtualClock()
     device = _block(FalconSimulator, "falcon_sim", FalconSimulatorParams(), clock, tmp_path)
-    host = DatagramFalconLink(DatagramLink.host(tmp_path, "falcon_sim"))
+    host = DatagramFalconLink(DatagramLink.host(tmp_path, "falcon_sim", memory=clock.virtual))
     command, status = new_frame(), Status()
     FrameCodec().encode_command((0, 0, 0), int(Flag.HOMING), command)
     for fault, answered in (("silent", False), ("corrupt", False), ("none", True)):

@@ -1,4 +1,4 @@
-"""The simulated TiM561 as an activity: it scans the world's hallway from the pose the world
+"""The simulated TiM561 as an activity: it scans the world's scene from the pose the world
 streams, serves CoLa A where it says it does, and switches its faults (virtual clock, real sockets)."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import numpy as np
 from hapticop.devices.link import published_address
 from hapticop.devices.sick.client import ColaClient
 from hapticop.runtime.clock import VirtualClock
+from hapticop.sim import scene_files
 from hapticop.sim.devices.tim561 import Tim561Simulator
-from hapticop.sim.hallway import HallwayGeometry
-from hapticop.sim.world_share import publish_world, withdraw_world
+from hapticop.sim.world_share import PublishedScene, publish_world, withdraw_world
 
 from .runtime_helpers import standalone
 
@@ -31,8 +31,10 @@ def test_a_world_that_is_not_open_is_waited_for_and_said(tmp_path, caplog):
 
 
 def test_scans_follow_the_world_and_faults_switch(tmp_path):
-    geometry = HallwayGeometry.named("H1")
-    publish_world(tmp_path, "world", geometry)
+    loaded, _ = scene_files.load("H1")
+    scene = loaded.scene
+    shared = PublishedScene.of(scene, loaded.xml)
+    publish_world(tmp_path, "world", shared)
     clock = VirtualClock()
     scanner = standalone(Tim561Simulator, "lidar_sim", {"world": "world"}, tmp_path, clock, seed=1)
     scanner.create()
@@ -58,8 +60,8 @@ def test_scans_follow_the_world_and_faults_switch(tmp_path):
 
     try:
         start = ahead(scan())  # no pose from the world yet: the robot stands at its start
-        assert abs(start - (geometry.length_m - geometry.start[0] - geometry.lidar.mount[0])) < 0.1
-        pose.value[:] = geometry.start
+        assert abs(start - (scene.hallway.length_m - scene.robot.start[0] - scene.robot.lidar.x_m)) < 0.1
+        pose.value[:] = shared.start
         pose.value[0] += 3.0  # the world streams the robot 3 m further: the end wall is closer
         pose.meta[0] = 1
         assert abs(ahead(scan()) - (start - 3.0)) < 0.1

@@ -17,9 +17,10 @@ from hapticop.benchmark.stats import MISSED_LIMIT_PERCENT, Distribution, Goal, m
 
 PROBES = ("probe_above", "probe_below")
 EMPTY_PROBE = "probe_above"  # the empty loop in its own process, above the application: the machine's misses
-MAIN_CYCLE_US = 300.0
+MAIN_CYCLE_US = 150.0  # the main loop's compute p99 goal (issue 32): room for a late wake-up in 1 ms
 FRAMEWORK_US = 30.0
-VIRTUAL_SPEED = 20.0
+CPU_PERCENT = 40.0  # the system without its simulated devices, of one core of two
+VIRTUAL_SPEED = 10.0  # the full hallway under the virtual clock, simulated s per CPU s (desk applications: 20)
 NOISY_CYCLICTEST_P999_US = 500.0  # docs/realtime.md §3: beyond this the machine itself misses the wake-up goals
 NOISY_SPREAD = 2.0  # cyclictest's p99 differing more than this between rounds of one condition
 STARVED_SIMULATORS_PERCENT = 10.0  # simulators missing more of their periods leave the loops without their load
@@ -61,7 +62,7 @@ def goals(condition: Condition) -> list[Goal]:
         if t.get("deploy") == "main" and t.get("cycle_us"):
             found.append(Goal(f"{condition.name} {name}: compute p99 per cycle (us)",
                               t["cycle_us"]["p99"] or math.nan, MAIN_CYCLE_US))
-    for path, limit in (("handle_to_wheel_command", 1500.0), ("lidar_telegram_to_force", 2000.0)):
+    for path, limit in (("handle_to_wheel_command", 1500.0), ("lidar_telegram_to_force", 1500.0)):
         e2e = condition.timing.get("latencies", {}).get(path)
         if e2e:
             found.append(Goal(f"{condition.name} {path} p99 (us)", e2e["latency_us"]["p99"] or math.nan, limit))
@@ -69,10 +70,10 @@ def goals(condition: Condition) -> list[Goal]:
     simulated = (condition.timing.get("cpu") or {}).get("simulators_percent")
     if simulated is None:
         found.append(Goal(f"{condition.name} CPU of the composition's loops, % of one core (simulators included)",
-                          loops, 50.0))
+                          loops, CPU_PERCENT))
     else:
         found.append(Goal(f"{condition.name} CPU of the composition without its simulated devices, % of one core",
-                          loops - simulated, 50.0))
+                          loops - simulated, CPU_PERCENT))
     return found
 
 

@@ -9,14 +9,16 @@ gives the equations.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
 from hapticop.blocks.base import Block
 from hapticop.blocks.bounds import Bounds
-from hapticop.blocks.interface import Params, Port, RateRange
+from hapticop.blocks.interface import Interface, Params, Port, RateRange
 
 HANDLE_RATE = RateRange(500.0, 2000.0, "forces for the Falcon: a stiff coupling is stable only near 1 kHz")
 POSITION_RANGE = (-10.0, 10.0)  # m: far beyond any desk device; a sample outside is a fault, not a position
@@ -126,6 +128,9 @@ class ContactToHandleParams(Params):
     dead_band_n: float = Field(0.0, ge=0.0, le=1.0e3, description="world forces up to this norm are not felt; "
                                "above it, the norm is reduced by it (no jump at the edge), N")
     max_n: float = Field(8.0, ge=0.0, le=1.0e3, description="norm limit of the force on the handle, N")
+    measured: Literal["force", "planar_wrench"] = Field(
+        "force", description="what 'world_force' carries: 'force' [fx, fy, fz] (N); 'planar_wrench' [fx, fy, torque "
+        "about z] (N, N, N m) as a planar robot's contact wrench (scene_world's), of which the torque is not felt")
 
 
 def rotation(yaw: float, pitch: float, roll: float) -> tuple[float, ...]:
@@ -144,12 +149,23 @@ class ContactToHandle(Block):
 
     Params = ContactToHandleParams
     running_params = frozenset({"yaw_rad", "pitch_rad", "roll_rad", "gain", "dead_band_n", "max_n"})
-    inputs = {"force": Port("float64", (3,), "N", "the force measured in the world, world frame", range=FORCE_RANGE)}
+    inputs = {"world_force": Port("float64", (3,), "N", "the force measured in the world, world frame",
+                                  range=FORCE_RANGE)}
     outputs = {"force": Port("float64", (3,), "N", "the force on the handle, device frame")}
     rate = HANDLE_RATE
 
+    @classmethod
+    def interface(cls, params: ContactToHandleParams) -> Interface:
+        base = super().interface(params)
+        if params.measured == "planar_wrench":
+            port = dataclasses.replace(base.inputs["world_force"], unit="N, N, N m",
+                                       doc="a planar wrench measured in the world, world frame: its force is felt")
+            base = dataclasses.replace(base, inputs={"world_force": port})
+        return base
+
     def create(self) -> None:
-        self.bounds = Bounds(self.inputs.force.spec, f"{self.name}.force")
+        self.planar = self.params.measured == "planar_wrench"
+        self.bounds = Bounds(self.inputs.world_force.spec, f"{self.name}.world_force")
         self.seq, self.good = -1, True
         self.retune(frozenset())
 
@@ -163,7 +179,7 @@ class ContactToHandle(Block):
         return self.bounds.refused
 
     def compute(self) -> None:
-        measured, out, p = self.inputs.force, self.outputs.force, self.params
+        measured, out, p = self.inputs.world_force, self.outputs.force, self.params
         if measured.seq != self.seq:
             self.seq = measured.seq
             self.good = self.bounds.admits(measured.value)
@@ -171,7 +187,7 @@ class ContactToHandle(Block):
         x = y = z = 0.0
         if measured.valid and self.good:
             f = measured.value
-            wx, wy, wz = float(f[0]), float(f[1]), float(f[2])
+            wx, wy, wz = float(f[0]), float(f[1]), 0.0 if self.planar else float(f[2])
             norm = math.sqrt(wx * wx + wy * wy + wz * wz)
             if norm > p.dead_band_n:
                 s = p.gain * (norm - p.dead_band_n) / norm

@@ -125,8 +125,8 @@ class EthercatMaster(Block):
         if p.driver == "sim":
             from hapticop.devices.link import DatagramLink
 
-            return DatagramSegment(DatagramLink.host(self.run_dir, p.simulator), p.wheels, SMARTWHEEL_INPUT_BYTES,
-                                   len(p.slaves))
+            link = DatagramLink.host(self.run_dir, p.simulator, memory=self.clock.virtual)
+            return DatagramSegment(link, p.wheels, SMARTWHEEL_INPUT_BYTES, len(p.slaves))
         from hapticop.devices.ethercat.master import ExpectedSlave, SoemLink, SoemMaster
 
         expected = [ExpectedSlave(name, spec.product, *SMARTWHEEL_LAYOUT) if spec.wheel is not None

@@ -126,7 +126,7 @@ class Falcon(Block):
         """The link `driver` chooses."""
         p = self.params
         if p.driver == "sim":
-            return DatagramFalconLink(DatagramLink.host(self.run_dir, p.simulator))
+            return DatagramFalconLink(DatagramLink.host(self.run_dir, p.simulator, memory=self.clock.virtual))
         from hapticop.devices.falcon.firmware import read_firmware
         from hapticop.devices.falcon.usb_driver import system_backend
         from hapticop.devices.falcon.usb_link import UsbLink, virtual_falcon

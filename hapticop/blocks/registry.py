@@ -57,7 +57,6 @@ BUILTIN: dict[str, str] = {
     "pose_predictor": "hapticop.blocks.prediction:PosePredictor",
     "energy_tank": "hapticop.blocks.tank:EnergyTankBlock",
     "speed_governor": "hapticop.blocks.governor:SpeedGovernor",
-    "hallway_world": "hapticop.sim.world:HallwayWorld",
     "scene_world": "hapticop.sim.scene_world:SceneWorld",
     "blind_operator": "hapticop.sim.blind_operator:Operator",
     "scripted_hand": "hapticop.sim.scripted_hand:ScriptedHand",
@@ -70,6 +69,12 @@ BUILTIN: dict[str, str] = {
     "zenoh_bridge": "hapticop.blocks.bridge:ZenohBridge",
     "ros2_bridge": "hapticop.blocks.ros2_bridge:Ros2Bridge",
 }
+
+RETIRED: dict[str, str] = {
+    "hallway_world": "the hallways are scene files now: use 'block: scene_world' with 'scene: H1' (or 'hallway: H1'); "
+                     "its other parameters are the same",
+}
+"""Built-in names no longer built in, and what to write instead."""
 
 _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 
@@ -153,6 +158,8 @@ def resolve(name: str) -> type[Block] | None:
     `blocks_not_imported()`, was not imported.
     """
     target = BUILTIN.get(name)
+    if name in RETIRED:
+        raise UnknownBlock(name, f"block '{name}' is no longer built in", RETIRED[name])
     if target is None and _untrusted.get():
         raise UnknownBlock(name, f"block '{name}' is not built in, and a recording's composition imports no module "
                                  "unless told to", "if you trust this file and the module it names, say so with "

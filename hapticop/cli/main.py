@@ -46,6 +46,7 @@ from hapticop.cli.devices import falcon as _falcon  # noqa: E402
 from hapticop.cli.devices import lidar as _lidar  # noqa: E402
 from hapticop.cli.docpages import docs as _docs  # noqa: E402
 from hapticop.cli.ethercat import ethercat as _ethercat  # noqa: E402
+from hapticop.cli.experiments import experiment as _experiment  # noqa: E402
 from hapticop.cli.hosts import hosts as _hosts  # noqa: E402
 from hapticop.cli.new import new as _new  # noqa: E402
 from hapticop.cli.recordings import info as _info  # noqa: E402
@@ -63,6 +64,7 @@ app.add_typer(_falcon, name="falcon")
 app.command("devices")(_devices)
 app.add_typer(_ethercat, name="ethercat")
 app.add_typer(_hosts, name="hosts")
+app.add_typer(_experiment, name="experiment")
 app.command("blocks")(_blocks)
 app.command("new")(_new)
 app.command("info")(_info)
@@ -71,6 +73,13 @@ app.command("plot")(_plot)
 app.command("replay")(_replay)
 app.command("report")(_report)
 app.command("docs")(_docs)
+
+
+def _validate_one(path: Path, state_limit: int) -> Report:
+    """A composition, or an experiment file (its factors checked against its composition)."""
+    from hapticop.experiment.checks import is_experiment, load
+
+    return load(path).report if is_experiment(path) else validate_path(path, state_limit).report
 
 
 class OutputFormat(str, Enum):
@@ -106,7 +115,7 @@ def validate(
         typer.echo(f"no composition files given and none in {SYSTEMS_DIR}/", err=True)
         raise typer.Exit(2)
     with contextlib.nullcontext() if import_blocks else blocks_not_imported():
-        reports: list[Report] = [validate_path(p, state_limit).report for p in paths]
+        reports: list[Report] = [_validate_one(p, state_limit) for p in paths]
     if format is OutputFormat.json:
         typer.echo(reports_to_json(reports))
     else:
@@ -370,25 +379,29 @@ def bench(
 
 @app.command()
 def schema(
-    check: bool = typer.Option(False, help="exit 1 if schemas/composition.schema.json is not current"),
-    write: bool = typer.Option(False, help="regenerate schemas/composition.schema.json"),
+    check: bool = typer.Option(False, help="exit 1 if the files in schemas/ are not current"),
+    write: bool = typer.Option(False, help="regenerate schemas/composition.schema.json and experiment.schema.json"),
 ) -> None:
-    """Print (or check, or write) the JSON Schema of composition files."""
-    from hapticop.composition.schema import SCHEMA_FILE, schema_text
+    """Print (or check, or write) the JSON Schema of composition files (and, with --check/--write, of
+    experiment files)."""
+    from hapticop.composition import schema as composition
+    from hapticop.experiment import schema as experiment
 
-    text = schema_text()
+    pairs = [(composition.SCHEMA_FILE, composition.schema_text()), (experiment.SCHEMA_FILE, experiment.schema_text())]
     if check:
-        current = SCHEMA_FILE.read_text() if SCHEMA_FILE.exists() else ""
-        if current != text:
-            typer.echo(f"{SCHEMA_FILE} is out of date; run `hapticop schema --write`", err=True)
-            raise typer.Exit(1)
-        typer.echo(f"{SCHEMA_FILE} is current")
+        for file, text in pairs:
+            current = file.read_text() if file.exists() else ""
+            if current != text:
+                typer.echo(f"{file} is out of date; run `hapticop schema --write`", err=True)
+                raise typer.Exit(1)
+            typer.echo(f"{file} is current")
     elif write:
-        SCHEMA_FILE.parent.mkdir(parents=True, exist_ok=True)
-        SCHEMA_FILE.write_text(text)
-        typer.echo(f"wrote {SCHEMA_FILE}")
+        for file, text in pairs:
+            file.parent.mkdir(parents=True, exist_ok=True)
+            file.write_text(text)
+            typer.echo(f"wrote {file}")
     else:
-        typer.echo(text, nl=False)
+        typer.echo(pairs[0][1], nl=False)
 
 
 OPTIONAL_VALUES = ("--record", "--view")  # options whose value may be left out: `--record`, `--view 9000`

@@ -69,6 +69,20 @@ def print_timing(data: dict, console: Console, virtual: bool) -> None:
         console.print(f"CPU of the loops: {plain(cpu['loops_percent'])} % of one core, of which simulated devices "
                       f"{plain(cpu['simulators_percent'])} %: the system itself "
                       f"{plain(cpu['without_simulators_percent'])} %")
+    for line in simulation_lateness(data):
+        console.print(line)
+
+
+def simulation_lateness(data: dict, limit_percent: float = 1.0) -> list[str]:
+    """Simulated threads that fell behind real time, said as the simulation's lateness.
+
+    A simulated device that answers late looks to the system like a device that fails; the
+    reader must know which it was before blaming the system (or the hardware it stands in for).
+    """
+    return [f"the simulation fell behind real time: thread {name} missed {plain(t['missed_percent'], 3)} % of its "
+            "periods; a late or missing device sample in this run may be the simulation's, not the system's"
+            for name, t in data["threads"].items()
+            if t.get("simulation") and (t.get("missed_percent") or 0.0) >= limit_percent]
 
 
 def print_results(run_dir: Path, console: Console) -> None:

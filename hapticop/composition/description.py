@@ -12,6 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
+from hapticop.composition.ros2streams import Ros2Stream, Ros2System
 from hapticop.composition.units import Duration, Offset
 from hapticop.network.link import LinkParams
 
@@ -191,7 +192,8 @@ class NetworkQoS(Strict):
 class Stream(Strict):
     """One writer port to one or more reader ports, with an explicit connection policy."""
 
-    writer: PortRef = Field(alias="from", description="the writing port, 'activity.port'")
+    writer: PortRef | None = Field(None, alias="from", description="the writing port, 'activity.port' (none: "
+                                   "with 'ros2:', subscribed from ROS 2)")
     readers: list[PortRef] = Field(
         default_factory=list, alias="to", description="the reading ports; none: a stream only watched (recorded, "
         "plotted, in the live view), as a network bridge's link figures are")
@@ -200,7 +202,16 @@ class Stream(Strict):
     network: NetworkQoS | None = Field(
         None, description="with 'hosts:', how the stream crosses the network when its writer and readers are on "
         "different hosts")
+    ros2: Ros2Stream | None = Field(None, description="a ROS 2 topic: published with no 'to', subscribed with no "
+                                    "'from' (docs/ros2.md)")
     doc: str = ""
+
+    @model_validator(mode="after")
+    def _written(self) -> Stream:
+        if self.writer is None:  # the loader gives a ROS 2 subscription its writer (composition/ros2streams.py)
+            raise PydanticCustomError("stream_writer", "'from' is missing: a stream has one writer port (with "
+                                      "'ros2:' and the system's 'ros2:' node, none: subscribed from ROS 2)")
+        return self
 
     @model_validator(mode="before")
     @classmethod
@@ -454,6 +465,7 @@ class Composition(Strict):
         default_factory=dict, max_length=MAX_LATENCIES,
         description="end-to-end latencies to measure and report, e.g. handle displacement to wheel command",
     )
+    ros2: Ros2System | None = Field(None, description="the ROS 2 node that carries the streams with 'ros2:'")
     duration: Duration | None = Field(None, description="the system stops by itself after this long, e.g. '60s'")
     record: Record | None = Field(None, description="record streams to an MCAP file while running")
     cpu_dma_latency: int | None = Field(

@@ -18,6 +18,7 @@ from pydantic import ValidationError
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Interface, Params
 from hapticop.blocks.registry import UnknownBlock, resolve
+from hapticop.composition import ros2streams
 from hapticop.composition.description import COLLECTIONS, VERSION, Activity, Composition
 from hapticop.composition.diagnostics import Diagnostic, Path, Severity
 from hapticop.composition.model_errors import diagnostics_from
@@ -53,8 +54,8 @@ class Loaded:
 
 
 def load_tree(tree: dict) -> Loaded:
-    diagnostics: list[Diagnostic] = []
     broken: set[tuple[str, str]] = set()
+    tree, diagnostics = ros2streams.expand(tree)
     work = copy.deepcopy(tree)
     composition = None
     for _ in range(4):  # each pass sets aside the entries the previous one found broken

@@ -8,6 +8,10 @@ at the receiver before `send` returns (so virtual-clock reruns stay identical), 
 processes, and it leaves no file behind. Neither end ever blocks: a datagram that finds no peer or a
 full queue is dropped and counted, as a frame lost on a wire would be.
 
+Under the virtual clock every activity runs in one thread of one process, so the runtime asks for
+a `MemoryLink` instead (`memory=True`): the same datagrams, the same drops (no peer, or a full
+queue, as long as the kernel's), kept in a queue in this process, no system call.
+
 A device served over TCP (the simulated TiM561 speaks CoLa A on a loopback port) publishes its
 address in the run directory instead (`publish_address`, `published_address`).
 """
@@ -16,11 +20,24 @@ from __future__ import annotations
 
 import hashlib
 import socket
+from collections import deque
 from pathlib import Path
 
 from hapticop.published import publish, published, withdraw
 
 _MAX_NAME = 107  # sun_path holds 108 bytes, the abstract namespace's leading NUL included
+
+
+def _socket_queue() -> int:
+    """How many datagrams a Unix socket holds before a sender is refused: Linux refuses once more
+    than net.unix.max_dgram_qlen are waiting (10 by default)."""
+    try:
+        return int(Path("/proc/sys/net/unix/max_dgram_qlen").read_text()) + 1
+    except (OSError, ValueError):
+        return 11
+
+
+_QUEUE = _socket_queue()
 
 
 def link_name(run_dir: Path, activity: str) -> str:
@@ -47,16 +64,17 @@ class DatagramLink:
         self.sock.setblocking(False)
 
     @classmethod
-    def host(cls, run_dir: Path, device_activity: str) -> DatagramLink:
-        """The device block's end, talking to the activity that serves the device."""
+    def host(cls, run_dir: Path, device_activity: str, memory: bool = False) -> DatagramLink | MemoryLink:
+        """The device block's end, talking to the activity that serves the device (`memory`: both
+        ends run in this thread, so the link is a `MemoryLink`)."""
         name = link_name(run_dir, device_activity)
-        return cls(name + ".host", name)
+        return (MemoryLink if memory else cls)(name + ".host", name)
 
     @classmethod
-    def device(cls, run_dir: Path, activity: str) -> DatagramLink:
+    def device(cls, run_dir: Path, activity: str, memory: bool = False) -> DatagramLink | MemoryLink:
         """The serving activity's end (the simulated device)."""
         name = link_name(run_dir, activity)
-        return cls(name, name + ".host")
+        return (MemoryLink if memory else cls)(name, name + ".host")
 
     def send(self, data) -> bool:
         """Send one datagram; False (and counted) if the other end is not there or not keeping up."""
@@ -79,6 +97,45 @@ class DatagramLink:
 
     def close(self) -> None:
         self.sock.close()
+
+
+class MemoryLink:
+    """One end of a link whose both ends run in this thread: a `DatagramLink` without the socket.
+
+    The ends find each other by the same names in a table of this process; what `send` would have
+    queued in the kernel is queued here as bytes, dropped in the same cases."""
+
+    _bound: dict[str, deque[bytes]] = {}  # name -> the datagrams waiting at that end
+
+    def __init__(self, local: str, peer: str):
+        if local in self._bound:
+            raise OSError(f"address already in use: {local!r}")
+        self.local, self.peer = local, peer
+        self.dropped = 0
+        self.queue: deque[bytes] = deque()
+        self._bound[local] = self.queue
+
+    def send(self, data) -> bool:
+        queue = self._bound.get(self.peer)
+        if queue is None or len(queue) >= _QUEUE:
+            self.dropped += 1
+            return False
+        queue.append(bytes(data))
+        return True
+
+    def receive_into(self, buffer) -> int:
+        if not self.queue:
+            return 0
+        data = self.queue.popleft()
+        target = memoryview(buffer).cast("B")
+        n = min(len(data), len(target))  # a datagram longer than the buffer is cut, as recv_into does
+        target[:n] = data[:n]
+        return n
+
+    def close(self) -> None:
+        if self._bound.get(self.local) is self.queue:
+            del self._bound[self.local]
+        self.queue.clear()
 
 
 def publish_address(run_dir: Path, activity: str, host: str, port: int) -> None:

@@ -39,6 +39,7 @@ from hapticop.recording.live import LiveOptions, LiveServer, LiveViewUnavailable
 from hapticop.recording.mcapfile import RecordingFile, StreamInfo
 from hapticop.recording.outputs import Fanout, Output
 from hapticop.recording.plan import RecordedStream, recorded_streams
+from hapticop.recording.ros2channels import ros2_channels
 from hapticop.recording.scene import views_for
 from hapticop.runtime.region import Layout, Transport
 from hapticop.runtime.streams import SpscQueue, sample_dtype
@@ -293,7 +294,9 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
     plan = RecorderPlan(path, rings, clock,
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
-                        {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings]), live,
+                        {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings])
+                        + (ros2_channels(composition, [ring.info.name for ring in rings]) if path is not None else []),
+                        live,
                         TimingPlan.of(composition, layout), run_dir, run["composition"], events=EventPlan.of(layout))
     plan.rings += [RecordedRing(*ring) for ring in cycle_rings.recorded(loaded, layout)] if path is not None else []
     return plan

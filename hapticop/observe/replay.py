@@ -142,7 +142,7 @@ def results(path: Path | Run, run_dir: Path, tolerance: float = 0.0) -> tuple[li
     promising = leaving_results(run)
     if not promising:
         raise ReplayError(f"{run.path}: no activity of its composition leaves results (a block whose "
-                          "`promises` names files, such as hallway_world)")
+                          "`promises` names files, such as scene_world)")
     reasons = {name: why_not(run, name) for name in promising}
     able = [name for name, reason in reasons.items() if reason is None]
     if not able:

@@ -1,18 +1,18 @@
 """The live view: the recorder's channels served over Foxglove's WebSocket protocol, thinned for display.
 
 A `LiveServer` is an output like the MCAP file (`recording.outputs`): the recorder hands it the
-same channels and batches, and it forwards at most `rate_hz` messages a second per channel to
-the WebSocket server of `foxglove-sdk` (the optional `[foxglove]` extra), which runs on the
-SDK's own threads in the recorder's process, never on a real-time loop. Each message goes out
-with the loop's own stamp as its time, so plots and frames line up as in a recording; a client
-that falls behind loses the oldest messages (the SDK's backlog), never the recording.
+same channels and batches, and it forwards at most `rate_hz` messages a second per channel to the
+clients of `live_gate.Gate`, whose thread serves them in the recorder's process, never on a
+real-time loop. Each message goes out with the loop's own stamp as its time, so plots and frames
+line up as in a recording; a client that falls behind loses the oldest messages, never the recording.
 
-The protocol has no authentication, and the SDK's server offers no hook to add one, so the SDK's
-server listens on a loopback port of its own and `live_gate.Gate` listens where asked, letting a
-client through only with the run's token (`?token=` in its URL), written owner-only in the run
-directory (docs/security.md). With a certificate and key (`tls_cert`, `tls_key`) the gate speaks only
-`wss://`, so neither the streams nor the token are readable on the way. `exposure` says at start
-who can reach the address when it is more than loopback.
+The protocol has no authentication, and the SDK's server offers no hook to add one, so no SDK
+server runs: the gate is the live view's one socket, and it lets a client in only with the run's
+token (`?token=` in its URL), written owner-only in the run directory (docs/security.md). With a
+certificate and key (`tls_cert`, `tls_key`) it speaks only `wss://`, so neither the streams nor the
+token are readable on the way. `exposure` says at start who can reach the address when it is more
+than loopback. The messages themselves come encoded: the streams' arrays (`arrays`), the views'
+Foxglove schemas (`scene`, with the SDK's message classes), the log and events as the file has them.
 """
 
 from __future__ import annotations
@@ -25,16 +25,17 @@ import numpy as np
 
 from hapticop.recording import arrays
 from hapticop.recording.live_gate import Gate, new_token, write_token
+from hapticop.recording.live_protocol import Advertised
 from hapticop.recording.mcapfile import LOG_TOPIC, StreamInfo, topic_of
 
 DEFAULT_PORT = 8765
-DEFAULT_HOST = "127.0.0.1"  # this machine only: the protocol has no authentication
+DEFAULT_HOST = "127.0.0.1"  # this machine only, by default
 DEFAULT_RATE_HZ = 30.0
-MISSING = "the live view needs foxglove-sdk: pip install 'hapticop[foxglove]'"
+NEEDED = (("foxglove", "foxglove-sdk"), ("websockets", "websockets"))  # the `[foxglove]` extra: modules, packages
 
 
 class LiveViewUnavailable(RuntimeError):
-    """foxglove-sdk is not installed, or the server could not listen."""
+    """The `[foxglove]` extra is not installed, or the server could not listen."""
 
 
 @dataclass(frozen=True)
@@ -93,18 +94,22 @@ def read_identity(options: LiveOptions) -> tuple[bytes, bytes] | tuple[None, Non
 
 
 def require_sdk() -> None:
-    """Fail early, in one line, when the `[foxglove]` extra is missing."""
-    try:
-        import foxglove  # noqa: F401
-    except ImportError as missing:
-        raise LiveViewUnavailable(MISSING) from missing
+    """Fail early, in one line, when the `[foxglove]` extra is missing (the SDK for the views' schemas,
+    `websockets` for the protocol)."""
+    import importlib
+
+    for module, package in NEEDED:
+        try:
+            importlib.import_module(module)
+        except ImportError as missing:
+            raise LiveViewUnavailable(f"the live view needs {package}: pip install 'hapticop[foxglove]'") from missing
 
 
 @dataclass
 class _Live:
-    """One channel on the server and when it may send next."""
+    """One channel and when it may send next."""
 
-    channel: object  # foxglove.Channel
+    id: int
     prefix: bytes = b""  # a stream channel's protobuf prefix (`arrays`)
     thinned: bool = True  # not the log (events, each its own) nor a tapped slot (read at the display rate already)
     next_ns: int = 0  # a view's channel: the next message's earliest stamp
@@ -112,27 +117,19 @@ class _Live:
 
 
 class LiveServer:
-    """A Foxglove WebSocket server fed as a recorder output."""
+    """Foxglove's WebSocket protocol, served by the gate, fed as a recorder output."""
 
     def __init__(self, options: LiveOptions, name: str = "hapticop", run_dir: Path | None = None):
         require_sdk()
-        import foxglove
-
         self.options = options
         self.period_ns = int(1e9 / options.rate_hz)
-        self.context = foxglove.Context()  # this server's channels alone (not the SDK's global context)
         cert, key = read_identity(options)
         where = f"{options.host}:{options.port}"
-        try:  # the SDK's own server: loopback, any port, reached through the gate only
-            self.server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self.context)
-        except Exception as error:  # noqa: BLE001 - the SDK raises its own error types
-            raise LiveViewUnavailable(f"the live view cannot listen on 127.0.0.1: {error}") from error
         token = new_token()
         try:
-            self.gate = Gate(options.host, options.port, self.server.port, token,
+            self.gate = Gate(options.host, options.port, token, name,
                              (cert, key) if cert is not None and key is not None else None)
         except (OSError, ValueError) as error:
-            self.server.stop()
             raise LiveViewUnavailable(f"the live view cannot listen on {where}: {error}") from error
         scheme = "wss" if cert else "ws"
         self.public_address = f"{scheme}://{options.host}:{self.gate.port}"  # the port chosen when asked for any (0)
@@ -142,24 +139,20 @@ class LiveServer:
         except OSError as error:
             self.stop()
             raise LiveViewUnavailable(f"the live view cannot write its token in {run_dir}: {error.strerror}") from None
-        self._schemas: list[object] = []
+        self._schemas: list[tuple[str, str, bytes]] = []
         self._channels: list[_Live] = []
         self.sent = 0
 
     def schema(self, name: str, encoding: str, data: bytes) -> int:
-        import foxglove
-
-        self._schemas.append(foxglove.Schema(name=name, encoding=encoding, data=data))
+        self._schemas.append((name, encoding, bytes(data)))
         return len(self._schemas)
 
     def channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str]) -> int:
-        import foxglove
-
-        schema = self._schemas[schema_id - 1] if schema_id else None
-        channel = foxglove.Channel(topic, schema=schema, message_encoding=message_encoding, context=self.context,
-                                   metadata=dict(metadata))
-        self._channels.append(_Live(channel, thinned=topic != LOG_TOPIC))
-        return len(self._channels)
+        name, encoding, data = self._schemas[schema_id - 1] if schema_id else ("", "", b"")
+        id_ = len(self._channels) + 1
+        self._channels.append(_Live(id_, thinned=topic != LOG_TOPIC))
+        self.gate.advertise(Advertised(id_, topic, message_encoding, name, encoding, data, dict(metadata)))
+        return id_
 
     def stream_channel(self, info: StreamInfo, thinned: bool = True) -> int:
         """A stream's channel; `thinned=False` for samples already taken at the display rate (`observe.taps`)."""
@@ -171,29 +164,26 @@ class LiveServer:
 
     def write(self, channel: int, log_time_ns: int, data: bytes, publish_time_ns: int, sequence: int) -> None:
         live = self._channels[channel - 1]
-        if (live.thinned and publish_time_ns < live.next_ns) or not live.channel.has_sinks():
+        if (live.thinned and publish_time_ns < live.next_ns) or not self.gate.subscribed(live.id):
             return
         live.next_ns = publish_time_ns + self.period_ns
-        live.channel.log(data, log_time=int(publish_time_ns))
+        self.gate.send(live.id, int(publish_time_ns), bytes(data))
         self.sent += 1
 
     def write_samples(self, channel: int, samples: np.ndarray, log_time_ns: int) -> None:
         """The first sample of each display period, with the loop's stamp as its time."""
         live = self._channels[channel - 1]
-        if not len(samples) or not live.channel.has_sinks():
+        if not len(samples) or not self.gate.subscribed(live.id):
             return
-        if not live.thinned:
-            for k in range(len(samples)):
-                live.channel.log(live.prefix + samples["payload"][k].tobytes(), log_time=int(samples["stamp_ns"][k]))
-            self.sent += len(samples)
-            return
-        periods = samples["stamp_ns"].astype(np.int64) // self.period_ns
-        chosen = np.flatnonzero(np.diff(periods, prepend=live.period) > 0)
+        if live.thinned:
+            periods = samples["stamp_ns"].astype(np.int64) // self.period_ns
+            chosen = np.flatnonzero(np.diff(periods, prepend=live.period) > 0)
+            live.period = max(live.period, int(periods[-1]))
+        else:
+            chosen = range(len(samples))
         for k in chosen:
-            live.channel.log(live.prefix + samples["payload"][k].tobytes(), log_time=int(samples["stamp_ns"][k]))
-        live.period = max(live.period, int(periods[-1]))
+            self.gate.send(live.id, int(samples["stamp_ns"][k]), live.prefix + samples["payload"][k].tobytes())
         self.sent += len(chosen)
 
     def stop(self) -> None:
-        self.server.stop()  # its goodbye to each client first, through the gate
-        self.gate.stop()
+        self.gate.stop()  # the backlog and a goodbye to each client first

@@ -131,7 +131,7 @@ def compute_metrics(
     sl = slice(0, end + 1)
     t, pose, clear_all, front, side = t[sl], pose[sl], clear_all[sl], front[sl], side[sl]
     d = {k: v[sl] for k, v in d.items()}
-    w = _hold_weights(t)
+    w = hold_weights(t)
     total = float(w.sum())
     crash = ended_by == "crash"
 
@@ -180,7 +180,7 @@ def compute_metrics(
         **_energy_metrics(w, d),
         **_transparency(t, d),
         **_authority(w, d),
-        **_effort_and_oscillation(t, w, d, force_limit_n, workspace_m),
+        **effort_and_oscillation(t, w, d, force_limit_n, workspace_m),
     )
 
 
@@ -196,7 +196,7 @@ def _speed_from_poses(t: F64, pose: F64) -> F64:
     return np.abs(vx * np.cos(pose[:, 2]) + vy * np.sin(pose[:, 2]))
 
 
-def _hold_weights(t: F64) -> F64:
+def hold_weights(t: F64) -> F64:
     dt = np.diff(t)
     return np.append(dt, dt[-1])
 
@@ -347,7 +347,7 @@ def _sliding_rms(cumulative_sq: F64, dt: float, window_s: float) -> F64:
     return np.sqrt(np.maximum((cumulative_sq[win:] - cumulative_sq[:-win]) / win, 0.0))
 
 
-def _effort_and_oscillation(
+def effort_and_oscillation(
     t: F64, w: F64, d: Mapping[str, np.ndarray], limit: float, workspace_m: float
 ) -> dict[str, object]:
     nan = math.nan
@@ -382,14 +382,14 @@ def _effort_and_oscillation(
 def metrics_json(metrics: RunMetrics, extra: dict | None = None) -> str:
     """The metrics as the run directory's metrics.json: plain JSON, null for what is not a number;
     `extra` adds what only some compositions measure (an energy tank's lowest level)."""
-    return json.dumps(_plain({**asdict(metrics), **(extra or {})}), indent=2)
+    return json.dumps(json_plain({**asdict(metrics), **(extra or {})}), indent=2)
 
 
-def _plain(value):
+def json_plain(value):
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: json_plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [json_plain(v) for v in value]
     if isinstance(value, (np.floating, float)):
         return None if not np.isfinite(value) else float(value)
     if isinstance(value, (np.integer, int, bool, np.bool_)) and not isinstance(value, str):

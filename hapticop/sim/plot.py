@@ -1,4 +1,5 @@
-"""A one-page PNG of a hallway run: the path in the hallway from above, then force and velocity over time.
+"""A one-page PNG of a run: the path from above (in the hallway, or among a scene's static geometry), then
+force and velocity over time.
 
 Why: a glance at a run shows what the metrics summarise (where it drifted, how it stopped, how the cue felt).
 matplotlib is optional (the `report` extra) and imported only here, inside the function.
@@ -6,25 +7,49 @@ matplotlib is optional (the `report` extra) and imported only here, inside the f
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from hapticop.devices.ropod.body import Footprint
 from hapticop.sim.hallway import HallwayGeometry
 from hapticop.sim.recording import TrajectoryRecorder, as_channels
 
 
+def scene_outlines(engine) -> list[np.ndarray]:
+    """Each static geom of a loaded scene (hapticop.sim.engine) seen from above: a box's four corners, any
+    other shape a circle of its radius; (k, 2) arrays of x, y."""
+    import mujoco
+
+    m, d = engine.model, engine.data
+    mujoco.mj_kinematics(m, d)
+    outlines = []
+    for g in engine.static:
+        centre, size = d.geom_xpos[g, :2], m.geom_size[g]
+        if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+            turn = d.geom_xmat[g].reshape(3, 3)[:2, :2]
+            local = np.array([(1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0)]) * size[:2]
+            outlines.append(centre + local @ turn.T)
+        else:
+            a = np.linspace(0.0, 2.0 * np.pi, 33)
+            outlines.append(centre + size[0] * np.column_stack([np.cos(a), np.sin(a)]))
+    return outlines
+
+
 def plot_run(
     data: TrajectoryRecorder | Mapping[str, np.ndarray],
-    geometry: HallwayGeometry,
+    geometry: HallwayGeometry | None,
     path: str | Path,
     *,
+    walls: Sequence[np.ndarray] = (),
+    footprint: Footprint | None = None,
     title: str | None = None,
     footprint_every_s: float = 1.0,
     dpi: int = 110,
 ) -> Path:
-    """Write the PNG and return its path. Needs the "t" and "pose" channels; forces and velocities if logged."""
+    """Write the PNG and return its path. Needs the "t" and "pose" channels; forces and velocities if logged.
+    Without a hallway (`geometry` None) the path is drawn among `walls` (`scene_outlines`)."""
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -39,25 +64,30 @@ def plot_run(
     top, mid, low = fig.subplots(3, 1, height_ratios=[1.4, 1, 1])
 
     # Top view: walls, comfort lines at dist1, the stop line at dist2, the path and footprints.
-    segs, _ = g.segments()
-    for s in segs:
-        top.plot(s[:, 0], s[:, 1], color="black", lw=2.5, solid_capstyle="butt")
-    h, inner = 0.5 * g.width_m, 0.5 * g.width_m - g.dist1_m
-    for y, label in ((inner, "dist1 from the side walls"), (-inner, None)):
-        top.plot([g.entrance_x_m, g.length_m], [y, y], ls=":", color="tab:green", lw=1, label=label)
-    top.plot([g.stop_line_x_m] * 2, [-h, h], ls="--", color="tab:red", lw=1, label="dist2 stop line")
+    if g is not None:
+        segs, _ = g.segments()
+        for s in segs:
+            top.plot(s[:, 0], s[:, 1], color="black", lw=2.5, solid_capstyle="butt")
+        h, inner = 0.5 * g.width_m, 0.5 * g.width_m - g.dist1_m
+        for y, label in ((inner, "dist1 from the side walls"), (-inner, None)):
+            top.plot([g.entrance_x_m, g.length_m], [y, y], ls=":", color="tab:green", lw=1, label=label)
+        top.plot([g.stop_line_x_m] * 2, [-h, h], ls="--", color="tab:red", lw=1, label="dist2 stop line")
+    for outline in walls:
+        top.fill(outline[:, 0], outline[:, 1], facecolor="0.3", edgecolor="black", lw=0.8)
+    fp = g.footprint if g is not None else footprint or Footprint()
     every = max(1, int(round(footprint_every_s / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
-    for c in g.footprint.corners(pose[::every]):
+    for c in fp.corners(pose[::every]):
         top.fill(c[:, 0], c[:, 1], facecolor="tab:blue", alpha=0.08, edgecolor="tab:blue", lw=0.5)
-    c = g.footprint.corners(pose[-1])
+    c = fp.corners(pose[-1])
     top.fill(c[:, 0], c[:, 1], facecolor="none", edgecolor="tab:blue", lw=1.5)
     top.plot(pose[:, 0], pose[:, 1], color="tab:blue", lw=1.2, label="robot centre")
     top.set_aspect("equal")
-    top.set_xlim(min(g.entrance_x_m, float(pose[:, 0].min())) - 0.3, g.length_m + 0.3)
-    top.set_ylim(-h - 0.3, h + 0.3)
+    if g is not None:
+        top.set_xlim(min(g.entrance_x_m, float(pose[:, 0].min())) - 0.3, g.length_m + 0.3)
+        top.set_ylim(-h - 0.3, h + 0.3)
     top.set_xlabel("x [m]")
     top.set_ylabel("y [m] (left +)")
-    top.set_title(title or f"{g.name}: run of {t[-1] - t[0]:.1f} s")
+    top.set_title(title or f"{g.name if g is not None else 'scene'}: run of {t[-1] - t[0]:.1f} s")
     top.legend(loc="upper left", fontsize=8)
 
     if "force_env" in d:

@@ -5,13 +5,17 @@ plant says (the plant's pose from its start, composed with the scene's start) mo
 steps the physics one period, and publishes what the plant and the others need: the robot's pose in the
 scene (where the simulated LIDAR scans from), the contacts' wrench on the robot (the plant's external
 force: a pushed box slows it, a wall stops it) and the movable bodies' poses (the LIDAR sees them where
-they are). The robot touching static geometry is a collision; with the scene's `hallway` task the run is
-judged as hallway_world judges it (docs/hallway-experiment.md §5).
+they are). The robot touching static geometry is a collision. Once the operator drives it records the run
+(robot pose and velocity, handle, forces, clearance) and raises `finished` when the operator is done and
+the robot still, the robot crashes, or time is up. With the scene's `hallway` task the run is judged by
+the hallway experiment's metrics and targets (docs/hallway-experiment.md §5, §6), and by the `targets`
+declared on the world with the judge users configure (hapticop.sim.judge, docs/scenes.md §5).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 from typing import Literal
@@ -19,20 +23,27 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from hapticop.blocks.interface import Display, Interface, Port
+from hapticop.blocks.base import Block
+from hapticop.blocks.interface import Display, Interface, Params, Port
 from hapticop.composition.diagnostics import Diagnostic
+from hapticop.sim.judge import Targets
 from hapticop.sim.scene import Scene
-from hapticop.sim.world import HallwayWorld, HallwayWorldParams
 
 
-class SceneWorldParams(HallwayWorldParams):
+class SceneWorldParams(Params):
     hallway: Literal["H1", "H2", "H3", "H4", "H5", "H6"] | None = Field(
-        None, description="the shipped scene of that hallway (docs/hallway-experiment.md §2): `scene: H2` said as "
-        "hallway_world says it")
+        None, description="the shipped scene of that hallway (docs/hallway-experiment.md §2): the same as "
+        "`scene: H2`")
     operator: str | None = Field(None, description="the activity whose run this world judges (block "
                                  "blind_operator): its variant sets the targets")
     scene: str | Scene = Field("H1", description="the scene: written here, or a scene file (a shipped name such as "
                                "'H1', or a path beside the composition; .yaml, or .xml for MJCF): docs/scenes.md")
+    targets: Targets = ()
+    time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
+    plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
+    judge: bool = Field(True, description="judge the run by the hallway experiment's targets; false for an "
+                        "application that does not drive the robot down the hallway (the desk): its "
+                        "trajectory is kept, but nothing is judged")
 
     @model_validator(mode="after")
     def _hallway_names_the_scene(self) -> SceneWorldParams:
@@ -63,9 +74,35 @@ def _count_bodies(params: SceneWorldParams) -> int:
     return Engine(loaded.xml).bodies
 
 
-class SceneWorld(HallwayWorld):
+class SceneWorld(Block):
     Params = SceneWorldParams
+    simulator = True  # everything it does is the simulation
+    provides = frozenset({"hallway"})
+    needs = {"operator": "operator"}
+    inputs = {
+        "robot_pose": Port("float64", (3,), "m, m, rad", "the simulated robot's pose from its start", required=False),
+        "robot_twist": Port("float64", (3,), "m/s, m/s, rad/s", "the simulated robot's twist", required=False),
+        "velocity_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the commanded twist", required=False),
+        "executed_setpoint": Port("float64", (3,), "m/s, m/s, rad/s", "the twist a safety layer let through of "
+                                  "the command (shared control): its authority is measured", required=False),
+        "environment_force": Port("float64", (3,), "N", "the obstacle force on the handle", required=False),
+        "device_force": Port("float64", (3,), "N", "the whole force the Falcon renders", required=False),
+        "hand_force": Port("float64", (3,), "N", "the operator's hand on the grip", required=False),
+        "tank_level": Port("float64", (), "J", "an energy tank's level on the Falcon's port: its lowest goes "
+                           "into the metrics", required=False),
+        "round_trip": Port("float64", (), "s", "a link's measured round trip: its largest goes into the metrics",
+                           required=False),
+        "link_jitter": Port("float64", (), "s", "a link's measured jitter: its largest goes into the metrics",
+                            required=False),
+        "link_loss": Port("float64", (), "1", "a link's measured loss: its largest goes into the metrics",
+                          required=False),
+        "handle_position": Port("float64", (3,), "m", "true handle position, device frame", required=False),
+        "handle_velocity": Port("float64", (3,), "m/s", "true handle velocity, device frame", required=False),
+        "operator_time": Port("float64", (), "s", "seconds the operator has driven: the recording's clock"),
+        "operator_done": Port("uint8", (), "1", "the operator believes the task is over"),
+    }
     outputs = {}
+    flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
 
     @classmethod
     def interface(cls, params: SceneWorldParams) -> Interface:
@@ -94,7 +131,24 @@ class SceneWorld(HallwayWorld):
             found.append(Diagnostic("scene-judge", "the run is judged by the hallway experiment's targets, but the "
                                     "scene has no 'hallway' task", ("params", "judge"),
                                     hint="judge: false, or a 'hallway:' section in the scene"))
+        if loaded is not None and params.targets:
+            found += _target_findings(params, loaded)
         return found
+
+    @classmethod
+    def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
+        """The trajectory (when an operator's clock or targets keep it); the hallway's metrics, the targets'
+        verdicts and the picture when judged."""
+        if not params.judge and not params.targets and params.operator is None:
+            return ()  # nothing keeps a trajectory: the streams (--record) are the run's record
+        promised = ["trajectory.npz"]
+        if params.judge:
+            promised += ["metrics.json", "results.json"]
+        if params.targets:
+            promised += ["judge.json", "results.json"]
+        if params.plot and (params.judge or params.targets):
+            promised.append("run.png")
+        return tuple(dict.fromkeys(promised))
 
     @classmethod
     def displays(cls, params: SceneWorldParams) -> tuple[Display, ...]:
@@ -110,12 +164,9 @@ class SceneWorld(HallwayWorld):
         self.scene = scene = loaded.scene or Scene()
         self.engine = Engine(loaded.xml, self.name)
         self.geometry = _judged_geometry(scene)
-        start = scene.robot.start
-        self.start = (start[0], start[1], math.radians(start[2]))
-        lidar = scene.robot.lidar
-        publish_world(self.run_dir, self.name, PublishedScene(loaded.xml, self.start, lidar.noise_sigma_m,
-                                                           lidar.min_range_m, lidar.max_range_m,
-                                                           math.radians(lidar.yaw_deg)))
+        shared = PublishedScene.of(scene, loaded.xml)
+        self.start = shared.start
+        publish_world(self.run_dir, self.name, shared)
         out = self.outputs
         self.prepare(out.pose_in_hallway.value)
         self.pose[:] = self.start
@@ -123,12 +174,14 @@ class SceneWorld(HallwayWorld):
         self.bodies = out.body_poses.value if self.engine.bodies else None
         self.engine.place_robot(self.pose)
         self.twist = np.zeros(3)
+        capacity = self.recorder.capacity
+        self.contact = np.zeros(capacity)  # |contact force| on the robot, per recorded sample
+        self.body_track = np.zeros((capacity, self.engine.bodies, 3))
+        self.body_aliases = _body_aliases(scene if loaded.scene is not None else None, self.engine.body_names)
 
     def compute(self) -> None:
         inputs, engine, out = self.inputs, self.engine, self.outputs
         if inputs.robot_pose.seq:
-            from hapticop.sim.world import place
-
             place(self.start, inputs.robot_pose.value, self.pose)
         engine.place_robot(self.pose, inputs.robot_twist.value if inputs.robot_twist.seq else None)
         engine.step()
@@ -142,8 +195,200 @@ class SceneWorld(HallwayWorld):
         if self.bodies is not None:
             engine.body_poses(self.bodies)
             out.body_poses.publish()
-        if inputs.operator_time.seq and not self.ended:
-            self.judge(clearance, clearance <= 0.0)
+        if (inputs.operator_time.seq or self.params.targets) and not self.ended:
+            if self.started_ns is None and not inputs.operator_time.seq:  # no operator: the run is the whole run
+                self.started_ns = self.clock.now_ns()
+            # a collision ends the run (a crash), unless the scene is judged by targets of its own: then it is counted
+            touching = clearance <= 0.0
+            self.judge(clearance, touching and (self.params.judge or not self.params.targets))
+            i = self.recorder.n - 1
+            wrench = self.wrench
+            self.contact[i] = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1])
+            if self.bodies is not None:
+                self.body_track[i] = self.bodies
+
+    def clean(self) -> None:
+        self._hallway_clean()
+        if self.params.targets and self.recorder.n >= 2:
+            self._judge_targets()
+
+    def prepare(self, pose: np.ndarray) -> None:
+        """The judge's state, once `geometry` is known; `pose` is the output the robot's pose goes to."""
+        from hapticop.sim.recording import TrajectoryRecorder
+
+        p = self.params
+        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": self.geometry.name})
+        self.pose = pose
+        self.pose[:] = self.geometry.start
+        self.started_ns: int | None = None  # when the operator started driving, on the system's clock
+        self.ended = ""
+        self.still_since: float | None = None
+        self.velocity = np.zeros(2)  # (v, omega): the recorder's unicycle view of a twist
+        self.command = np.zeros(2)
+        self.executed = np.zeros(2)
+        self.nothing = np.zeros(3)
+        self.variant = "unknown"  # the operator's, once it has said (clean)
+        # What only some compositions measure, its extreme while driving kept for metrics.json (infinite: never
+        # measured): (key, input, whether the lowest is kept, else the highest)
+        inputs = self.inputs
+        self.watched = (("tank_level_min_j", inputs.tank_level, True), ("round_trip_max_s", inputs.round_trip, False),
+                        ("link_jitter_max_s", inputs.link_jitter, False), ("link_loss_max", inputs.link_loss, False))
+        self.extremes = {key: math.inf if lowest else -math.inf for key, _, lowest in self.watched}
+
+
+    def judge(self, clearance: float, crashed: bool) -> None:
+        """Record this cycle once the operator drives, and end the run when its time has come."""
+        inputs = self.inputs
+        driven = inputs.operator_time
+        now = self.clock.now_ns()
+        if self.started_ns is None:  # the recording's time 0: when the operator started, on the system's clock
+            self.started_ns = driven.stamp_ns - round(float(driven.value) * 1e9)
+            self.recorder.meta["operator_start_ns"] = self.started_ns
+        t = (now - self.started_ns) / 1e9
+        vx, vy, wz = inputs.robot_twist.value.tolist()  # floats: numpy scalars are slow to compare
+        self.velocity[0], self.velocity[1] = vx, wz
+        setpoint = inputs.velocity_setpoint.value
+        self.command[0], self.command[1] = setpoint[0], setpoint[2]
+        executed = inputs.executed_setpoint
+        if executed.seq:
+            self.executed[0], self.executed[1] = executed.value[0], executed.value[2]
+        force = inputs.environment_force
+        extremes = self.extremes
+        for key, port, lowest in self.watched:
+            if port.seq:
+                value = float(port.value)
+                if value < extremes[key] if lowest else value > extremes[key]:
+                    extremes[key] = value
+        self.recorder.append(t, self.pose, robot_velocity=self.velocity, cmd=self.command,
+                             cmd_exec=self.executed if executed.seq else None,
+                             handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
+                             force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
+                             force_device=inputs.device_force.value, clearance=clearance)
+        g = self.geometry
+        moving = abs(vx) >= g.still_speed_mps or abs(vy) >= g.still_speed_mps
+        self.still_since = None if moving else (t if self.still_since is None else self.still_since)
+        still = self.still_since is not None and t - self.still_since >= g.still_time_s
+        if crashed:
+            self.ended = "crash"
+        elif inputs.operator_done.value and still:  # the judge's rule: stopped, and still for a while
+            self.ended = "operator done"
+        elif t >= self.params.time_limit_s:
+            self.ended = "time limit"
+        if self.ended:  # its time is told once, from the metrics, when the world cleans
+            self.log.always("run judged over: %s", self.ended)
+            self.flags["finished"] = True
+
+
+    def _hallway_clean(self) -> None:
+        from hapticop.sim.metrics import compute_metrics, metrics_json
+        from hapticop.sim.world_share import find_operator, withdraw_world
+
+        withdraw_world(self.run_dir, self.name)
+        if self.recorder.n < 2:
+            return
+        operator = (find_operator(self.run_dir, self.params.operator) if self.params.operator else None) or {}
+        self.variant = str(operator.get("variant", self.variant))
+        self.recorder.meta.update(operator=self.variant, variation=operator.get("variation"))
+        self.recorder.save(self.run_dir / "trajectory.npz")
+        if not self.params.judge:
+            self.log.info("not a hallway run: trajectory kept, nothing judged")
+            return
+        metrics = compute_metrics(self.recorder, self.geometry, v_cruise_mps=_cruise_speed(operator))
+        extra = {key: value for key, value in self.extremes.items() if math.isfinite(value)}
+        (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra or None))
+        self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
+                        metrics.ended_by)
+        if self.params.plot:
+            try:
+                from hapticop.sim.plot import plot_run
+
+                plot_run(self.recorder, self.geometry, self.run_dir / "run.png",
+                         title=f"{self.geometry.name}, {self.variant} operator")
+            except RuntimeError as error:  # matplotlib missing: the numbers are still there
+                self.log.warning("no picture of the run: %s", error)
+        self._results(metrics)
+
+
+    def _results(self, m) -> None:
+        """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
+        from hapticop.sim.targets import judged_rows
+
+        results = {"title": f"hallway {self.geometry.name}, {self.variant} operator",
+                   "rows": judged_rows(m, self.geometry, self.variant, end_time_s(m, self.recorder)),
+                   "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
+        (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
+
+    def _plot_scene(self) -> str | None:
+        """run.png: the path among the scene's static geometry (drawn from the compiled scene)."""
+        if not self.params.plot:
+            return None
+        from hapticop.devices.ropod.body import Footprint
+        from hapticop.sim.plot import plot_run, scene_outlines
+
+        r = self.scene.robot
+        try:
+            plot_run(self.recorder, None, self.run_dir / "run.png", walls=scene_outlines(self.engine),
+                     footprint=Footprint(length_m=r.length_m, width_m=r.width_m), title=f"scene of {self.name}")
+        except RuntimeError as error:  # matplotlib missing: the numbers are still there
+            self.log.warning("no picture of the run: %s", error)
+            return None
+        return "run.png"
+
+    def _judge_targets(self) -> None:
+        """judge.json (the generic metrics and each target's verdict) and the rows `hapticop compose` prints."""
+        from hapticop.sim.judge import Run, judge, metric_rows, run_metrics
+        from hapticop.sim.metrics import json_plain  # NaN as null: JSON has no such number
+        from hapticop.sim.recording import as_channels
+
+        n, d = self.recorder.n, as_channels(self.recorder)
+        zeros = np.zeros((n, 3))
+        r = self.scene.robot
+        run = Run(t=d["t"], pose=d["pose"], clearance=d["clearance"], contact_n=self.contact[:n],
+                  handle_force=d.get("force_device", zeros), handle_velocity=d.get("handle_velocity", zeros),
+                  bodies=self.body_track[:n], body_names=self.body_aliases, footprint=(r.length_m, r.width_m),
+                  ended=self.ended)
+        metrics = run_metrics(run)
+        rows = judge(run, self.params.targets, metrics)
+        ok = all(row["ok"] for row in rows)
+        (self.run_dir / "judge.json").write_text(json.dumps(json_plain({"metrics": metrics, "targets": rows, "ok": ok}),
+                                                            indent=2))
+        self.log.info("targets %s (%d of %d met)", "met" if ok else "missed", sum(r["ok"] for r in rows), len(rows))
+        results = self.run_dir / "results.json"
+        if self.params.judge and results.exists():  # the hallway's rows first, the scene's targets after
+            table = json.loads(results.read_text())
+            table["rows"] += rows
+        else:
+            table = {"title": f"scene {self.name}", "rows": metric_rows(metrics) + rows,
+                     "picture": self._plot_scene()}
+        results.write_text(json.dumps(json_plain(table), indent=2))
+
+
+def _body_aliases(scene: Scene | None, mjcf_names: list[str]) -> tuple[tuple[str, ...], ...]:
+    """Each movable body's names a target may use: its scene name (if it has one) and its MJCF name."""
+    if scene is None:
+        return tuple((name,) for name in mjcf_names)
+    return tuple(((b.name,) if b.name else ()) + (f"bodies[{i}]",) for i, b in enumerate(scene.bodies))
+
+
+def _target_findings(params: SceneWorldParams, loaded) -> list[Diagnostic]:
+    """A target naming a body the scene does not have, located at the name."""
+    if loaded.scene is not None:
+        aliases = _body_aliases(loaded.scene, [])
+    else:
+        from hapticop.sim.engine import Engine
+
+        aliases = _body_aliases(None, Engine(loaded.xml).body_names)
+    from hapticop.sim.judge import body_index
+
+    found = []
+    for i, target in enumerate(params.targets):
+        push = target.push_body
+        if push is not None and body_index(aliases, push.body) is None:
+            known = ", ".join(a[0] for a in aliases) or "none"
+            found.append(Diagnostic("scene-target", f"push_body names {push.body!r}, which is no movable body of "
+                                    f"the scene", ("params", "targets", i, "push_body", "body"),
+                                    expected=f"one of: {known}"))
+    return found
 
 
 def _judged_geometry(scene: Scene):
@@ -163,3 +408,33 @@ def _judged_geometry(scene: Scene):
                            entrance_x_m=task.entrance_x_m, dist1_m=task.dist1_m, dist2_m=task.dist2_m,
                            dist3_m=task.dist3_m, pillars=tuple(Pillar(p.x_m, p.along_m, p.depth_m, p.side)
                                                                for p in task.pillars), **common)
+
+
+def end_time_s(metrics, recorder) -> float:
+    """The run's one end time, on the recording's clock: when the robot came to rest for good (the
+    completion time), or the last moment recorded when it crashed or ran out of time."""
+    if metrics.completion_time_s == metrics.completion_time_s:  # not NaN: it stopped
+        return float(metrics.completion_time_s)
+    return float(recorder.t[recorder.n - 1] - recorder.t[0])
+
+
+def _cruise_speed(operator: dict) -> float | None:
+    """The cruise speed of the operator the run had (T_ref's speed), or None if it did not say."""
+    from hapticop.sim.operator import BlindOperator
+
+    variant = operator.get("variant")
+    if not variant:
+        return None
+    return BlindOperator.variant(str(variant), seed=operator.get("variation")).profile.cruise_speed()
+
+
+def place(start: tuple[float, float, float], moved: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The robot's pose in the hallway: its start pose composed with how far it has moved
+    (`moved` = [x, y, theta] from where it started, in the start frame), into `out`."""
+    sx, sy, st = start
+    rx, ry, rt = float(moved[0]), float(moved[1]), float(moved[2])
+    c, s = math.cos(st), math.sin(st)
+    out[0] = sx + c * rx - s * ry
+    out[1] = sy + s * rx + c * ry
+    out[2] = st + rt
+    return out

@@ -1,6 +1,6 @@
 """What a simulated world shares with the simulators that live in it, found by its activity's name.
 
-The world's geometry (walls, pillars, the LIDAR's noise) is fixed for a run, so the world writes it
+The world's scene (its compiled MJCF, the LIDAR's model) is fixed for a run, so the world writes it
 once into the run directory, where a simulator in any process of the run finds it by the world
 activity's name (the name its `world:` parameter gives, which validation checks). Everything that
 moves (the robot's pose, the operator's hand) travels in declared streams instead. The same way,
@@ -9,11 +9,15 @@ the operator says who it is (its variant), which the world's judge needs for the
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hapticop.published import publish, published, withdraw
-from hapticop.sim.hallway import HallwayGeometry
+
+if TYPE_CHECKING:
+    from hapticop.sim.scene import Scene
 
 
 @dataclass(frozen=True)
@@ -27,19 +31,23 @@ class PublishedScene:
     max_range_m: float
     yaw_rad: float
 
+    @classmethod
+    def of(cls, scene: Scene, xml: str) -> PublishedScene:
+        """A scene's share: its compiled MJCF, the robot's start and the LIDAR's model (angles in radians)."""
+        start, lidar = scene.robot.start, scene.robot.lidar
+        return cls(xml, (start[0], start[1], math.radians(start[2])), lidar.noise_sigma_m, lidar.min_range_m,
+                   lidar.max_range_m, math.radians(lidar.yaw_deg))
 
-def publish_world(run_dir: Path, activity: str, geometry: HallwayGeometry | PublishedScene) -> None:
-    """Write the world's geometry (a hallway's walls, or a scene) where its simulators look."""
-    publish(run_dir, "worlds", activity, geometry)
+
+def publish_world(run_dir: Path, activity: str, scene: PublishedScene) -> None:
+    """Write the world's scene where its simulators look."""
+    publish(run_dir, "worlds", activity, scene)
 
 
-def find_world(run_dir: Path, activity: str) -> HallwayGeometry | PublishedScene | None:
-    """The geometry of the world `activity`, or None until it is open (a world left behind by an
-    ended run in a reused run directory does not count). A scene is told by its compiled scene
-    (`xml`); read as a hallway, its other fields would quietly take a hallway's defaults."""
-    fact = published(run_dir, "worlds", activity)
-    kind = PublishedScene if isinstance(fact, dict) and "xml" in fact else HallwayGeometry
-    return None if fact is None else published(run_dir, "worlds", activity, as_type=kind)
+def find_world(run_dir: Path, activity: str) -> PublishedScene | None:
+    """The scene of the world `activity`, or None until it is open (a world left behind by an
+    ended run in a reused run directory does not count)."""
+    return published(run_dir, "worlds", activity, as_type=PublishedScene)
 
 
 def withdraw_world(run_dir: Path, activity: str) -> None:

@@ -12,7 +12,7 @@ from hapticop.composition.graph import CompositionGraph
 from hapticop.composition.loader import Loaded, load_tree
 from hapticop.composition.placement import for_host, place
 from hapticop.composition.yamlsource import Source
-from hapticop.validation import coordination, hosts, modes, security, structure
+from hapticop.validation import coordination, hosts, modes, ros2, security, structure
 from hapticop.validation.reachability import DEFAULT_STATE_LIMIT
 
 
@@ -47,7 +47,7 @@ def check_source(source: Source, state_limit: int = DEFAULT_STATE_LIMIT) -> Vali
     if loaded.composition is not None and loaded.composition.hosts:
         return _check_hosts(source, loaded, cg, report, state_limit)
     if loaded.composition is not None:
-        for check in structure.CHECKS + coordination.CHECKS + modes.CHECKS:
+        for check in structure.CHECKS + ros2.CHECKS + coordination.CHECKS + modes.CHECKS:
             found = check(cg, state_limit) if check is coordination.reachability else check(cg)
             report.extend(placed(source, loaded, d) for d in found)
         report.extend(_block_findings(source, loaded))

@@ -234,6 +234,9 @@ def streams(cg: G.CompositionGraph) -> Check:
             if writer_port is None:
                 continue
             wnode, wport = writer_port
+            if spec.ros2 is not None:  # the message, not the generated port, is the reference: validation/ros2.py
+                yield from _thread_safety(cg, snode, spec, wnode, rnode, rdata)
+                continue
             rport = cg.g.nodes[rnode]["port"]
             for what, a, b in (("dtype", wport.dtype, rport.dtype), ("shape", wport.shape, rport.shape),
                                ("unit", wport.unit, rport.unit)):

@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from hapticop.devices.link import DatagramLink
+from hapticop.devices.link import DatagramLink, MemoryLink
 
 
 class SegmentLink(Protocol):
@@ -47,7 +47,7 @@ class SegmentReply:
 class DatagramSegment:
     """The master's end of a simulated segment (the simulating activity answers every frame)."""
 
-    def __init__(self, link: DatagramLink, wheels: int, input_bytes: int, slaves: int):
+    def __init__(self, link: DatagramLink | MemoryLink, wheels: int, input_bytes: int, slaves: int):
         self.link = link
         self.reply = SegmentReply(wheels, input_bytes, slaves)
         self.expected_wkc = 3 * wheels  # each wheel's process data counts 3 (read and write)

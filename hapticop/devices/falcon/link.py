@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hapticop.devices.falcon.codec import FRAME_SIZE, FrameCodec, FrameError, Status, new_frame
-from hapticop.devices.link import DatagramLink
+from hapticop.devices.link import DatagramLink, MemoryLink
 
 __all__ = ["FalconLink", "DatagramFalconLink"]
 
@@ -38,7 +38,7 @@ class FalconLink(Protocol):
 class DatagramFalconLink:
     """Falcon frames to and from the activity that simulates the Falcon, one datagram each."""
 
-    def __init__(self, link: DatagramLink) -> None:
+    def __init__(self, link: DatagramLink | MemoryLink) -> None:
         self.link = link
         self.codec = FrameCodec()
         self.frame = new_frame()

@@ -67,7 +67,7 @@ class FalconSimulator(Block):
         if self.link is not None:
             self.link.close()
         self.device = SimulatedFalcon(p.geometry, handle_mass_kg=p.handle_mass_kg + p.hand_mass_kg, rng=self.rng)
-        self.link = DatagramLink.device(self.run_dir, self.name)
+        self.link = DatagramLink.device(self.run_dir, self.name, memory=self.clock.virtual)
         self.last_ns = self.clock.now_ns()
 
     def compute(self) -> None:

@@ -58,7 +58,7 @@ class RopodPlantSimulator(Block):
         self.reply.states[:] = AL_OP
         self.reply.working_counter[0] = 3 * wheels  # each wheel's process data counts 3; the junctions none
         self.plant.write_sensors(self.reply.inputs)
-        self.link = DatagramLink.device(self.run_dir, self.name)
+        self.link = DatagramLink.device(self.run_dir, self.name, memory=self.clock.virtual)
         self.last_ns = self.clock.now_ns()
 
     def compute(self) -> None:

@@ -74,20 +74,11 @@ class Tim561Simulator(Block):
         self.angles = np.asarray(ANGLES_RAD, dtype=float)
         self.ranges = np.zeros(len(self.angles))
         self.start_pose = np.asarray(found.start, dtype=float)
-        if hasattr(found, "xml"):  # a scene: MuJoCo casts the rays
-            from hapticop.sim.engine import Engine
+        from hapticop.sim.engine import Engine
 
-            self.engine, self.walls = Engine(found.xml, world), None
-            self.limits = (found.min_range_m, found.max_range_m, found.yaw_rad)
-            noise = found.noise_sigma_m
-        else:  # hallway_world's walls
-            from hapticop.sim.hallway import World
-
-            self.engine, self.walls = None, World.from_geometry(found)
-            self.lidar = found.lidar
-            self.mount = np.asarray(found.lidar.mount, dtype=float)
-            noise = found.lidar.noise_sigma_m
-        self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=noise,
+        self.engine = Engine(found.xml, world)  # the scene: MuJoCo casts the rays
+        self.limits = (found.min_range_m, found.max_range_m, found.yaw_rad)
+        self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=found.noise_sigma_m,
                                    rng=self.rng, clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
         self.fault = "none"
         # The first step sets the scans' schedule. A thread at the scan rate may wake later for
@@ -102,16 +93,11 @@ class Tim561Simulator(Block):
         """The ranges of the scan leaving now: the world ray-cast from where the robot is."""
         where = self.inputs.pose_in_hallway
         pose = where.value if where.seq > 0 else self.start_pose  # at its start until the world says
-        if self.engine is not None:
-            if self.params.bodies and self.inputs.body_poses.seq > 0:
-                self.engine.place_bodies(self.inputs.body_poses.value)
-            self.engine.place_robot(pose)
-            low, high, yaw = self.limits
-            self.engine.scan(self.angles, self.ranges, low, high, yaw)
-        else:
-            lidar = self.lidar
-            self.walls.raycast(pose, self.mount, self.angles, self.ranges, max_range=lidar.max_range_m,
-                               min_range=lidar.min_range_m)
+        if self.params.bodies and self.inputs.body_poses.seq > 0:
+            self.engine.place_bodies(self.inputs.body_poses.value)
+        self.engine.place_robot(pose)
+        low, high, yaw = self.limits
+        self.engine.scan(self.angles, self.ranges, low, high, yaw)
         np.nan_to_num(self.ranges, copy=False, nan=0.0)  # no echo: the TiM reports 0
         return self.ranges
 
