@@ -4,6 +4,8 @@ every force model and both filters; no force from a stale or missing scan; nothi
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -199,3 +201,38 @@ def test_a_new_filter_renders_the_next_scan():
     renderer.step()
     expected = ScanField(MovingMedianParams(window=5), angles).apply(ranges)
     np.testing.assert_array_equal(renderer.outputs.field.value, expected)
+
+
+# -- the scan declared once: raw or rendered, and its filter where it is applied --------------------
+
+HALLWAY = Path(__file__).resolve().parent.parent / "systems" / "hallway.yaml"
+
+
+@pytest.mark.parametrize(("layer", "rule", "line"), [
+    # the filter declared on the controller as well as on scan_field: the controller's would do nothing
+    ("activities:\n  haptic:\n    params:\n      scan_filter: {kind: moving_median, window: 5}\n", "param-unused", 5),
+    # the raw scan and the rendered one both fed to the controller
+    ("streams:\n  scan_ranges:\n    to: [scan_field.ranges, haptic.ranges]\n", "inputs-alternative", None),
+    # neither: the controller would run blind for ever
+    ("streams:\n  rendered_scan: null\n", "input-unconnected", None),
+])
+def test_a_scan_declared_twice_or_not_at_all_is_refused_where_it_is_written(tmp_path, layer, rule, line):
+    from hapticop.validation import validate_path
+
+    layer_file = tmp_path / "layer.yaml"
+    layer_file.write_text(f"extends: {HALLWAY}\n{layer}")
+    errors = validate_path(layer_file).report.errors
+    assert [d.rule for d in errors] == [rule], errors
+    assert errors[0].line > 0 and errors[0].file
+    if line is not None:
+        assert (Path(errors[0].file).name, errors[0].line) == ("layer.yaml", line)
+
+
+def test_the_controllers_own_filter_serves_its_raw_scan(tmp_path):
+    """Where the raw scan is fed (teleop: the ranges cross the link), the controller's filter counts."""
+    from hapticop.validation import validate_path
+
+    layer_file = tmp_path / "layer.yaml"
+    layer_file.write_text(f"extends: {HALLWAY.parent / 'teleop_sim.yaml'}\nactivities:\n  haptic:\n    params:\n"
+                          "      scan_filter: {kind: moving_median, window: 5}\n")
+    assert validate_path(layer_file).report.ok

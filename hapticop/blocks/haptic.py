@@ -8,6 +8,8 @@ their defaults, units and descriptions are written there once.
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import numpy as np
 from pydantic import Field
 
@@ -48,10 +50,10 @@ class HapticControllerParams(Params):
     governor: GovernorParams | None = Field(
         None, description="the robot-side speed governor S1 ({} for its defaults); null: none")
     blind: BlindPolicy = Field(default_factory=BlindPolicy)
-    scan_filter: ScanFilterParams = Field(
-        default_factory=MovingAverageParams, discriminator="kind",
-        description="the per-beam filter of each scan taken on the ranges input: 'kind' moving_average or "
-        "moving_median (a scan_field input comes filtered by its own block's)")
+    scan_filter: Annotated[ScanFilterParams, Field(discriminator="kind")] | None = Field(
+        None, description="the per-beam filter of a raw scan on the ranges input: 'kind' moving_average or "
+        "moving_median; null: the 3-beam moving average. With the scan_field input connected instead, the "
+        "scan_field activity declares it (set here, validation refuses it)")
     correction_feel: CorrectionFeelParams | None = Field(
         None, description="shared control: render the robot's correction of the command (the velocity_correction "
         "input) as part of the environmental force ({} for its defaults); null: not felt")
@@ -108,6 +110,8 @@ class HapticController(Block):
             flags_read=dict(cls.flags_read),
             flags_written=dict(cls.flags_written),
             rate=RateRange(500.0, 2000.0, "the haptic loop renders stiff forces only near 1 kHz"),
+            one_of=(("ranges", "scan_field"),),  # the scan, raw or rendered beside the loop
+            input_params={"scan_filter": "ranges"},  # a rendered scan comes filtered by its own block's
         )
 
     # -- life cycle -------------------------------------------------------------------------
@@ -267,7 +271,7 @@ class HapticController(Block):
         p = self.params
         field = self.inputs.scan_field
         self.use_field = bool(field.meta[0])  # a scan_field block feeds it: its scans come rendered
-        self.filter = make_scan_filter(p.scan_filter)
+        self.filter = make_scan_filter(p.scan_filter or MovingAverageParams())
         if self.use_field:  # the field's filtered beams, padded to scan_points with beams that see nothing
             angles = field.value[ANGLE].copy()
         else:
