@@ -1,6 +1,6 @@
 """Once: the hallway sweep's and the delay experiment's JSON-line records (bench/results/*.jsonl, made by the
-scripts they replaced) as the tables of experiments/hallway.yaml and experiments/delay.yaml, so that
-`hapticop experiment report` reads them and a resumed `experiment run` skips them. The output is committed
+scripts that experiments/hallway.yaml and experiments/delay.yaml replaced) as the tables of those two files,
+so that `hapticop experiment report` reads them and a resumed `experiment run` skips them. The output is committed
 (experiments/results/); the records stay as they were.
 
     python bench/convert_records.py
@@ -63,15 +63,29 @@ def hallway_metrics(record: dict) -> dict:
 
 
 @functools.cache
-def _delay_bench():
-    import importlib.util
-    import sys
+def reference_time_s(profile: str, variation: int, hallway: str) -> float:
+    """§5's autonomous reference for this operator, as the world computes it (`autonomous_reference_s` at the
+    varied profile's cruise speed over the robot's start clearance to the end wall less dist2), so both
+    experiments judge completion time alike."""
+    import numpy as np
 
-    sys.path.insert(0, str(ROOT / "bench"))
-    spec = importlib.util.spec_from_file_location("delay_experiment", ROOT / "bench" / "delay_experiment.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from hapticop.sim.hallway_task import Hallway
+    from hapticop.sim.metrics import autonomous_reference_s
+    from hapticop.sim.operator import BlindOperator
+
+    task = Hallway.named(hallway)
+    front_m = float(task.clearances(np.array([task.start]))[0, 1])
+    return autonomous_reference_s(front_m - task.dist2_m,
+                                  BlindOperator.variant(profile, seed=variation).profile.cruise_speed())
+
+
+def judged(record: dict) -> dict:
+    """A delay record with T_ref and T/T_ref by the world's definition. Runs before 2026-11-25 stored the
+    script's own T_ref, from the un-varied profile's cruise speed; their measured completion times are judged
+    again here, as the script's summary always did."""
+    t_ref = reference_time_s(record["profile"], record["operator"], record.get("hallway", "H1"))
+    completion = record["completion_time_s"]
+    return {**record, "t_ref_s": t_ref, "t_norm": completion / t_ref if completion is not None else None}
 
 
 def delay_labels(record: dict):
@@ -83,7 +97,7 @@ def delay_labels(record: dict):
 
 
 def delay_metrics(record: dict) -> dict:
-    record = _delay_bench().judged(record)
+    record = judged(record)
     names = {"collisions": "n_collisions"}
     kept = ("ended_by", "crash", "collisions", "e_stop_m", "side_clearance_min_m", "completion_time_s", "t_ref_s",
             "t_norm", "oscillation_index_mps", "sustained_oscillation", "divergence", "oscillation_s",

@@ -18,12 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
+from hapticop.devices.sick.device_model import ANGLES_RAD
 from hapticop.haptics.force_models import FORCE_MODELS, make_force_model
 from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import govern_cycle, govern_scan, govern_twist
 from hapticop.haptics.handle import CentringPD, handle_to_twist
 from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
-from hapticop.sim.hallway import HallwayGeometry, World
+from hapticop.sim.hallway_task import Hallway
 from hapticop.sim.operator import BlindOperator
 from hapticop.sim.recording import TrajectoryRecorder
 from hapticop.testing import allocation_stats, time_per_call
@@ -31,9 +32,11 @@ from hapticop.testing import allocation_stats, time_per_call
 
 def cases() -> dict[str, Callable[[], object]]:
     """The per-cycle calls to measure, each with its inputs already prepared."""
-    h2 = HallwayGeometry.named("H2")
-    raw_angles = h2.lidar.angles()
-    raw = World.from_geometry(h2).raycast(h2.start, h2.lidar.mount, raw_angles, np.empty(h2.lidar.beams, np.float32))
+    h2 = Hallway.named("H2")
+    raw_angles = np.asarray(ANGLES_RAD, dtype=float)
+    engine = h2.engine()
+    engine.place_robot(np.array(h2.start))
+    raw = engine.scan(raw_angles, np.empty(len(raw_angles), np.float32), 0.05, 10.0)
     average = MovingAverage()
     angles = average.configure(raw_angles)
     ranges = average.apply(raw).copy()
@@ -72,14 +75,19 @@ def world_cases() -> dict[str, Callable[[], object]]:
     run: dict[str, Callable[[], object]] = {}
     pose = np.array([3.0, 0.2, 0.1])
     for name in ("H1", "H4"):
-        g = HallwayGeometry.named(name)
-        world = World.from_geometry(g)
-        run[f"world: footprint clearance, {name}"] = lambda world=world, g=g: world.clearance(pose, g.footprint)
+        g = Hallway.named(name)
+        engine = g.engine()
+
+        def clearances(engine=engine, g=g) -> object:
+            engine.place_robot(pose)
+            return engine.clearances(g.front)
+
+        run[f"world: footprint clearances (all, end wall, sides), {name}"] = clearances
     recorder = TrajectoryRecorder(10_000_000)
     two, three = np.zeros(2), np.zeros(3)
     run["world: recorder append"] = lambda: recorder.append(
         1.0, pose, robot_velocity=two, cmd=two, handle_position=three, handle_velocity=three, force_env=three,
-        force_hand=three, force_device=three, clearance=0.5)
+        force_hand=three, force_device=three, clearance=0.5, front_clearance=0.5, side_clearance=0.5)
     for variant in ("nominal", "tremor"):
         operator = BlindOperator.variant(variant)
         clock = [0.0]

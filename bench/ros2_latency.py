@@ -46,7 +46,7 @@ activities:
       subscribe:
         cmd_in: {topic: /cmd_in, type: geometry_msgs/msg/Twist}
       publish:
-        stamped: {topic: /cmd_stamped, type: geometry_msgs/msg/TwistStamped, rate_hz: RATE, stale: skip}
+        stamped: {topic: /cmd_stamped, type: geometry_msgs/msg/TwistStamped, rate: RATEHz, stale: skip}
 streams:
   cmd_in: {from: ros2.cmd_in, to: [echo.input], max_age: 200ms}
   cmd_out: {from: echo.output, to: [ros2.stamped], max_age: 200ms}
@@ -73,7 +73,7 @@ def main() -> None:
     try:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "ros2_latency.yaml"
-            path.write_text(textwrap.dedent(SYSTEM.replace("PORT", str(port)).replace("RATE", str(args.rate))
+            path.write_text(textwrap.dedent(SYSTEM.replace("PORT", str(port)).replace("RATE", f"{args.rate:g}")
                                             .replace("PERIOD", args.period)))
             validated = validate_path(path)
             assert validated.report.ok, [d.to_text() for d in validated.report.diagnostics]

@@ -209,3 +209,16 @@ def test_a_commands_range_check_allocates_nothing():
     retained, peak = allocation_stats(lambda: (bounds.admits(good), bounds.admits(bad)), 1000)
     # retained: the counters themselves (Python ints); peak: numpy's transient ufunc scratch, no array
     assert retained < 256 and peak < 2048
+
+
+def test_the_bilateral_set_up_with_its_scene_world_allocates_nothing_that_stays(tmp_path):
+    """systems/bilateral.yaml: two Falcons and their simulators, the coupling, and the scene world putting the
+    follower's handle in its scene and publishing the wall's push on it."""
+    from .conftest import SYSTEMS
+
+    path = SYSTEMS / "bilateral.yaml"
+    with _virtual_system(tmp_path, path.read_text(), str(path)) as (system, threads, cycles):
+        cycles(0, 3_000)  # both homed, the leader's hand pushing
+        assert system.state("world").flag_name == "running" and system.state("follower").flag_name == "running"
+        _assert_nothing_stays(system, lambda: cycles(3_000, 1_500))  # the follower against the wall, held
+        assert threads["main"].runners["world"].block.outputs.follower_handle_force.value[2] > 0

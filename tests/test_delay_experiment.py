@@ -1,127 +1,148 @@
-"""The delay experiment's bench: its grid (goal cells and the others), every cell's composition valid, when a
-tank counts as empty, and a sweep that resumes only from runs of the same setup."""
+"""The delay experiment as declared (experiments/delay.yaml): its grid (goal cells and the others), every cell's
+composition valid and linked as the docs say, when a tank counts as empty, its tables from the results rows,
+and the reference time the converted records are judged by (bench/convert_records.py)."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
-import sys
 from collections import Counter
 from pathlib import Path
 
 import pytest
 
-from hapticop.haptics.energy_tank import EnergyTankParams
+from hapticop.experiment.checks import load
+from hapticop.experiment.grid import runs
+from hapticop.experiment.summaries import EMPTY_J, TANK_FLOOR_J, delay, delay_goal, tank_empty
+from hapticop.experiment.table import row
 
 ROOT = Path(__file__).resolve().parent.parent
+ROUND_TRIPS = ["0", "50", "200", "400", "1000"]
 
 
 @pytest.fixture(scope="module")
-def bench():
-    sys.path.insert(0, str(ROOT / "bench"))  # it imports the hallway experiment's helpers
-    try:
-        spec = importlib.util.spec_from_file_location("delay_experiment", ROOT / "bench" / "delay_experiment.py")
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        yield module
-    finally:
-        sys.path.remove(str(ROOT / "bench"))
+def loaded():
+    found = load(ROOT / "experiments" / "delay.yaml", deep=False)
+    assert found.report.ok, [d.to_text() for d in found.report.errors]
+    return found
 
 
-def test_the_goal_cells_get_operators_the_others_their_own_count_and_focus_only_reorders(bench):
-    jobs = bench.jobs(operators=4, others=2, others_per_round=3)
-    per_cell = Counter(job[:4] for job in jobs)
-    goal = [cell for cell in bench.cells() if bench.is_goal(cell)]
-    assert sorted(cell[0] for cell in goal) == [0, 50, 200, 400, 1000]
-    assert all(cell[1:] == (0.05, True, True) for cell in goal)
-    assert len(per_cell) == 40 and len(jobs) == len(set(jobs))
-    assert all(per_cell[cell] == (4 if bench.is_goal(cell) else 2) for cell in per_cell)
-    focused = bench.focused(jobs)
-    assert sorted(focused) == sorted(jobs)
-    assert focused[0] == (1000, 0.05, True, True, 2)  # the aggressive operator at the longest round trip first
-    one_each = [(rtt, 0.05, True, True, 0) for rtt in bench.ROUND_TRIPS_MS]
-    assert sorted(bench.focused(bench.jobs(1, 0, 0))) == sorted(one_each)  # nothing run that was not asked for
+def is_goal(labels: dict) -> bool:
+    return labels["loss"] == "5 %" and labels["tank"] == "on" and labels["governor"] == "on"
 
 
-@pytest.mark.parametrize("tank", [True, False])
-@pytest.mark.parametrize("governor", [True, False])
-def test_every_cells_composition_is_valid(bench, tank, governor):
-    from hapticop.composition.layers import resolve
-    from hapticop.composition.yamlsource import Source, read_file
+def test_the_goal_cells_get_200_operators_the_others_3_and_every_cell_comes_before_the_next_seed(loaded):
+    every = runs(loaded.experiment)
+    per_cell = Counter(r.cell.id for r in every)
+    labels = {r.cell.id: r.cell.labels for r in every}
+    goal = [c for c in per_cell if is_goal(labels[c])]
+    assert sorted(int(labels[c]["rtt_ms"]) for c in goal) == [0, 50, 200, 400, 1000]
+    assert len(per_cell) == 40 and len(every) == len({r.id for r in every}) == 5 * 200 + 35 * 3
+    assert all(per_cell[c] == (200 if c in goal else 3) for c in per_cell)
+    # a study cut short has covered the cells evenly: every cell's operator i before any cell's i + 1
+    seeds = [r.seed for r in every]
+    assert seeds == sorted(seeds) and {r.cell.id for r in every[:40]} == set(per_cell)
+    assert {r.cell.id for r in every if r.seed >= 3} == set(goal)
+    # operator i is profile i mod 3 with variation i; the links' seeds follow the operator
+    run = next(r for r in every if r.seed == 7)
+    sets = dict(run.sets)
+    assert sets["activities.operator.params.variation"] == 7
+    assert sets["activities.operator.params.variant"] == "nominal"
+    assert sets["activities.uplink.params.link.seed"] == 1007
+    assert sets["activities.downlink.params.link.seed"] == 2007
+
+
+@pytest.mark.parametrize("tank", ["on", "off"])
+@pytest.mark.parametrize("governor", ["on", "off"])
+def test_every_cells_composition_is_valid(loaded, tank, governor):
+    from hapticop.experiment.runner import compose, job
+    from hapticop.experiment.study import composition_of
     from hapticop.validation import validate_source
-    from hapticop.validation.patches import apply_patch
 
-    source = read_file(ROOT / "systems" / "teleop_sim.yaml")
-    tree = apply_patch(resolve(source).tree, bench.cell_patch(400, 0.05, tank, governor, seed=7))
-    validated = validate_source(Source("teleop_sim.yaml", tree, source.text), state_limit=300)
+    wanted = {"rtt_ms": "400", "loss": "5 %", "tank": tank, "governor": governor}
+    run = next(r for r in runs(loaded.experiment) if r.cell.labels == wanted and r.seed == 2)
+    e = loaded.experiment
+    source, digest = compose(job(composition_of(loaded, run), run.patches, run.sets, run.seed, e.clock,
+                                 e.duration_s, e.metrics))
+    validated = validate_source(source, state_limit=300)
     assert validated.report.ok, [d.to_text() for d in validated.report.errors]
     activities = validated.graph.loaded.activities
-    assert ("tank" in activities) is tank and ("governor" in activities) is governor
+    assert ("tank" in activities) is (tank == "on") and ("governor" in activities) is (governor == "on")
     assert "pinger" in activities  # every cell measures its round trip
-    link = activities["uplink"].params.link
-    assert link.delay_s == pytest.approx(0.2) and link.jitter_s == pytest.approx(0.02) and link.loss == 0.05
+    for name, seed in (("uplink", 1002), ("downlink", 2002)):
+        link = activities[name].params.link
+        assert link.delay_s == pytest.approx(0.2) and link.jitter_s == pytest.approx(0.02) and link.loss == 0.05
+        assert link.seed == seed
+    assert activities["predictor"].params.prediction.forward_delay_s == pytest.approx(0.2)
+    haptic = activities["haptic"].params
+    assert (haptic.governor is None) is (governor == "off")
+    if governor == "off":  # M1 with its own parameters, not the hallway's tuning for the governor
+        assert haptic.force_model == type(haptic.force_model)()
+    if tank == "on":
+        assert activities["tank"].params.tank.min_j == TANK_FLOOR_J  # the floor the summary judges empty by
 
 
-def test_a_tank_is_empty_at_its_floor(bench):
-    params = EnergyTankParams(initial_j=0.4, max_j=0.4, min_j=0.05)
-    assert EnergyTankParams().initial_j == EnergyTankParams().max_j == 0.4  # full at the start
-    assert bench.tank_empty(0.05 + 3e-7, params) is True
-    assert bench.tank_empty(0.0505, params) is True
-    assert bench.tank_empty(0.06, params) is False
-    assert bench.tank_empty(None, params) is None and bench.tank_empty(0.1, None) is None
+def test_a_tank_is_empty_at_its_floor():
+    assert EMPTY_J == 1e-3
+    assert tank_empty(0.05 + 3e-7, 0.05) is True
+    assert tank_empty(0.0505, 0.05) is True
+    assert tank_empty(0.06, 0.05) is False
+    assert tank_empty(None, 0.05) is None and tank_empty(0.1, None) is None
+    assert tank_empty(0.0) is True and tank_empty(0.002) is False  # systems/teleop_sim.yaml's floor, 0 J
 
 
-def test_a_sweep_resumes_and_summarises_only_the_runs_of_its_setup(bench, tmp_path):
-    setup = bench.setup()
-    assert setup.startswith(bench.SETUP_TAG + ":")
-
-    def run(rtt, operator, *, lowest=0.2, empty=False, of=setup):
-        return {"rtt_ms": rtt, "loss": 0.05, "tank": True, "governor": True, "operator": operator,
-                "profile": "nominal", "hallway": "H1", "completion_time_s": 12.0, "collisions": 0, "crash": False,
-                "e_stop_m": 0.02, "t_norm": 1.05, "oscillation_index_mps": 0.08,
-                "sustained_oscillation": False, "tank_level_min_j": lowest, "tank_empty": empty,
-                "round_trip_max_s": rtt / 1000 + 0.001, "setup": of}
-
-    path = tmp_path / "runs.jsonl"
-    runs = [run(1000, 0), run(1000, 1, lowest=0.0, empty=True), run(400, 0), run(400, 1, of="tank-0.1J:0")]
-    path.write_text("".join(json.dumps(r) + "\n" for r in runs) + json.dumps({"rtt_ms": 0}) + "\n")
-    kept = bench.records(path, setup)
-    assert [(r["rtt_ms"], r["operator"]) for r in kept] == [(1000, 0), (1000, 1), (400, 0)]
-    table = bench.summarise(path)
-    row = next(line for line in table.splitlines() if "| 1000 |" in line).split(" | ")
-    assert row[4] == "2" and row[-2] == "1 of 2" and row[-1] == "1001 |"
-    assert row[-3] == "0.000"
-    row = next(line for line in table.splitlines() if "| 400 |" in line).split(" | ")
-    assert row[4] == "1"  # the other setup's run is not counted
+def delay_row(rtt, seed, *, loss="5 %", tank="on", governor="on", lowest=0.2, empty=False, status="done"):
+    metrics = {"n_collisions": 0, "crash": False, "e_stop_m": 0.02, "t_norm": 1.05, "oscillation_index_mps": 0.08,
+               "sustained_oscillation": False, "tank_level_min_j": lowest, "tank_empty": empty,
+               "round_trip_max_s": int(rtt) / 1000 + 0.001}
+    labels = {"rtt_ms": rtt, "loss": loss, "tank": tank, "governor": governor}
+    return row(f"{rtt}{loss}{tank}{governor}-s{seed}", "cell", labels, seed, "test",
+               {"status": status, "metrics": metrics if status == "done" else {}})
 
 
-def test_the_readme_table_holds_the_goal_cells_only(bench, tmp_path):
+def test_the_table_counts_the_finished_runs_of_each_cell():
+    rows = [delay_row("1000", 0), delay_row("1000", 1, lowest=0.0, empty=True), delay_row("400", 0),
+            delay_row("400", 1, status="failed")]
+    fresh = delay_row("200", 0, lowest=0.0005)  # a run of `experiment run`: no tank_empty of its own
+    del fresh["metric.tank_empty"]
+    table = delay(rows + [fresh])
+    found = next(line for line in table.splitlines() if "| 1000 |" in line).split(" | ")
+    assert found[4] == "2" and found[-2] == "1 of 2" and found[-1] == "1001 |"
+    assert found[-3] == "0.000"
+    found = next(line for line in table.splitlines() if "| 400 |" in line).split(" | ")
+    assert found[4] == "1"  # the failed run is not counted
+    found = next(line for line in table.splitlines() if "| 200 |" in line).split(" | ")
+    assert found[-2] == "1 of 1"  # judged empty from its lowest level against the floor
+
+
+def test_the_readme_table_holds_the_goal_cells_only():
     """Governor and tank on, 5 % loss: the cells the goals judge; the others stay in the full table."""
-    base = {"operator": 0, "profile": "cautious", "hallway": "H1", "completion_time_s": 20.0, "collisions": 0,
-            "crash": False, "e_stop_m": 0.02, "t_norm": 1.05,
-            "oscillation_index_mps": 0.08, "sustained_oscillation": False, "tank_level_min_j": 0.2,
-            "tank_empty": False, "round_trip_max_s": 0.2, "setup": bench.setup()}
-    runs = [{**base, "rtt_ms": 200, "loss": 0.05, "tank": True, "governor": True},
-            {**base, "rtt_ms": 200, "loss": 0.0, "tank": True, "governor": True},
-            {**base, "rtt_ms": 200, "loss": 0.05, "tank": False, "governor": True, "tank_level_min_j": None,
-             "tank_empty": None},
-            {**base, "rtt_ms": 200, "loss": 0.05, "tank": True, "governor": False}]
-    path = tmp_path / "runs.jsonl"
-    path.write_text("".join(json.dumps(r) + "\n" for r in runs))
-    rows = [line for line in bench.summarise(path, goal_only=True).splitlines() if line.startswith("| o")]
-    assert rows == [next(line for line in bench.summarise(path).splitlines() if line.startswith("| on | on | 5 %"))]
-    assert len([line for line in bench.summarise(path).splitlines() if line.startswith("| o")]) == 4
+    rows = [delay_row("200", 0), delay_row("200", 0, loss="0 %"),
+            delay_row("200", 0, tank="off", lowest=None, empty=None), delay_row("200", 0, governor="off")]
+    full = [line for line in delay(rows).splitlines() if line.startswith("| o")]
+    assert [line for line in delay_goal(rows).splitlines() if line.startswith("| o")] == [
+        next(line for line in full if line.startswith("| on | on | 5 %"))]
+    assert len(full) == 4
 
 
-def test_the_reference_time_is_the_worlds_own(bench):
+@pytest.fixture(scope="module")
+def convert():
+    spec = importlib.util.spec_from_file_location("convert_records", ROOT / "bench" / "convert_records.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_reference_time_is_the_worlds_own(convert):
     """T_ref as the hallway runs' worlds computed it (their metrics.json, kept in the sweep's records), to the
-    bit: both experiments judge completion time by one definition."""
+    bit: the converted delay records are judged by the one definition both experiments use."""
     sweep = ROOT / "bench" / "results" / "hallway-sweep.jsonl"
-    runs = [r for r in map(json.loads, sweep.read_text().splitlines()) if r["model"] == "braking_field+governor"]
-    seen = {(r["profile"], r["variation"], r["hallway"]): r["metrics"]["t_ref_s"] for r in runs}
+    records = [r for r in map(json.loads, sweep.read_text().splitlines()) if r["model"] == "braking_field+governor"]
+    seen = {(r["profile"], r["variation"], r["hallway"]): r["metrics"]["t_ref_s"] for r in records
+            if r["hallway"] in ("H1", "H4", "H6")}  # the hallways whose robot starts facing the end wall
     assert len(seen) >= 30
-    for (profile, variation, hallway), t_ref in list(seen.items())[:60]:
-        assert bench.reference_time_s(profile, variation, hallway) == t_ref
+    for (profile, variation, hallway), t_ref in list(seen.items())[::7]:
+        assert convert.reference_time_s(profile, variation, hallway) == t_ref
     record = {"profile": "nominal", "operator": 4, "hallway": "H1", "completion_time_s": 12.0, "t_norm": 9.9}
-    assert bench.judged(record)["t_norm"] == 12.0 / bench.reference_time_s("nominal", 4, "H1")
-    assert bench.judged({**record, "completion_time_s": None})["t_norm"] is None
+    assert convert.judged(record)["t_norm"] == 12.0 / convert.reference_time_s("nominal", 4, "H1")
+    assert convert.judged({**record, "completion_time_s": None})["t_norm"] is None

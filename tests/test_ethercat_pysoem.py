@@ -26,6 +26,9 @@ from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES, Com1, new_rx_im
 NAMES = ["ek1100", "ek1122_front", "wheel_1", "wheel_2", "ek1122_rear", "wheel_3", "wheel_4"]
 PRODUCTS = [EK1100, EK1122, SWMC, SWMC, EK1122, SWMC, SWMC]
 WHEELS = [2, 3, 5, 6]
+# The emulator is a Python process sharing the cores: on a busy machine its answers (a frame, a
+# CoE mailbox reply) can take far longer than a wire's, so the master waits generously here.
+TIMEOUTS = dict(receive_timeout_us=20_000, frame_timeout_us=10_000, mailbox_timeout_us=5_000_000)
 
 
 def expected(products=PRODUCTS, names=NAMES):
@@ -52,7 +55,7 @@ def box():
 
 @pytest.fixture
 def master(box):
-    m = SoemMaster(box.interface, expected(), receive_timeout_us=20_000)
+    m = SoemMaster(box.interface, expected(), **TIMEOUTS)
     m.open()
     try:
         yield m
@@ -72,7 +75,7 @@ def test_bring_up_reaches_op_with_the_expected_slaves(box, master):
 
 
 def test_a_wrong_slave_count_is_refused_by_name(box):
-    m = SoemMaster(box.interface, expected(PRODUCTS[:6], NAMES[:6]), receive_timeout_us=20_000)
+    m = SoemMaster(box.interface, expected(PRODUCTS[:6], NAMES[:6]), **TIMEOUTS)
     m.open()
     try:
         with pytest.raises(BringUpError, match=r"found 7 slaves on 'hapticop-ecat0', expected 6"):
@@ -84,7 +87,7 @@ def test_a_wrong_slave_count_is_refused_by_name(box):
 def test_a_wrong_product_code_is_refused_by_position_and_code(box):
     products = list(PRODUCTS)
     products[5] = 0x01701001  # the older SmartWheel2 prototype
-    m = SoemMaster(box.interface, expected(products), receive_timeout_us=20_000)
+    m = SoemMaster(box.interface, expected(products), **TIMEOUTS)
     m.open()
     try:
         with pytest.raises(BringUpError, match=r"slave 5 is SWMC with product code 0x01705011; "
@@ -96,7 +99,7 @@ def test_a_wrong_product_code_is_refused_by_position_and_code(box):
 
 def test_an_empty_wire_and_a_missing_interface_are_clear_errors():
     with Sandbox(emulator=False) as empty:
-        m = SoemMaster(empty.interface, expected(), receive_timeout_us=20_000)
+        m = SoemMaster(empty.interface, expected(), **TIMEOUTS)
         m.open()
         try:
             with pytest.raises(BringUpError, match="no EtherCAT slave answers on 'hapticop-ecat0'"):
@@ -198,7 +201,7 @@ def test_close_takes_every_slave_back_to_init_and_the_sandbox_leaves_nothing(box
     home = os.readlink("/proc/thread-self/ns/net")
     with Sandbox(interface="hapticop-ecat7", peer="hapticop-esc7") as inner:
         assert os.readlink("/proc/thread-self/ns/net") != home
-        m = SoemMaster(inner.interface, expected(), receive_timeout_us=20_000)
+        m = SoemMaster(inner.interface, expected(), **TIMEOUTS)
         m.open()
         m.bring_up()
         m.close()
@@ -255,7 +258,7 @@ def test_bring_up_maps_every_entry_when_pdo_assignment_replies_are_lost(box):
     the mapping (an input 4 bytes short) unless the slave repeats it."""
     for wheel in WHEELS:
         box.fault("lose_mailbox_reply", slave=wheel, frames=6)
-    m = SoemMaster(box.interface, expected(), receive_timeout_us=20_000)
+    m = SoemMaster(box.interface, expected(), **TIMEOUTS)
     m.open()
     try:
         m.bring_up()
@@ -280,7 +283,7 @@ def test_config_dc_finds_the_wheels_clocks_and_dc_sync_starts_sync0(master):
 
 
 def test_the_bring_up_runs_sync0_at_the_cycle_and_the_dc_frame_keeps_the_working_counter(box):
-    m = SoemMaster(box.interface, expected(), receive_timeout_us=20_000, cycle_ns=2_000_000)
+    m = SoemMaster(box.interface, expected(), **TIMEOUTS, cycle_ns=2_000_000)
     m.open()
     try:
         m.bring_up()
@@ -299,7 +302,7 @@ def test_the_bring_up_runs_sync0_at_the_cycle_and_the_dc_frame_keeps_the_working
 def test_without_sync0_the_wheels_refuse_safe_op_with_0x0030(box):
     specs = [ExpectedSlave(n, p, RXPDO_BYTES, TXPDO_BYTES) if p == SWMC else ExpectedSlave(n, p)
              for n, p in zip(NAMES, PRODUCTS)]
-    m = SoemMaster(box.interface, specs, receive_timeout_us=20_000)
+    m = SoemMaster(box.interface, specs, **TIMEOUTS)
     m.open()
     try:
         with pytest.raises(BringUpError, match=r"wheel_1 PRE-OP\+ERR \(AL code 0x0030 Invalid DC SYNC config"):
@@ -311,7 +314,7 @@ def test_without_sync0_the_wheels_refuse_safe_op_with_0x0030(box):
 def test_a_pdo_assignment_other_than_the_drivers_fails_bring_up_in_one_message(box):
     specs = [ExpectedSlave(n, p, RXPDO_BYTES, 172, sync0=True) if p == SWMC else ExpectedSlave(n, p)
              for n, p in zip(NAMES, PRODUCTS)]  # a KELO drive's 172-byte sensors
-    m = SoemMaster(box.interface, specs, receive_timeout_us=20_000)
+    m = SoemMaster(box.interface, specs, **TIMEOUTS)
     m.open()
     try:
         with pytest.raises(BringUpError, match=r"^slave wheel_1 \(SWMC\) assigns over CoE outputs 0x1600 \(9 entries, "

@@ -77,6 +77,27 @@ def test_validate_refuses_a_bad_factor_with_file_line_and_field(tmp_path, factor
     assert cli.returncode == 1 and f"{path}:{line}:" in cli.stdout and "Traceback" not in cli.stdout + cli.stderr
 
 
+KP = "{path: activities.spring.params.kp_n_per_m, name: kp, values: [100.0, 200.0]}"
+
+
+@pytest.mark.parametrize("tail, line, field", [
+    (f"factors:\n  - {KP}\nlatin_hypercube:\n  n: 3\n  bounds:\n    activities.spring.params.mode_x: [0, 1]\n",
+     9, "latin_hypercube.bounds.activities.spring.params.mode_x"),
+    (f"factors:\n  - {KP}\nlatin_hypercube:\n  n: 3\n  bounds:\n    activities.spring.params.kp_n_per_m: [1, 9000]\n",
+     9, "latin_hypercube.bounds.activities.spring.params.kp_n_per_m"),
+    (f"factors:\n  - {KP}\ncell_patches:\n  - where: {{kp: '200.0'}}\n"
+     "    patch: {activities: {spring: {params: {mode: explode}}}}\n", 8, "cell_patches.0.patch"),
+    (f"factors:\n  - {KP}\npaths: hallway\n", 6, "paths"),
+    ("factors:\n  - {path: activities.nothing_here.params.kp, values: [1.0]}\n", 5, "factors.0.values.0"),
+])
+def test_validate_refuses_a_bad_bound_cell_patch_or_paths_with_file_line_and_field(tmp_path, tail, line, field):
+    path = write(tmp_path, "version: 1\nname: bad\ncomposition: COMPOSITION\n" + tail)
+    report = load(path).report
+    assert not report.ok
+    found = report.errors[0]
+    assert (found.file, found.line, found.dotted_path) == (str(path), line, field), found.to_text()
+
+
 def test_the_shipped_experiment_files_validate():
     for path in [STUDY, HERE / "tiny.yaml"]:
         assert load(path).report.ok, [d.to_text() for d in load(path).report.errors]
@@ -100,17 +121,62 @@ def _parts(out: Path) -> int:
     return len(list((out / "parts").glob("*.parquet"))) if (out / "parts").exists() else 0
 
 
-def test_a_study_killed_halfway_resumes_without_repeating_a_run(tmp_path):
+def _parent(pid: int) -> int:
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return 0
+
+
+def _runners(ancestor: int) -> list[int]:
+    """The experiment runs (`python -m hapticop.experiment.runner`) started by `ancestor` or its descendants."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if b"hapticop.experiment.runner" not in (entry / "cmdline").read_bytes():
+                continue
+        except OSError:
+            continue
+        pid = up = int(entry.name)
+        while up > 1:
+            up = _parent(up)
+            if up == ancestor:
+                found.append(pid)
+                break
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def _wait_gone(pids: list[int], bound_s: float = 60.0) -> list[int]:
+    deadline = time.monotonic() + bound_s
+    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return [p for p in pids if _alive(p)]
+
+
+def test_a_study_killed_halfway_resumes_without_repeating_a_run_and_leaves_no_run_behind(tmp_path):
     out = tmp_path / "out"
     command = HAPTICOP + ["experiment", "run", str(STUDY), "--workers", "1", "--out", str(out)]
     child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 300
-        while _parts(out) < 2 and time.monotonic() < deadline and child.poll() is None:
+        while not (_parts(out) >= 2 and _runners(child.pid)) and time.monotonic() < deadline \
+                and child.poll() is None:
             time.sleep(0.05)
+        in_flight = _runners(child.pid)
     finally:
-        os.killpg(child.pid, signal.SIGKILL)  # the study and the run in flight, as a crash would
+        os.killpg(child.pid, signal.SIGKILL)  # the study, as a crash would (its runs are in groups of their own)
         child.wait()
+    assert in_flight, "no run was in flight at the kill"
+    assert not _wait_gone(in_flight), "a run outlived the study that started it"
     first = read(out).column("run_id").to_pylist()
     assert 2 <= len(first) < 6, "the kill came too late to test a resume"
     again = subprocess.run(command, capture_output=True, text=True, timeout=600)
@@ -119,6 +185,69 @@ def test_a_study_killed_halfway_resumes_without_repeating_a_run(tmp_path):
     assert len(ids) == len(set(ids)) == 6, "a run was repeated or lost"
     assert f"{len(first)} from before" in again.stderr
     assert set(first) <= set(ids)
+
+
+HANGING = ("version: 1\nname: stop\ncomposition: COMPOSITION\ntime_limit_s: LIMIT\n"
+           "factors:\n  - {path: activities.spring.params.mode, values: [ok, hang]}\n"
+           "  - {path: activities.spring.params.kp_n_per_m, values: [100.0, 200.0]}\n")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL], ids=["ctrl-c", "term", "crash"])
+def test_ctrl_c_stops_the_study_and_its_runs_at_once_and_the_same_command_resumes(tmp_path, signum):
+    """Two runs finish, the third hangs (for the 600 s of its time limit): Ctrl+C (or `kill`) stops the
+    study and kills that run now, records nothing for it, and says how to resume; killed outright (a crash),
+    the study cannot stop its run, which stops itself once its study is gone."""
+    path = write(tmp_path, HANGING.replace("LIMIT", "600"))
+    out = tmp_path / "out"
+    command = HAPTICOP + ["experiment", "run", str(path), "--workers", "1", "--out", str(out)]
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not (_parts(out) >= 2 and _runners(child.pid)) and time.monotonic() < deadline \
+                and child.poll() is None:
+            time.sleep(0.05)
+        in_flight = _runners(child.pid)
+        assert _parts(out) == 2 and in_flight, "the hanging run was not reached"
+        child.send_signal(signum)
+        _, err = child.communicate(timeout=120)  # the hanging run has 600 s left: only stopping it ends this
+    finally:
+        if child.poll() is None:
+            os.killpg(child.pid, signal.SIGKILL)
+            child.wait()
+    if signum == signal.SIGKILL:
+        assert child.returncode == -signal.SIGKILL
+    else:
+        assert child.returncode == 130 and "interrupted" in err and "Traceback" not in err, err
+    assert not _wait_gone(in_flight), "the run in flight outlived its study"
+    assert _parts(out) == 2 and set(read(out).column("status").to_pylist()) == {"done"}
+    path.write_text(HANGING.replace("LIMIT", "15").replace("COMPOSITION", str(HERE / "probe.yaml")))
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and "2 from before" in again.stderr, again.stderr
+    rows = read(out).to_pylist()
+    assert len(rows) == len({r["run_id"] for r in rows}) == 4
+    assert sorted(r["status"] for r in rows) == ["done", "done", "failed", "failed"]
+
+
+def test_failed_runs_are_kept_on_resume_and_run_again_with_retry_failed(tmp_path):
+    """A failure is a result: resuming keeps it. `--retry-failed` runs the failed runs again (here they failed
+    for a time limit too short, which is not part of what the experiment means); each run keeps one row."""
+    text = ("version: 1\nname: retry\ncomposition: COMPOSITION\ntime_limit_s: LIMIT\n"
+            "factors:\n  - {path: activities.spring.params.kp_n_per_m, values: [100.0, 200.0]}\n")
+    path = write(tmp_path, text.replace("LIMIT", "0.01"))
+    out = tmp_path / "out"
+    assert run_study(load(path), out) == (2, 2)
+    assert {r["message"].split(":")[0] for r in read(out).to_pylist()} == {"time limit"}
+    path.write_text(text.replace("LIMIT", "120").replace("COMPOSITION", str(HERE / "probe.yaml")))
+    assert run_study(load(path), out) == (0, 0)  # kept as they were
+    assert set(read(out).column("status").to_pylist()) == {"failed"}
+    cli = subprocess.run(HAPTICOP + ["experiment", "run", str(path), "--out", str(out), "--retry-failed"],
+                         capture_output=True, text=True, timeout=600)
+    assert cli.returncode == 0 and "2 runs now, 0 failed" in cli.stdout, cli.stderr
+    rows = read(out).to_pylist()
+    assert len(rows) == 2 and {r["status"] for r in rows} == {"done"} and _parts(out) == 4
+    assert all(r["metric.force_peak_n"] > 0 for r in rows)
+    assert run_study(load(path), out, retry_failed=True) == (0, 0)  # nothing failed is left to retry
 
 
 def test_a_table_of_another_experiment_or_version_is_refused(tmp_path):
@@ -153,30 +282,81 @@ def test_the_report_judges_each_cell_against_the_targets_and_draws_them(tmp_path
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "plots/force_peak_n.png" in page
 
 
-def test_the_same_study_on_a_local_ray_cluster_gives_the_same_metrics_bit_for_bit(tmp_path):
+@pytest.fixture(scope="module")
+def local_ray():
+    """A Ray cluster of two CPUs on this machine, started as the tests' driver."""
     try:
         import ray
     except ImportError:
         if os.environ.get("CI"):
             pytest.fail("ray is missing under CI: install hapticop[cluster]")
         pytest.skip("ray is not installed (hapticop[cluster])")
-    loaded = load(STUDY)
-    run_study(loaded, tmp_path / "pool", workers=2)
     short = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # Ray's socket paths must stay under 108 bytes
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, _temp_dir=short)
     try:
-        run_study(loaded, tmp_path / "ray-out", ray="auto")
+        yield ray
     finally:
         ray.shutdown()
         shutil.rmtree(short, ignore_errors=True)
 
+
+def test_the_same_study_on_a_local_ray_cluster_gives_the_same_metrics_bit_for_bit(tmp_path, local_ray):
+    loaded = load(STUDY)
+    run_study(loaded, tmp_path / "pool", workers=2)
+    run_study(loaded, tmp_path / "ray-out", ray="auto")
+
     def metrics(folder: str) -> dict:
-        kept = ("status", "composition_hash")
+        kept = ("status", "composition_hash", "tries")
         return {r["run_id"]: {k: v for k, v in r.items() if k.startswith("metric.") or k in kept}
                 for r in read(tmp_path / folder).to_pylist()}
 
     pool, cluster = metrics("pool"), metrics("ray-out")
     assert len(pool) == 6 and pool == cluster
+
+
+def _kill_the_first_ray_worker_running_a_run(killed: list) -> None:
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        for runner in _runners(os.getpid()):
+            worker = _parent(runner)
+            try:
+                is_worker = Path(f"/proc/{worker}/cmdline").read_bytes().startswith(b"ray::")
+            except OSError:
+                continue
+            if is_worker:
+                os.kill(worker, signal.SIGKILL)
+                killed.append(runner)
+                return
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("retries", [1, 0])
+def test_a_run_lost_with_its_ray_worker_is_tried_again_and_reported(tmp_path, local_ray, capsys, retries):
+    """The worker running the run is killed (as a node lost): the run is submitted again and its row says
+    it took two tries and what was lost; with no retries left it is a failed row, and the study goes on."""
+    import threading
+
+    path = write(tmp_path, f"version: 1\nname: lost\ncomposition: COMPOSITION\nretries: {retries}\n"
+                 "factors:\n  - {path: activities.spring.params.kp_n_per_m, values: [100.0]}\n")
+    killed: list[int] = []
+    killer = threading.Thread(target=_kill_the_first_ray_worker_running_a_run, args=(killed,))
+    killer.start()
+    try:
+        done, failed = run_study(load(path), tmp_path / "out", ray="auto")
+    finally:
+        killer.join()
+    assert killed, "no run was seen on a Ray worker"
+    assert not _wait_gone(killed), "the run outlived its lost worker"
+    [row] = read(tmp_path / "out").to_pylist()
+    said = capsys.readouterr().err
+    if retries:
+        assert (done, failed) == (1, 0) and row["status"] == "done" and row["tries"] == 2
+        assert row["metric.force_peak_n"] > 0 and "lost before: " in row["message"]
+        assert "lost on the cluster" in said and "trying again (2 of 2)" in said
+    else:
+        assert (done, failed) == (1, 1) and row["status"] == "failed" and row["tries"] == 1
+        assert row["message"].startswith("lost on the cluster 1 times: ")
+        assert "recorded as failed" in said
 
 
 def test_a_marker_quoted_inside_a_line_is_text_not_a_region():

@@ -3,6 +3,7 @@ give the tables the README and docs quote, and those tables are the generated on
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -78,3 +79,9 @@ def test_the_worked_example_validates_and_a_reduced_version_of_it_runs(tmp_path)
     assert sorted(table.column("factor.force_model").to_pylist()) == ["M1", "M1", "thesis", "thesis"]
     page = write_report(experiment, table, tmp_path / "report").read_text()
     assert "mean peak force <= 8 N" in page and page.count("| nominal | 1 | 0 |") == 4
+    for hallway in ("H1", "H3"):  # the paths per scene: both force models' runs drawn in each hallway
+        picture = tmp_path / "report" / "plots" / f"paths-{hallway}.png"
+        assert picture.read_bytes()[:4] == b"\x89PNG" and f"(plots/paths-{hallway}.png)" in page
+    for run in table.to_pylist():
+        xs, ys = json.loads(run["path"])
+        assert len(xs) == len(ys) > 20 and xs[-1] > xs[0] + 0.5  # three seconds down the hallway

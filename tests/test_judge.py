@@ -69,13 +69,16 @@ def pushed(tmp_path_factory):
         "no_collision",
         {"time_within": {"max_s": 3.1}},
         {"time_within": {"max_s": 2.9}},
+        {"metric": {"name": "path_length_m", "min": 1.4, "max": 1.6}},
+        {"metric": {"name": "path_length_m", "max": 1.0}},
     ]
     return _run(tmp_path_factory.mktemp("pushed"), PUSH, targets, travel_m=1.5)
 
 
 @pytest.mark.parametrize("kind, met, missed", [("reach", 0, 1), ("stop_before", 2, 3),
                                                ("stop_before (ending near)", 4, 5), ("keep_clearance", 6, 7),
-                                               ("push_body", 8, 9), ("time_within", 11, 12)])
+                                               ("push_body", 8, 9), ("time_within", 11, 12),
+                                               ("metric", 13, 14)])
 def test_each_target_is_met_by_the_run_that_meets_it_and_missed_otherwise(pushed, kind, met, missed):
     rows = pushed["targets"]
     assert rows[met]["ok"] is True, rows[met]
@@ -168,3 +171,65 @@ def test_a_malformed_target_is_located(tmp_path):
     report = validate_path(_app(tmp_path, "        - reach: {region: {box: {min_m: [1, 1], max_m: [0, 0]}}}")).report
     assert not report.ok
     assert any(e.line == 17 for e in report.errors), [e.to_text() for e in report.errors]
+
+
+def test_a_metric_bound_reads_its_metric_and_says_when_it_was_not_measured():
+    from hapticop.sim.judge import MetricBound
+
+    side = MetricBound(name="side_clearance_min_m", min=-0.10, relative_to="dist1_m")
+    assert side.verdict({"side_clearance_min_m": 0.31}, {"dist1_m": 0.4}) == (0.31, True, False)
+    assert side.verdict({"side_clearance_min_m": 0.29}, {"dist1_m": 0.4})[1] is False
+    assert side.text({"dist1_m": 0.4}) == ">= 0.30"
+    assert MetricBound(name="crash", equals=False).verdict({"crash": True})[1] is False
+    assert MetricBound(name="x", max=1.0).verdict({"x": float("nan")}) == (pytest.approx(float("nan"), nan_ok=True),
+                                                                            None, False)
+    cautious = MetricBound(name="e_stop_m", min=-0.05, max=0.25, operators=("cautious",))
+    assert cautious.applies("cautious") and not cautious.applies("nominal")
+    assert cautious.text() == "-0.05 to +0.25"
+    with pytest.raises(ValidationError, match="needs min, max or equals"):
+        MetricBound(name="x")
+    with pytest.raises(ValidationError, match="equals goes alone"):
+        MetricBound(name="x", equals=0, max=1.0)
+
+
+ROOM_WITH_TASK = """walls:
+  - {name: north, size_m: [6.0, 0.1, 1.0], position_m: [3.0, 2.05]}
+  - {name: end, size_m: [0.1, 4.0, 1.0], position_m: [6.05, 0.0]}
+hallway: {name: room, end_wall: [%s], middle_x_m: 3.0}
+targets: %s
+"""
+
+
+def test_a_scene_names_a_file_of_targets_and_what_is_wrong_is_located(tmp_path):
+    from hapticop.sim import scene_files
+
+    (tmp_path / "goals.yaml").write_text("doc: mine\ntargets:\n  - metric: {name: collisions, equals: 0}\n")
+    (tmp_path / "room.yaml").write_text(ROOM_WITH_TASK % ("end", "goals.yaml"))
+    loaded, found = scene_files.load("room.yaml", tmp_path)
+    assert found == [] and loaded.scene.targets[0].metric.name == "collisions"
+    shipped, found = scene_files.load("H2")
+    assert found == [] and len(shipped.scene.targets) == 21  # §6's: hapticop/sim/scenes/targets/hallway.yaml
+
+    (tmp_path / "goals.yaml").write_text("targets:\n  - metric: {name: collisions, equal: 0}\n")
+    _, (error,) = scene_files.load("room.yaml", tmp_path)
+    assert error.file.endswith("goals.yaml") and error.line == 2 and "equal" in error.to_text()
+
+    (tmp_path / "room.yaml").write_text(ROOM_WITH_TASK % ("end", "missing.yaml"))
+    _, (error,) = scene_files.load("room.yaml", tmp_path)
+    assert error.rule == "scene-targets" and error.file.endswith("room.yaml") and error.line == 5
+    assert "hallway" in error.message  # the shipped ones are named
+
+    (tmp_path / "room.yaml").write_text(ROOM_WITH_TASK % ("ending", "goals.yaml"))
+    _, (error,) = scene_files.load("room.yaml", tmp_path)
+    assert error.rule == "scene-task" and error.line == 4 and "ending" in error.message and "end" in error.expected
+
+
+def test_a_bound_relative_to_a_hallway_distance_needs_a_hallway_task(tmp_path):
+    report = validate_path(_app(tmp_path, "        - metric: {name: least_clearance_m, min: -0.1, "
+                                          "relative_to: dist1_m}")).report
+    (error,) = report.errors
+    assert error.rule == "scene-target" and "dist1_m" in error.message and error.line == 17
+    from hapticop.sim.judge import MetricBound
+
+    lone = MetricBound(name="least_clearance_m", min=-0.1, relative_to="dist1_m")
+    assert lone.verdict({"least_clearance_m": 0.5}) == (0.5, None, False)  # no task: no verdict, no error

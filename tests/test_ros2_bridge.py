@@ -116,7 +116,7 @@ activities:
       subscribe:
         cmd_in: {topic: /cmd_in, type: geometry_msgs/msg/Twist, qos: {reliability: best_effort, depth: 1}}
       publish:
-        cmd_out: {topic: /cmd_out, type: geometry_msgs/msg/Twist, rate_hz: 50}
+        cmd_out: {topic: /cmd_out, type: geometry_msgs/msg/Twist, rate: 50Hz}
 streams:
   cmd_in: {from: ros2.cmd_in, to: [echo.input], max_age: 200ms}
   cmd_out: {from: echo.output, to: [ros2.cmd_out], max_age: 200ms}
@@ -176,7 +176,7 @@ class Hostile:
         self.hub = router(port)
         self.harness = BlockHarness("ros2_bridge", {
             "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
-            "subscribe": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "max_age_ms": 300.0},
+            "subscribe": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "max_age": "300ms"},
                           "scan": {"topic": "/scan", "type": "sensor_msgs/msg/LaserScan", "shape": [4]}}},
             name="ros2", run_dir=tmp_path)
         self.harness.block.create()
@@ -263,13 +263,36 @@ def test_bad_samples_are_refused_counted_and_the_next_good_one_delivered(hostile
     assert h.harness.outputs.refused.value == sum(r.total for r in h.harness.block.refusals.values())
 
 
+def test_a_late_sample_arrives_as_old_as_it_is_so_a_readers_max_age_counts_its_time_in_ros2(hostile):
+    """A twist (or a scan, an odometry) sent 250 ms ago is accepted (the option's max_age is 300 ms) but stamped
+    with its source time on this host's clock: a reader's stream with `max_age: 200ms` finds it stale, so a
+    late scan is no force and a late odometry no motion, however fast the bridge took it."""
+    h = hostile
+    h.follows([0.1, 0.0, 0.2])
+    h.harness.advance(1_000_000_000)  # this host's clock well past the sample's age (stamps are not negative)
+    stamps: list[int] = []
+
+    class Stamps:  # a reader's end of the stream: the stamp each sample is published with
+        def push(self, value, stamp_ns: int, origins) -> None:
+            stamps.append(stamp_ns)
+
+    h.harness.outputs.cmd.transports.append(Stamps())
+    deadline = time.monotonic() + PATIENCE_S
+    while h.delivered[-1] != [0.5, 0.0, 0.0]:
+        assert time.monotonic() < deadline, "the late twist was never delivered"
+        h.put(h.key, h.twist.encode(np.array([0.5, 0.0, 0.0]), 0), stamp_ns=time.time_ns() - 250_000_000)
+        h.step()
+        time.sleep(0.002)
+    assert h.harness.clock.now_ns() - stamps[-1] >= 250_000_000
+
+
 def test_a_stale_command_is_published_as_a_stop(tmp_path):
     """With no valid sample on its input, a command topic carries zeros at its rate (`stale: zero`)."""
     port = _free_port()
     hub = router(port)
     harness = BlockHarness("ros2_bridge", {
         "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
-        "publish": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "rate_hz": 100}}}, name="ros2", run_dir=tmp_path)
+        "publish": {"cmd": {"topic": "/cmd_vel", "type": TWIST, "rate": "100Hz"}}}, name="ros2", run_dir=tmp_path)
     listener = transport.session([], [f"tcp/127.0.0.1:{port}"], mode="client")
     try:
         receiver = transport.Receiver(listener, names.data_key(0, "/cmd_vel", TWIST, "jazzy"), 16)
@@ -330,7 +353,7 @@ def test_a_sample_is_sent_at_the_rate_with_its_own_stamp_each_time(tmp_path):
     hub = router(port)
     harness = BlockHarness("ros2_bridge", {
         "mode": "client", "connect": [f"tcp/127.0.0.1:{port}"],
-        "publish": {"cmd": {"topic": "/cmd_vel", "type": "geometry_msgs/msg/TwistStamped", "rate_hz": 100}}},
+        "publish": {"cmd": {"topic": "/cmd_vel", "type": "geometry_msgs/msg/TwistStamped", "rate": "100Hz"}}},
         name="ros2", run_dir=tmp_path)
     listener = transport.session([], [f"tcp/127.0.0.1:{port}"], mode="client")
     try:

@@ -13,6 +13,7 @@ from pathlib import Path
 from hapticop.runtime.supervisor import ExitStatus
 from tests.runtime_helpers import run_until
 from tests.test_ros2_bridge import Client, _free_port, router
+from tests.test_ros2_streams import assert_bag_reads_back
 
 SYSTEM = Path(__file__).parent.parent / "systems" / "ros2_teleop.yaml"
 
@@ -41,11 +42,20 @@ def test_the_falcon_drives_a_ros2_robot_down_the_corridor_to_a_stop(tmp_path, mo
             return travelled["x"] > 4.0 and travelled["stopped_for"] >= 50
 
         text = SYSTEM.read_text().replace("tcp/127.0.0.1:7447", f"tcp/127.0.0.1:{port}")
+        recording = tmp_path / "teleop.mcap"
         result = run_until(tmp_path, text, stopped_near_the_end,
-                           f"the robot stopped near the corridor's end (last x {travelled['x']:.2f} m)", name="teleop")
+                           f"the robot stopped near the corridor's end (last x {travelled['x']:.2f} m)", name="teleop",
+                           record=str(recording))
         assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
         assert travelled["x"] > 4.0 and travelled["stopped_for"] >= 50  # not ended some other way
         figure(f"stopped at x = {travelled['x']:.3f} m, the end wall at 6 m")
+        # the run's ROS 2 topics, both ways, as a rosbag2 bag that rosbags reads back
+        bag = assert_bag_reads_back(recording, at_least=10)
+        assert set(bag) == {"/scan", "/odom", "/cmd_vel", "/handle/pose", "/handle/wrench"}
+        assert min(m.pose.position.z for _, m in bag["/handle/pose"]) < -0.005  # the handle pushed forward
+        assert all(len(m.ranges) == 181 for _, m in bag["/scan"])
+        assert max(m.linear.x for _, m in bag["/cmd_vel"]) > 0.1  # it drove
+        assert max(m.pose.pose.position.x for _, m in bag["/odom"]) > 4.0
     finally:
         robot.close()
         hub.close()

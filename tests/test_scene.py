@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hapticop.devices.link import published_address
+from hapticop.devices.memory_stream import MEMORY_SOCKETS
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
 from hapticop.devices.ropod.plant import RopodPlant
 from hapticop.devices.sick.client import ColaClient
@@ -17,7 +18,6 @@ from hapticop.runtime.clock import VirtualClock
 from hapticop.sim import scene_files
 from hapticop.sim.devices.tim561 import Tim561Simulator
 from hapticop.sim.engine import Engine, SceneError
-from hapticop.sim.hallway import HallwayGeometry, World
 from hapticop.sim.scene import Block3, Movable, Robot, Scene, to_mjcf
 from hapticop.sim.scene_world import SceneWorld, SceneWorldParams
 from hapticop.sim.world_share import publish_world, withdraw_world
@@ -28,22 +28,51 @@ from .runtime_helpers import standalone
 HALLWAYS = ("H1", "H2", "H3", "H4", "H5", "H6")
 
 
+SIZES = {"H1": (2.0, 10.0), "H2": (2.0, 10.0), "H3": (1.5, 8.0), "H4": (2.0, 10.0), "H5": (2.0, 10.0),
+         "H6": (2.0, 20.0)}
+"""Each hallway's width and end wall (docs/hallway-experiment.md §2); H4's pillar stands 0.25 m out of the
+right wall over x 4.8 to 5.2."""
+
+
+def _slab_ranges(origin, angles, boxes, low=0.05, high=10.0):
+    """Where each beam from `origin` first enters one of the axis-aligned `boxes` ((x0, x1, y0, y1)), by the
+    slab method: an independent check of MuJoCo's ray cast. NaN outside [low, high]."""
+    dx, dy = np.cos(angles), np.sin(angles)
+    best = np.full(len(angles), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for x0, x1, y0, y1 in boxes:
+            tx0, tx1 = (x0 - origin[0]) / dx, (x1 - origin[0]) / dx
+            ty0, ty1 = (y0 - origin[1]) / dy, (y1 - origin[1]) / dy
+            enter = np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1))
+            leave = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
+            best = np.where((enter <= leave) & (enter > 0) & (enter < best), enter, best)
+    return np.where((best >= low) & (best <= high), best, np.nan)
+
+
 @pytest.mark.parametrize("name", HALLWAYS)
-def test_each_hallway_scene_scans_and_measures_as_the_hand_written_hallway(name):
+def test_each_hallway_scene_scans_and_measures_as_its_dimensions_say(name):
     loaded, found = scene_files.load(name)
     assert found == [] and loaded is not None
     engine = Engine(loaded.xml)
-    geometry = HallwayGeometry.named(name)
-    walls = World.from_geometry(geometry)
+    width, length = SIZES[name]
+    h = 0.5 * width
+    boxes = [(0.0, length, h, h + 0.1), (0.0, length, -h - 0.1, -h), (length, length + 0.1, -h - 0.1, h + 0.1)]
+    if name == "H4":
+        boxes.append((4.8, 5.2, -1.0, -0.75))
     angles = np.asarray(ANGLES_RAD, dtype=float)
-    old, new = np.zeros(len(angles)), np.zeros(len(angles))
-    for pose in (geometry.start, (geometry.length_m - 1.5, 0.2, 0.3), (geometry.length_m / 2, -0.3, -0.5)):
-        engine.place_robot(np.array(pose))
-        engine.scan(angles, new, 0.05, 10.0)
-        walls.raycast(pose, geometry.lidar.mount, angles, old, 10.0, 0.05)
-        assert np.array_equal(np.isnan(old), np.isnan(new))
-        assert np.nanmax(np.abs(old - new)) < 1e-9
-        assert abs(engine.clearance() - walls.clearance(np.array(pose), geometry.footprint)[0]) < 1e-9
+    ranges = np.zeros(len(angles))
+    start = loaded.scene.robot.start
+    for x, y, theta in ((start[0], start[1], math.radians(start[2])), (length - 1.5, 0.2, 0.3),
+                        (length / 2 - 2.0, -0.3, -0.5)):
+        engine.place_robot(np.array([x, y, theta]))
+        engine.scan(angles, ranges, 0.05, 10.0)
+        expected = _slab_ranges((x + 0.25 * math.cos(theta), y + 0.25 * math.sin(theta)), angles + theta, boxes)
+        assert np.array_equal(np.isnan(ranges), np.isnan(expected))
+        assert np.nanmax(np.abs(ranges - expected)) < 1e-9
+        # the footprint's corners nearest the end wall and a side wall (no pillar is as near at these poses)
+        reach_x = 0.35 * abs(math.cos(theta)) + 0.30 * abs(math.sin(theta))
+        reach_y = 0.35 * abs(math.sin(theta)) + 0.30 * abs(math.cos(theta))
+        assert engine.clearance() == pytest.approx(min(length - x - reach_x, h - abs(y) - reach_y), abs=1e-9)
 
 
 def _write(tmp_path, scene_text: str, params: str = "judge: false") -> str:
@@ -182,7 +211,8 @@ def _scans(tmp_path, world, count: int = 3) -> dict[int, np.ndarray]:
     scanner.create()
     publish_world(tmp_path, "world", world)
     assert scanner.configure_resources() is True
-    client = ColaClient(*published_address(tmp_path, "lidar_sim"), backoff=(0.05, 0.1), clock_ns=clock.now_ns)
+    client = ColaClient(*published_address(tmp_path, "lidar_sim"), backoff=(0.05, 0.1), clock_ns=clock.now_ns,
+                        sockets=MEMORY_SOCKETS)  # under the virtual clock the simulator serves in memory
     pose = scanner.inputs.pose_in_hallway
     pose.value[:] = (4.0, 0.25, 0.2)
     pose.meta[0] = 1
@@ -272,3 +302,97 @@ activities:
     (error,) = validate_path(str(path)).report.errors
     assert error.rule == "unknown-block" and error.line == 10 and error.path[-1] == "block"
     assert "scene_world" in error.hint and "scene: H1" in error.hint
+
+
+DESK = """walls:
+  - {name: wall, size_m: [0.6, 0.1, 0.6], position_m: [0.0, 0.075]}
+handles:
+  - {name: tip, origin_m: [0.0, 0.0, 0.3], axes: [-y, z, -x]}
+robot: {start: [-2.0, 0.0, 0.0]}
+"""
+
+
+@pytest.mark.parametrize("change, rule, line, field", [
+    (("axes: [-y, z, -x]}\n", "axes: [-y, z, -x]}\n  - {name: tip, origin_m: [0.0, -0.2, 0.3]}\n"), "scene-handle", 5,
+     "handles.1.name"),
+    (("origin_m: [0.0, 0.0, 0.3]", "origin_m: [0.0, 0.07, 0.3]"), "scene-start-inside", 4, "handles.0.origin_m"),
+    (("axes: [-y, z, -x]", "axes: [y, z, -x]"), "model", 4, "handles.0.axes"),
+    (("axes: [-y, z, -x]", "axes: [y, y, -x]"), "model", 4, "handles.0.axes"),
+    (("axes: [-y, z, -x]", "axes: [-y, z, w]"), "model", 4, "handles.0.axes"),
+    (("name: tip", "name: Tip-1"), "model", 4, "handles.0.name"),
+])
+def test_a_wrong_handle_is_one_finding_located_in_the_scene_file(tmp_path, change, rule, line, field):
+    old, new = change
+    path = tmp_path / "desk.yaml"
+    path.write_text(DESK.replace(old, new))
+    loaded, found = scene_files.load(str(path))
+    assert loaded is None and len(found) == 1, [d.to_text() for d in found]
+    [finding] = found
+    assert (finding.line, finding.dotted_path, finding.file) == (line, field, str(path)), finding.to_text()
+    assert rule == "model" or finding.rule == rule
+
+
+def test_the_desk_with_a_handle_loads():
+    path_found = scene_files.load("desk.yaml", _desk_folder())
+    assert path_found[1] == [] and path_found[0].scene.handles[0].name == "tip"
+
+
+def _desk_folder():
+    import tempfile
+    from pathlib import Path
+
+    folder = Path(tempfile.mkdtemp())
+    (folder / "desk.yaml").write_text(DESK)
+    return folder
+
+
+def test_a_handles_contact_is_the_declared_spring_and_damper_in_the_devices_frame():
+    """The wall's face is at scene y = 0.025, the handle's sphere (5 mm) at the device's origin when the device is
+    at its origin; the device is turned (its z is the scene's -x, its x the scene's -y): pushing the device
+    along its -x moves the tip into the wall, and the wall pushes back along the device's +x."""
+    from hapticop.sim.scene import Handle
+
+    handle = Handle(name="tip", origin_m=(0.0, 0.0, 0.3), axes=("-y", "z", "-x"), stiffness_n_per_m=3000.0,
+                    damping_ns_per_m=4.0, mass_kg=0.2)
+    scene = Scene(walls=(Block3(size_m=(0.6, 0.1, 0.6), position_m=(0.0, 0.075)),), handles=(handle,),
+                  robot=Robot(start=(-2.0, 0.0, 0.0)))
+    engine = Engine(to_mjcf(scene))
+    assert engine.handles == ["tip"]
+    force = np.zeros(3)
+    for x in (0.0, -0.019, -0.021, -0.025):
+        for vx in (-0.2, 0.0, 0.05, 0.5):
+            engine.place_handle(0, np.array([x, 0.0, 0.0]), np.array([vx, 0.0, 0.0]))
+            engine.step()
+            engine.handle_force(0, force)
+            depth = -0.02 - x
+            expected = max(3000.0 * depth + 4.0 * -vx, 0.0) if depth >= 0 else 0.0
+            assert force[0] == pytest.approx(expected, abs=1e-6), (x, vx)
+            assert abs(force[1]) < 1e-9 and abs(force[2]) < 1e-9
+    # without a velocity the handle is at rest: the spring alone
+    engine.place_handle(0, np.array([-0.022, 0.0, 0.0]))
+    engine.step()
+    assert engine.handle_force(0, force)[0] == pytest.approx(6.0, abs=1e-6)
+
+
+def test_the_scene_world_has_a_handles_ports_and_ignores_a_position_not_finite(tmp_path):
+    from hapticop.sim.scene import Handle
+
+    clock = VirtualClock()
+    scene = Scene(walls=(Block3(size_m=(0.6, 0.1, 0.6), position_m=(0.0, 0.075)),),
+                  handles=(Handle(name="tip", origin_m=(0.0, 0.0, 0.3), axes=("-y", "z", "-x")),),
+                  robot=Robot(start=(-2.0, 0.0, 0.0)))
+    declared = SceneWorld.declare(SceneWorldParams(scene=scene, judge=False))
+    assert {"tip_handle_position", "tip_handle_velocity"} <= set(declared.inputs)
+    assert not declared.inputs["tip_handle_velocity"].required and "tip_handle_force" in declared.outputs
+    world = standalone(SceneWorld, "world", {"scene": scene.model_dump(), "judge": False}, tmp_path, clock)
+    world.create()
+    position, force = world.inputs.tip_handle_position, world.outputs.tip_handle_force
+    felt = []
+    for i, x in enumerate((0.0, -0.021, float("nan"), 1e6)):  # free, 1 mm in, then two samples not taken
+        clock.advance_to(clock.now_ns() + 1_000_000)
+        position.value[:] = (x, 0.0, 0.0)
+        position.meta[0] = i + 1
+        world.compute()
+        felt.append(float(force.value[0]))
+    assert felt[0] == 0.0
+    assert felt[1] == pytest.approx(2.0, abs=1e-6) and felt[2:] == pytest.approx([2.0, 2.0], abs=1e-6)

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from hapticop.sim.hallway import HallwayGeometry, World
+from hapticop.sim.hallway_task import Hallway
 from hapticop.sim.metrics import compute_metrics
 from hapticop.sim.operator import BlindOperator, OperatorProfile
 from hapticop.sim.recording import TrajectoryRecorder
@@ -21,8 +21,9 @@ def dead_zone(u):
 
 
 def run(cue, seconds=30.0, dt=1e-3):
-    g = HallwayGeometry.named("H1")
-    world = World.from_geometry(g)
+    g = Hallway.named("H1")
+    engine = g.engine()
+    end_wall_x = 10.0  # H1's
     profile = OperatorProfile.nominal()
     op = BlindOperator(profile)
     rec = TrajectoryRecorder(int(seconds / dt) + 1, meta={"hallway": g.name})
@@ -31,7 +32,7 @@ def run(cue, seconds=30.0, dt=1e-3):
     c, hit = math.inf, False
     for k in range(int(seconds / dt)):
         t = k * dt
-        gap = g.length_m - (pose[0] + 0.5 * g.footprint.length_m) - g.dist2_m
+        gap = end_wall_x - (pose[0] + 0.5 * g.footprint.length_m) - g.dist2_m
         fe[2] = cue(gap) if p[2] < 0 else 0.0
         op.step(t, fe, p, hand, velocity=v)
         force = hand + fe - KP * p - KD * v
@@ -41,7 +42,9 @@ def run(cue, seconds=30.0, dt=1e-3):
         cmd = (K1 * dead_zone(-p[2]), -K2 * dead_zone(p[0]))  # handle +x turns right (clockwise)
         pose += (cmd[0] * math.cos(pose[2]) * dt, cmd[0] * math.sin(pose[2]) * dt, cmd[1] * dt)
         if k % 5 == 0:  # every 5 ms (under 3 mm of travel) keeps the test quick
-            c, hit = world.clearance(pose, g.footprint)
+            engine.place_robot(pose)
+            c = engine.clearance()
+            hit = c <= 0.0
         rec.append(t, pose, robot_velocity=cmd, cmd=cmd, handle_position=p, handle_velocity=v,
                    force_env=fe, force_hand=hand, clearance=c)
         if hit:

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from hapticop.sim.hallway import HallwayGeometry
+from hapticop.sim.hallway_task import Hallway
 from hapticop.sim.plot import plot_run
 from hapticop.sim.recording import TrajectoryRecorder
 
@@ -26,11 +26,11 @@ def test_a_clear_error_without_matplotlib(tmp_path, monkeypatch):
         monkeypatch.setitem(sys.modules, name, None)
     run, _ = straight_run()
     with pytest.raises(RuntimeError, match=r"pip install 'hapticop\[report\]'"):
-        plot_run(run, HallwayGeometry.named("H1"), tmp_path / "run.png")
+        plot_run(run, Hallway.named("H1"), tmp_path / "run.png")
 
 
 def test_the_plot_writes_a_png(tmp_path):
-    g = HallwayGeometry.named("H4")
+    g = Hallway.named("H4")
     y = lambda t: 0.2 * np.sin(t / 3)  # noqa: E731
     run, _ = straight_run(g=g, y=y)
     rec = TrajectoryRecorder(len(run["t"]), meta={"hallway": "H4"})
@@ -49,8 +49,8 @@ def test_linear_and_angular_velocity_have_axes_of_their_own(tmp_path, monkeypatc
 
     drawn = []
     monkeypatch.setattr(Figure, "savefig", lambda self, *args, **kwargs: drawn.append(self))
-    run, _ = straight_run(g=HallwayGeometry.named("H4"), y=lambda t: 0.2 * np.sin(t / 3))
-    plot_run(run, HallwayGeometry.named("H4"), tmp_path / "run.png")
+    run, _ = straight_run(g=Hallway.named("H4"), y=lambda t: 0.2 * np.sin(t / 3))
+    plot_run(run, Hallway.named("H4"), tmp_path / "run.png")
     (figure,) = drawn
     velocity = [axis for axis in figure.axes if "[m/s]" in axis.get_ylabel() or "[rad/s]" in axis.get_ylabel()]
     assert [axis.get_ylabel() for axis in velocity] == ["linear v [m/s] (solid)", "angular omega [rad/s] (dashed)"]

@@ -1,5 +1,6 @@
 """The simulated TiM561 as an activity: it scans the world's scene from the pose the world
-streams, serves CoLa A where it says it does, and switches its faults (virtual clock, real sockets)."""
+streams, serves CoLa A where it says it does, and switches its faults (virtual clock: the in-memory
+streams its block and the LIDAR's then talk through; real time and loopback TCP in test_runtime_realtime.py)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import logging
 import numpy as np
 
 from hapticop.devices.link import published_address
+from hapticop.devices.memory_stream import MEMORY_SOCKETS
 from hapticop.devices.sick.client import ColaClient
 from hapticop.runtime.clock import VirtualClock
 from hapticop.sim import scene_files
@@ -39,7 +41,8 @@ def test_scans_follow_the_world_and_faults_switch(tmp_path):
     scanner = standalone(Tim561Simulator, "lidar_sim", {"world": "world"}, tmp_path, clock, seed=1)
     scanner.create()
     assert scanner.configure_resources() is True
-    client = ColaClient(*published_address(tmp_path, "lidar_sim"), backoff=(0.05, 0.1), clock_ns=clock.now_ns)
+    client = ColaClient(*published_address(tmp_path, "lidar_sim"), backoff=(0.05, 0.1), clock_ns=clock.now_ns,
+                        sockets=MEMORY_SOCKETS)
     pose = scanner.inputs.pose_in_hallway
     ranges = np.zeros(811)
 
@@ -60,7 +63,9 @@ def test_scans_follow_the_world_and_faults_switch(tmp_path):
 
     try:
         start = ahead(scan())  # no pose from the world yet: the robot stands at its start
-        assert abs(start - (scene.hallway.length_m - scene.robot.start[0] - scene.robot.lidar.x_m)) < 0.1
+        end = next(w for w in scene.walls if w.name == scene.hallway.end_wall[0])
+        face_x = end.position_m[0] - end.size_m[0] / 2  # the end wall's face towards the robot
+        assert abs(start - (face_x - scene.robot.start[0] - scene.robot.lidar.x_m)) < 0.1
         pose.value[:] = shared.start
         pose.value[0] += 3.0  # the world streams the robot 3 m further: the end wall is closer
         pose.meta[0] = 1

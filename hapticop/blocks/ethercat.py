@@ -64,6 +64,8 @@ class EthercatMasterParams(DeviceParams):
     receive_timeout_us: int = Field(2000, ge=100, le=100_000, description="how long a cycle waits for its frame")
     frame_timeout_us: int = Field(2000, ge=100, le=100_000, description="how long a configuration datagram "
                                   "may take at bring-up and recovery (SOEM's EC_TIMEOUTRET)")
+    mailbox_timeout_us: int = Field(700_000, ge=1000, le=30_000_000, description="how long a slave may take to "
+                                    "answer a CoE mailbox request at bring-up (SOEM's EC_TIMEOUTRXM)")
     start_timeout_s: float = Field(5.0, gt=0, description="bring-up to OP and the wheels' encoders ready, at most")
 
 
@@ -133,7 +135,7 @@ class EthercatMaster(Block):
                     else ExpectedSlave(name, spec.product) for name, spec in p.slaves.items()]
         wheels = [(spec.wheel, i) for i, spec in enumerate(p.slaves.values()) if spec.wheel is not None]
         master = SoemMaster(p.interface, expected, p.receive_timeout_us, p.start_timeout_s, p.frame_timeout_us,
-                            cycle_ns=self.context.period_ns or 1_000_000)
+                            cycle_ns=self.context.period_ns or 1_000_000, mailbox_timeout_us=p.mailbox_timeout_us)
         return SoemLink(master, wheels, _encoders_ready, self.clock.now_ns, self.log)
 
     def compute(self) -> None:

@@ -85,7 +85,10 @@ class Lidar(Block):
 
     def configure_resources(self) -> bool:
         """A CoLa A client for the scanner at host:port, or where the simulator says it listens."""
+        import socket
+
         from hapticop.devices.link import published_address
+        from hapticop.devices.memory_stream import MEMORY_SOCKETS
         from hapticop.devices.sick.client import ColaClient
         from hapticop.devices.sick.commands import OutputRange, startup_sequence
 
@@ -100,7 +103,9 @@ class Lidar(Block):
                                    stop=round((p.angle_max_deg + 90.0) * 10_000))
         self.client = ColaClient(*address, backoff=p.reconnect_backoff_s, clock_ns=self.clock.now_ns,
                                  points=p.points, min_range_m=p.min_range_m,
-                                 startup=startup_sequence(output_range=output_range))
+                                 startup=startup_sequence(output_range=output_range),
+                                 # a simulator under the virtual clock serves in this thread, in memory
+                                 sockets=MEMORY_SOCKETS if p.driver == "sim" and self.clock.virtual else socket.socket)
         self.ranges = np.zeros(p.points, dtype=np.float32)
         self.angles = np.zeros(p.points, dtype=np.float32)
         self.yaw = np.radians(p.yaw_deg)

@@ -7,7 +7,9 @@ like the two-host bridge: Zenoh's threads and its Python calls never share a pro
 sample is missing or older than the stream's `max_age`, with zeros (a stale command is no motion) or
 nothing (`stale: skip`). Each sample carries rmw_zenoh's attachment (sequence number, source time,
 this publisher's GID) on the key `<domain>/<topic>/<type>/<hash>`, and the node, its publishers and its
-subscriptions hold liveliness tokens, so `ros2 node list` and `ros2 topic list` see them.
+subscriptions hold liveliness tokens, so `ros2 node list` and `ros2 topic list` see them. With `flags:`,
+the run's flags (every one, by its full name, as a JSON object) are a `std_msgs/msg/String` topic too,
+sent at its rate and at once when one changes.
 
 Nothing that arrives is trusted: a sample on the topic with another type or hash, malformed CDR, a
 length or values that do not fit the port (not finite; a scan may say infinity), a missing attachment,
@@ -20,6 +22,7 @@ is delivered. A delivered sample is stamped with its source time on this host's 
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 
 import numpy as np
@@ -30,7 +33,7 @@ from hapticop.blocks.base import Block
 from hapticop.blocks.bounds import Refusals
 from hapticop.blocks.interface import Interface, Params, Port
 from hapticop.ros2 import attachment, names
-from hapticop.ros2.messages import LAYOUTS, layout_of
+from hapticop.ros2.messages import LAYOUTS, STRING, encode_string, layout_of
 from hapticop.ros2.topics import Ros2Node, Ros2Topic
 
 FUTURE_NS = 1_000_000_000  # a source time this far ahead of this host's clock is refused
@@ -88,6 +91,7 @@ class Ros2Bridge(Block):
         self.last_source = dict.fromkeys(p.subscribe, 0)
         self.refusals = {name: Refusals() for name in p.subscribe}
         self.published_refused = -1
+        self.flags_next_ns, self.flags_sent, self.flags_sequence = 0, "", 0
         self.net = None
         self.tokens: list = []
 
@@ -116,12 +120,24 @@ class Ros2Bridge(Block):
                 topic_keys = self.keys[name].rsplit("/", 2)[0] + "/*/*"
                 self.receivers[name] = transport.Receiver(self.net, topic_keys, max(4, min(depth, 64)), transient)
             self.tokens.append(transport.Token(self.net, token))
+        if p.flags is not None:  # the run's flags: a publisher like the others, of std_msgs/msg/String
+            topic, qos = p.flags.fully_qualified(p.namespace), p.flags.qos.names()
+            entity = 1 + len(p.publish) + len(p.subscribe)
+            token = node.endpoint_token(zid, 0, entity, True, topic, STRING, p.distro, qos)
+            self.flags_gid = hashlib.sha256(token.encode()).digest()[: attachment.GID_SIZE]
+            transient = p.flags.qos.durability == "transient_local"
+            self.flags_sender = transport.Sender(
+                self.net, names.data_key(p.domain, topic, STRING, p.distro), "data", qos.reliability == "reliable",
+                qos.blocks, (qos.depth or names.DEFAULT_DEPTH) if transient else 0)
+            self.tokens.append(transport.Token(self.net, token))
         return True
 
     def compute(self) -> None:
         now = self.clock.now_ns()
         wall = time.time_ns()
         self._publish(now, wall)
+        if self.params.flags is not None:
+            self._publish_flags(now, wall)
         self._take(now, wall)
 
     def pausing(self) -> None:
@@ -140,7 +156,7 @@ class Ros2Bridge(Block):
         for name, t in self.params.publish.items():
             if now < self.next_ns[name]:
                 continue
-            self.next_ns[name] = max(self.next_ns[name] + int(1e9 / t.rate_hz), now)
+            self.next_ns[name] = max(self.next_ns[name] + t.rate, now)
             port = getattr(self.inputs, name)
             if port.valid:
                 if port.seq != self.sent_seq[name]:  # a sample sent again keeps its stamp, to the nanosecond
@@ -153,6 +169,16 @@ class Ros2Bridge(Block):
             self.sequence[name] += 1
             payload = self.codecs[name].encode(value, source)
             self.senders[name].put(payload, attachment.pack(self.sequence[name], wall, self.gids[name]))
+
+    def _publish_flags(self, now: int, wall: int) -> None:
+        """Every flag of the run as JSON, at the topic's rate and at once when one changed."""
+        text = json.dumps(self.context.flags.run_flags(), sort_keys=True)
+        if now < self.flags_next_ns and text == self.flags_sent:
+            return
+        self.flags_next_ns, self.flags_sent = now + self.params.flags.rate, text
+        self.flags_sequence += 1
+        self.flags_sender.put(encode_string(self.params.distro, text),
+                              attachment.pack(self.flags_sequence, wall, self.flags_gid))
 
     # -- in -----------------------------------------------------------------------------
     def _take(self, now: int, wall: int) -> None:
@@ -181,7 +207,7 @@ class Ros2Bridge(Block):
         source = meta[1]
         if source > wall + FUTURE_NS:
             return "source time in the future"
-        if wall - source > t.max_age_ms * 1e6:
+        if wall - source > t.max_age:
             return "stale"
         if source < self.last_source[name]:
             return "older than the last one delivered"

@@ -19,7 +19,7 @@ DOCS = Path(__file__).resolve().parents[2] / "docs"
 FORMAT_MODELS = [
     "Thread", "Activity", "Stream", "LatestPolicy", "QueuePolicy", "Coordination", "StandardCoordination",
     "PetriNet", "Place", "Transition", "FlagMap", "Mode", "ScriptedPatch", "Latency", "Record",
-    "Host", "Security", "NetworkQoS", "LinkParams", "Ros2System", "Ros2Stream", "Ros2Qos", "ScanParams",
+    "Host", "Security", "NetworkQoS", "LinkParams", "Ros2System", "Ros2Flags", "Ros2Stream", "Ros2Qos", "ScanParams",
 ]
 
 

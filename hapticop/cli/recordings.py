@@ -170,7 +170,7 @@ def report(
                                       help="build the hallway's metrics and picture from the haptic, Falcon and "
                                            "odometry streams even when an activity (a simulated world) leaves them"),
     hallway: str | None = typer.Option(None, "--hallway",
-                                       help="the hallway the run drove (H1..H6; default: the world's, else H1)"),
+                                       help="the hallway the run drove: a shipped scene, H1..H6; default the world's"),
     trust_blocks: bool = typer.Option(False, "--trust-blocks",
                                       help="import the modules this recording's composition names for its blocks "
                                            "(installed packages and PYTHONPATH only, never the recording's folder); "
@@ -208,20 +208,23 @@ def report(
 
 def _from_streams(run, target: Path, hallway: str | None) -> None:
     """The hallway's metrics.json and run.png from the recorded streams (`sim.recorded_run`)."""
-    from hapticop.sim.hallway import HallwayGeometry
+    from hapticop.sim.hallway_task import Hallway
     from hapticop.sim.metrics import compute_metrics, metrics_json
     from hapticop.sim.recorded_run import READ, MissingStream, hallway_log, writers
+    from hapticop.sim.scene import Scene, to_mjcf
 
     composition = run.loaded.composition
+    scene: str | Scene = hallway or "H1"
     if hallway is None:
-        worlds = [a for a in run.loaded.activities.values() if a.spec.block in ("hallway_world", "scene_world")]
-        params = worlds[0].params if worlds else None
-        named = getattr(params, "hallway", None) or getattr(params, "scene", None)
-        hallway = named if isinstance(named, str) else "H1"  # a scene_world names a shipped hallway by its scene
+        worlds = [a for a in run.loaded.activities.values() if a.spec.block == "scene_world"]
+        named = getattr(worlds[0].params, "scene", None) if worlds else None
+        scene = named if isinstance(named, (str, Scene)) else "H1"  # the world's scene: a shipped name or inline
+        hallway = scene if isinstance(scene, str) else "the world's scene"
     try:
-        geometry = HallwayGeometry.named(hallway)
-    except (KeyError, ValueError):
-        raise _fail(f"--hallway {hallway}: not a hallway of docs/hallway-experiment.md §2 (H1 to H6)", 2) from None
+        geometry = Hallway.of(scene, to_mjcf(scene)) if isinstance(scene, Scene) else Hallway.named(scene)
+    except ValueError as error:
+        raise _fail(f"--hallway {hallway}: not a hallway (a scene with a hallway task, such as H1 to H6 of "
+                    f"docs/hallway-experiment.md §2): {error}", 2) from None
     found = writers({name: spec.writer for name, spec in composition.streams.items() if name in run.streams},
                     {name: spec.block for name, spec in composition.activities.items()})
     try:

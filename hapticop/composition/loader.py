@@ -55,7 +55,7 @@ class Loaded:
 
 def load_tree(tree: dict) -> Loaded:
     broken: set[tuple[str, str]] = set()
-    tree, diagnostics = ros2streams.expand(tree)
+    tree, diagnostics = ros2streams.expand(tree, declared_port)
     work = copy.deepcopy(tree)
     composition = None
     for _ in range(4):  # each pass sets aside the entries the previous one found broken
@@ -78,6 +78,21 @@ def load_tree(tree: dict) -> Loaded:
         _expand_standard(loaded)
         _resolve_activities(loaded)
     return loaded
+
+
+def declared_port(tree: dict, ref: str):
+    """The port `activity.port` names in `tree`, from its block's declaration; None when that cannot be told
+    (the activity's own findings say why). A ROS 2 option without a shape takes the port's (ros2streams)."""
+    activity, _, port = ref.partition(".")
+    spec = (tree.get("activities") or {}).get(activity) if isinstance(tree, dict) else None
+    if not isinstance(spec, dict):
+        return None
+    try:
+        block = resolve(spec.get("block"))
+        interface = block.declare(block.Params.model_validate(spec.get("params") or {}))
+    except Exception:  # noqa: BLE001 - an unknown block or bad parameters: reported where they are written
+        return None
+    return {**interface.inputs, **interface.outputs}.get(port)
 
 
 def _scheduled_by_broken(tree: dict, broken: set[tuple[str, str]]) -> set[str]:

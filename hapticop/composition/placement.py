@@ -96,6 +96,8 @@ def for_host(tree: Any, composition: Composition, host: str, ports: dict[str, di
     placement = place(composition)
     out = copy.deepcopy(tree)
     out.pop("hosts", None)
+    if isinstance(out.get("ros2"), dict) and out["ros2"].get("host") != host:
+        del out["ros2"]  # the ROS 2 node is another host's: its streams come and go over the link (ros2streams)
     if composition.name:
         out["name"] = f"{composition.name}_{host}"
     local_threads = {n for n, h in placement.thread_hosts.items() if h == host}

@@ -64,6 +64,10 @@ def load(path: str | Path, *, deep: bool = True) -> Loaded:
         report.extend([source.place(Diagnostic("experiment-composition", f"no composition file {loaded.composition}",
                                                ("composition",)))])
         return loaded
+    columns = [f.column for f in experiment.factors]
+    if experiment.paths is not None and experiment.paths not in columns:
+        report.extend([source.place(Diagnostic("experiment-paths", f"{experiment.paths!r} is not a factor's name",
+                                               ("paths",), expected=", ".join(columns) or "a factor"))])
     if experiment.latin_hypercube is not None and not experiment.latin_hypercube.bounds:
         report.extend([source.place(Diagnostic("experiment-empty-grid", "the Latin hypercube has no bounds",
                                                ("latin_hypercube", "bounds")))])

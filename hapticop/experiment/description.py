@@ -137,6 +137,9 @@ class Experiment(Strict):
     targets: list[Target] = Field(default_factory=list)
     summaries: list[Literal["hallway_sweep", "hallway_readme", "delay", "delay_goal"]] = Field(
         default_factory=list, description="named tables the report adds (hapticop.experiment.summaries)")
+    paths: str | None = Field(None, description="a factor's name: keep each run's robot path (from its world's "
+                              "trajectory, every 0.1 s) and draw a picture of them per value of that factor "
+                              "(the scene's, say)")
     cpus_per_run: float = Field(1.0, gt=0, description="what a run declares to a Ray cluster")
     retries: int = Field(2, ge=0, description="a run lost with its node is tried again this often (Ray)")
 
@@ -144,6 +147,6 @@ class Experiment(Strict):
         """A digest of what decides the runs (not the targets, the docs or the name): a table is resumed only
         by the experiment that wrote it."""
         decisive = self.model_dump(exclude={"doc", "targets", "name", "retries", "cpus_per_run", "time_limit_s",
-                                                 "summaries"})
+                                                 "summaries", "paths"})
         decisive["composition"] = hashlib.sha256(composition_text.encode()).hexdigest()
         return hashlib.sha256(json.dumps(decisive, sort_keys=True, default=str).encode()).hexdigest()[:16]

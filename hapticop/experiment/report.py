@@ -14,6 +14,7 @@ from pathlib import Path
 import pyarrow as pa
 
 from hapticop.experiment.description import Experiment, Target
+from hapticop.experiment.figures import save_figure
 
 COMPARE = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge, "==": operator.eq,
            "!=": operator.ne}
@@ -145,12 +146,52 @@ def plots(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
             ax.set_title(factor.removeprefix("factor."), fontsize=9)
             ax.grid(alpha=0.3)
         fig.suptitle(f"{metric}: every run by factor (line: median, dashed: target)", fontsize=9)
-        fig.tight_layout()
-        target_file = folder / f"{metric}.png"
-        fig.savefig(target_file, dpi=80)
-        plt.close(fig)
-        written.append(target_file)
+        written.append(save_figure(fig, folder / f"{metric}.png"))
     return written
+
+
+def path_plots(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
+    """With `paths: FACTOR`: a picture per value of that factor (a scene), every run's robot path in it, a
+    colour per combination of the other factors."""
+    if experiment.paths is None or "path" not in table.column_names:
+        return []
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in _rows(table) if r["status"] == "done" and r.get("path")]
+    by = f"factor.{experiment.paths}"
+    others = [c for c in factor_columns(table) if c != by]
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for level in dict.fromkeys(str(r.get(by)) for r in rows):
+        here = [r for r in rows if str(r.get(by)) == level]
+        groups = list(dict.fromkeys(" ".join(str(r.get(c)) for c in others) for r in here))
+        colours = plt.get_cmap("tab10")
+        fig, ax = plt.subplots(figsize=(7.0, 3.6))
+        labelled: set[str] = set()
+        for r in here:
+            group = " ".join(str(r.get(c)) for c in others)
+            xs, ys = json.loads(r["path"])
+            ax.plot(xs, ys, color=colours(groups.index(group) % 10), linewidth=0.8, alpha=0.6,
+                    label=None if group in labelled else group)
+            labelled.add(group)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.grid(alpha=0.3)
+        if any(groups):
+            ax.legend(fontsize=7, title=" ".join(c.removeprefix("factor.") for c in others), title_fontsize=7)
+        ax.set_title(f"{experiment.paths} {level}: every run's path", fontsize=9)
+        written.append(save_figure(fig, folder / f"paths-{_file_part(level)}.png"))
+    return written
+
+
+def _file_part(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
 def page(experiment: Experiment, table: pa.Table, pictures: list[Path], folder: Path) -> str:
@@ -166,7 +207,8 @@ def page(experiment: Experiment, table: pa.Table, pictures: list[Path], folder: 
     for name in experiment.summaries:
         out += [f"## {name}", "", summary(name, table), ""]
     if pictures:
-        out += ["## Metrics by factor", ""] + [f"![{p.stem}]({p.relative_to(folder)})" for p in pictures] + [""]
+        out += ["## Pictures: metrics by factor, paths, summaries", ""]
+        out += [f"![{p.stem}]({p.relative_to(folder)})" for p in pictures] + [""]
     return "\n".join(out)
 
 
@@ -185,9 +227,18 @@ def summary(name: str, table: pa.Table) -> str:
     raise KeyError(f"summary {name} has no section {section}")
 
 
+def summary_figures(experiment: Experiment, table: pa.Table, folder: Path) -> list[Path]:
+    """The pictures of the experiment's named summaries that draw some (`figures.FIGURES`)."""
+    from hapticop.experiment.figures import FIGURES
+
+    rows = table.to_pylist()
+    return [p for name in experiment.summaries if name in FIGURES for p in FIGURES[name](rows, folder)]
+
+
 def write_report(experiment: Experiment, table: pa.Table, folder: Path) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    pictures = plots(experiment, table, folder / "plots")
+    pictures = (plots(experiment, table, folder / "plots") + path_plots(experiment, table, folder / "plots")
+                + summary_figures(experiment, table, folder / "plots"))
     target = folder / "report.md"
     target.write_text(page(experiment, table, pictures, folder))
     return target

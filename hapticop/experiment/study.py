@@ -36,17 +36,18 @@ def composition_text(loaded: Loaded) -> str:
 
 
 def run_study(loaded: Loaded, out: Path, *, workers: int = 2, ray: str | None = None,
-              progress: Progress | None = None) -> tuple[int, int]:
-    """(runs done now, of which failed). Raises `table.TableMismatch` for another experiment's table."""
+              progress: Progress | None = None, retry_failed: bool = False) -> tuple[int, int]:
+    """(runs done now, of which failed). A run the table holds is not run again, unless it failed and
+    `retry_failed` says so. Raises `table.TableMismatch` for another experiment's table."""
     experiment = loaded.experiment
     assert experiment is not None
     open_table(out, experiment.name, experiment.meaning(composition_text(loaded)), __version__)
     every = runs(experiment)
-    have = finished(out)
+    have = finished(out, retry_failed)
     todo = [r for r in every if r.id not in have]
     by_id = {r.id: r for r in todo}
     jobs = [(r.id, job(composition_of(loaded, r), r.patches, r.sets, r.seed, experiment.clock,
-                       experiment.duration_s, experiment.metrics)) for r in todo]
+                       experiment.duration_s, experiment.metrics, experiment.paths is not None)) for r in todo]
     progress = progress or Progress(len(every), len(every) - len(todo))
     if ray:
         from hapticop.experiment.cluster import run_ray

@@ -14,6 +14,19 @@ from collections.abc import Callable
 
 PROFILES = ("cautious", "nominal", "aggressive", "tremor", "hands_off")
 CONTROLS = ("operator alone", "shared control")
+EMPTY_J = 1e-3
+"""A tank this close to its floor counts as empty: it is (or was about to be) scaling the cue down."""
+TANK_FLOOR_J = 0.0
+"""The floor (`min_j`) of systems/teleop_sim.yaml's tank, which the delay experiment never varies (a test holds
+the two together): the runs record the tank's lowest level, not its floor."""
+
+
+def tank_empty(lowest_j: float | None, floor_j: float | None = TANK_FLOOR_J) -> bool | None:
+    """Whether the tank ran empty: its lowest level within EMPTY_J of its floor, where it scales the cue down
+    (None without a tank: no floor or no level)."""
+    if floor_j is None or lowest_j is None:
+        return None
+    return lowest_j <= floor_j + EMPTY_J
 
 
 def records(rows: list[dict]) -> list[dict]:
@@ -150,7 +163,8 @@ def _delay(rows: list[dict], goal_only: bool) -> str:
         t_norm = f"{_median(norms, digits=2)} / {max(norms):.2f}" if norms else "-"
         osc = [m["oscillation_index_mps"] for m in ms]
         tanks = [m["tank_level_min_j"] for m in ms if m.get("tank_level_min_j") is not None]
-        empty = [m["tank_empty"] for m in ms if m.get("tank_empty") is not None]
+        empty = [e for e in (m["tank_empty"] if m.get("tank_empty") is not None else
+                             tank_empty(m.get("tank_level_min_j")) for m in ms) if e is not None]
         trips = [m["round_trip_max_s"] for m in ms if m.get("round_trip_max_s") is not None]
         lines.append(
             f"| {first['governor']} | {first['tank']} | {first['loss']} | {first['rtt_ms']} | {len(group)} | "

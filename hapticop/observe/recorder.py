@@ -295,7 +295,8 @@ def plan_of(loaded: Loaded, layout: Layout, tree, file: str, path: Path | None, 
                         [("composition.yaml", "application/yaml", dump(tree).encode()),
                          ("parameters.json", "application/json", json.dumps(params, indent=1).encode())],
                         {"hapticop.run": run}, views_for(loaded, [ring.info.name for ring in rings])
-                        + (ros2_channels(composition, [ring.info.name for ring in rings]) if path is not None else []),
+                        + (ros2_channels(composition, [ring.info.name for ring in rings], path)
+                           if path is not None else []),
                         live,
                         TimingPlan.of(composition, layout), run_dir, run["composition"], events=EventPlan.of(layout))
     plan.rings += [RecordedRing(*ring) for ring in cycle_rings.recorded(loaded, layout)] if path is not None else []

@@ -105,13 +105,13 @@ class RecordingFile:
     zstd-compressed and followed by its message indexes; the summary is written by `finish`.
     """
 
-    def __init__(self, path: Path, library: str = "hapticop"):
+    def __init__(self, path: Path, library: str = "hapticop", profile: str = ""):
         self.path = Path(path)
         self.part = part_of(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._out = open(self.part, "wb")  # noqa: SIM115 - closed by finish() or abandon()
         self._out.write(MAGIC)
-        self._write(Header(profile="", library=library))
+        self._write(Header(profile=profile, library=library))  # "ros2": a rosbag2 bag's file (ros2channels)
         self._schemas: dict[tuple[str, str], Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._batches: dict[int, tuple[np.dtype, np.ndarray]] = {}  # a stream channel's record layout, prefix
@@ -215,8 +215,9 @@ class RecordingFile:
             return
         data = bytes(self._chunk)
         start, end = self._chunk_times
+        compressed = zstandard.compress(data)
         chunk_offset, chunk_length = self._write(Chunk(
-            compression="zstd", data=zstandard.compress(data), message_start_time=start, message_end_time=end,
+            compression="zstd", data=compressed, message_start_time=start, message_end_time=end,
             uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data)))
         index_offsets, indexes = {}, bytearray()
         for channel, parts in self._index.items():
@@ -230,7 +231,7 @@ class RecordingFile:
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start, message_end_time=end, chunk_start_offset=chunk_offset,
             chunk_length=chunk_length, message_index_offsets=index_offsets, message_index_length=len(indexes),
-            compression="zstd", compressed_size=chunk_length, uncompressed_size=len(data)))
+            compression="zstd", compressed_size=len(compressed), uncompressed_size=len(data)))  # the records' bytes
         self._chunk.clear()
         self._chunk_times = []
         self._index = {}

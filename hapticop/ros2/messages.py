@@ -196,3 +196,12 @@ class Codec:
             return "not finite"
         out[...] = array.reshape(out.shape)
         return None
+
+
+STRING = "std_msgs/msg/String"
+
+
+def encode_string(distro: Distro, text: str) -> bytes:
+    """A `std_msgs/msg/String` in CDR (the run's flags: not a port, so no layout)."""
+    store = typestore(distro)
+    return bytes(store.serialize_cdr(store.types[STRING](data=text), STRING))

@@ -9,6 +9,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from pydantic_core import PydanticCustomError
 
+from hapticop.composition.units import Duration, format_duration
 from hapticop.ros2 import names
 from hapticop.ros2.messages import LAYOUTS, Codec, ScanGeometry, describe, layout_of
 
@@ -43,6 +44,20 @@ class ScanParams(BaseModel):
     range_max_m: float = Field(10.0, gt=0, description="the longest range measured")
 
 
+def _check_name_and_rate(topic: str, rate: int) -> None:
+    """A topic's name and send period, as every published or subscribed topic must have them."""
+    if not TOPIC.match(topic):
+        raise PydanticCustomError("ros2_topic", "topic '{topic}' is not a ROS 2 name (letters, digits and "
+                                  "'_' in chunks between '/')", {"topic": topic})
+    if rate < 1_000_000:
+        raise PydanticCustomError("ros2_rate", "rate {rate} is faster than 1kHz", {"rate": format_duration(rate)})
+
+
+def _qualified(topic: str, namespace: str) -> str:
+    """A relative topic under the node's namespace; an absolute one as it is."""
+    return topic if topic.startswith("/") else f"{namespace.rstrip('/')}/{topic}"
+
+
 class Ros2Topic(BaseModel):
     """One ROS 2 topic and the port that carries it."""
 
@@ -53,25 +68,25 @@ class Ros2Topic(BaseModel):
     shape: tuple[int, ...] | None = Field(None, description="the port's shape: a type admits a few "
                                           "(docs/ros2.md); default its first; [N] for a scan or joints")
     qos: Ros2Qos = Field(default_factory=Ros2Qos, description="reliability, durability, history and depth")
-    rate_hz: float = Field(50.0, gt=0, le=1000, description="published this often (publications only)")
+    rate: Duration = Field(20_000_000, description="published this often, as a rate or a period "
+                           "('50Hz', '20ms'; at most 1kHz; publications only)")
     stale: Literal["zero", "skip"] = Field("zero", description="with no valid sample to publish: zeros (a "
                                            "stop, for a command) or nothing")
-    max_age_ms: float = Field(500.0, gt=0, description="a sample older than this when it arrives is refused "
-                              "(subscriptions only)")
+    max_age: Duration = Field(500_000_000, description="a sample older than this when it arrives is refused "
+                              "('300ms'; subscriptions only)")
     frame_id: str = Field("", description="the header's frame")
     scan: ScanParams = Field(default_factory=ScanParams, description="a published LaserScan's geometry")
     joints: list[str] = Field(default_factory=list, description="a JointState's joint names")
 
     @model_validator(mode="after")
     def _fits(self) -> Ros2Topic:
-        if not TOPIC.match(self.topic):
-            raise PydanticCustomError("ros2_topic", "topic '{topic}' is not a ROS 2 name (letters, digits and "
-                                      "'_' in chunks between '/')", {"topic": self.topic})
+        _check_name_and_rate(self.topic, self.rate)
         if self.shape is not None and layout_of(self.type, LAYOUTS[self.type][0].dtype, self.shape) is None:
             raise PydanticCustomError("ros2_shape", "shape {shape} does not fit {type}: it takes {fits}",
                                       {"shape": list(self.shape), "type": self.type, "fits": describe(self.type)})
         if self.shape is None and LAYOUTS[self.type][0].size is None:
-            raise PydanticCustomError("ros2_shape", "{type} needs 'shape: [N]' (its length)", {"type": self.type})
+            raise PydanticCustomError("ros2_shape", "{type} needs 'shape: [N]' (its length), or a port to take it "
+                                      "from", {"type": self.type})
         return self
 
     @property
@@ -88,7 +103,24 @@ class Ros2Topic(BaseModel):
                      tuple(self.joints))
 
     def fully_qualified(self, namespace: str) -> str:
-        return self.topic if self.topic.startswith("/") else f"{namespace.rstrip('/')}/{self.topic}"
+        return _qualified(self.topic, namespace)
+
+
+class Ros2Flags(BaseModel):
+    """The run's flags as a `std_msgs/msg/String` topic: a JSON object of every flag by its full name."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    topic: str = Field("/hapticop/flags", description="the topic's name")
+    rate: Duration = Field(100_000_000, description="sent this often, and at once when a flag changes ('10Hz')")
+    qos: Ros2Qos = Field(default_factory=Ros2Qos, description="reliability, durability, history and depth")
+
+    @model_validator(mode="after")
+    def _fits(self) -> Ros2Flags:
+        _check_name_and_rate(self.topic, self.rate)
+        return self
+
+    def fully_qualified(self, namespace: str) -> str:
+        return _qualified(self.topic, namespace)
 
 
 class Ros2Node(BaseModel):
@@ -105,6 +137,8 @@ class Ros2Node(BaseModel):
                                             "through the Zenoh routers in 'connect' (rmw_zenohd)")
     listen: list[str] = Field(default_factory=list, description="this node's Zenoh endpoints (peer mode)")
     connect: list[str] = Field(default_factory=list, description="the endpoints of the peers or routers")
+    flags: Ros2Flags | None = Field(None, description="the run's flags published as a std_msgs/msg/String topic "
+                                    "(JSON: every flag by its full name), e.g. '{topic: /hapticop/flags}'")
 
     @model_validator(mode="after")
     def _endpoints(self) -> Ros2Node:

@@ -19,7 +19,7 @@ import numpy as np
 
 from hapticop.blocks.interface import Params, Port
 from hapticop.runtime.logs import Logger
-from hapticop.runtime.streams import ORIGINS
+from hapticop.runtime.streams import COUNT, ORIGINS
 
 STALE_IN_A_ROW = 3  # stale arrivals in a row before a reader says so (one old sample at start-up is no news)
 STALE_SAID_EVERY_NS = 10_000_000_000  # while it lasts, said again this often
@@ -43,7 +43,7 @@ class InputPort:
     """The reader's side of a stream: `value`, and how fresh it is."""
 
     __slots__ = ("name", "spec", "value", "meta", "origins", "max_age_ns", "transport", "queue", "fresh", "_clock",
-                 "_seen", "_number", "log", "_stale_run", "_stale_said_at")
+                 "_words", "_seen", "_number", "log", "_stale_run", "_stale_said_at")
 
     def __init__(self, name: str, spec: Port, clock: Callable[[], int], track_origins: bool = False):
         self.name, self.spec, self._clock = name, spec, clock
@@ -53,6 +53,7 @@ class InputPort:
         self.origins = np.zeros(ORIGINS, dtype=np.int64) if track_origins else None
         self.max_age_ns = 0
         self.transport: Any = None  # a LatestSlot or SpscQueue; None while unconnected
+        self._words: Any = None  # a latest slot's header words (its sample count at COUNT); None otherwise
         self.queue = False
         self.fresh = False  # a new sample arrived for this step
         self._seen = 0  # samples the transport had written when `value` was last copied
@@ -64,12 +65,13 @@ class InputPort:
     def connect(self, transport, queue: bool, max_age_ns: int) -> None:
         """Read from `transport` from now on (assembly, or a live patch rewiring the stream)."""
         self.transport, self.queue, self.max_age_ns = transport, queue, max_age_ns
+        self._words = None if queue else transport.words
         self._seen = -1  # whatever the new transport holds is news
         self._stale_run = 0
         self._number = int(self.meta[0])
 
     def disconnect(self) -> None:
-        self.transport = None
+        self.transport = self._words = None
 
     def refresh(self) -> bool:
         """Copy the newest sample in (runtime, before the step); queue inputs are left to pop().
@@ -78,14 +80,11 @@ class InputPort:
         An unchanged slot is not copied again: most inputs of a 1 kHz loop change at a lower
         rate (a scan of 811 ranges at 15 Hz), and the copy is most of what a read costs.
         """
-        transport = self.transport
-        if transport is None or self.queue:
+        words = self._words
+        if words is None or words[COUNT] == self._seen:  # a queue, unconnected, or nothing new
             self.fresh = False
             return False
-        if transport.count == self._seen:
-            self.fresh = False
-            return False
-        number = transport.read_into(self.value, self.meta, self.origins)
+        number = self.transport.read_into(self.value, self.meta, self.origins)
         fresh = self.fresh = number != 0 and number != self._number
         if number:
             self._number = number
@@ -185,11 +184,16 @@ class OutputPort:
 class FlagView:
     """An activity's own declared flags, by name: `flags["new_scan"] = True`."""
 
-    __slots__ = ("_flags", "_index", "_activity")
+    __slots__ = ("_flags", "_index", "_activity", "_run")
 
     def __init__(self, flags: np.ndarray, index: dict[str, int], activity: str, names: list[str]):
-        self._flags, self._activity = flags, activity
+        self._flags, self._activity, self._run = flags, activity, index
         self._index = {name: index[f"{activity}.{name}"] for name in names}
+
+    def run_flags(self) -> dict[str, bool]:
+        """Every flag of the run, by its full name, read only: what a block reporting the run's state
+        sends (the ROS 2 bridge's flags topic). Allocates: not for a 1 kHz compute."""
+        return {name: bool(self._flags[i]) for name, i in self._run.items()}
 
     def __getitem__(self, name: str) -> bool:
         return bool(self._flags[self._index[name]])

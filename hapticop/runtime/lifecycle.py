@@ -120,8 +120,11 @@ class Lifecycle:
             flags = self.flags
             a, b, c, d = self._running_requests
             if not (flags[a] or flags[b] or flags[c] or flags[d]):
-                if self._run(self.hooks.compute) is True:
-                    self._raise("running_complete")
+                try:  # `_run`, written out: this is every running owner's every cycle
+                    if self.hooks.compute() is True:
+                        self._raise("running_complete")
+                except Exception as error:  # noqa: BLE001
+                    self.fail_running(error)
                 return True
         state = self.state
         if state not in (State.CLEANING, State.DONE) and self._requested("request_cleaning"):

@@ -240,7 +240,7 @@ def apply(target: LiveTarget, pending: PendingPatch) -> None:
     for name, runner in runners.items():
         thread = new.owner_thread.get(name)
         if thread is not None:
-            target.threads[thread].runners[name] = runner
+            target.threads[thread].add_runner(name, runner)
     for name in plan.added_streams:
         _connect(target, name, new)
     for name in plan.changed_streams:

@@ -57,6 +57,7 @@ QUEUE_HEADER = np.dtype(
 _SEQ = SLOT_HEADER.fields["seq"][1] // 8
 _COUNT = SLOT_HEADER.fields["count"][1] // 8
 _STAMP = SLOT_HEADER.fields["stamp_ns"][1] // 8
+COUNT = _COUNT  # the word of `LatestSlot.words` that counts the samples written
 _ORIGINS = SLOT_HEADER.fields["origins_ns"][1]
 _W = QUEUE_HEADER.fields["write_index"][1] // 8
 _DROP_NEW = QUEUE_HEADER.fields["dropped_newest"][1] // 8
@@ -166,6 +167,7 @@ class LatestSlot:
         self._scratches: dict[int, tuple[np.ndarray, memoryview, np.ndarray, memoryview]] = {}
         self._written, self._written_origins, self._read = ByteViews(), ByteViews(), ByteViews()
         self._origins_like = np.zeros(ORIGINS, dtype=np.int64)
+        self.words = self._slot.words  # the header's words: `words[COUNT]` is `count` without a call
 
     @property
     def count(self) -> int:
@@ -179,14 +181,16 @@ class LatestSlot:
         seq = words[_SEQ]
         words[_SEQ] = seq + 1
         try:
-            view = self._written.of(value, slot.payload)
+            written = self._written  # the array written last, nearly always: its view without a call
+            view = written.last_view if value is written.last else written.of(value, slot.payload)
             if view is None:
                 np.copyto(slot.payload, value)
             else:
                 slot.payload_bytes[:] = view
             slot.stamps[_STAMP] = stamp_ns
             if origins is not None:
-                view = self._written_origins.of(origins, self._origins_like)
+                written = self._written_origins
+                view = written.last_view if origins is written.last else written.of(origins, self._origins_like)
                 if view is None:
                     np.copyto(slot.origins, origins)
                 else:
@@ -243,7 +247,8 @@ class LatestSlot:
         return 0
 
     def _copy_out(self, out: np.ndarray, source: np.ndarray, source_bytes: memoryview) -> None:
-        view = self._read.of(out, source)
+        read = self._read
+        view = read.last_view if out is read.last else read.of(out, source)
         if view is None:
             np.copyto(out, source)
         else:

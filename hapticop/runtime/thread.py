@@ -160,6 +160,9 @@ class CyclicThread:
             spec.start == "on_request", log, region.reached,
         )
         self.selected = -1
+        self._plan: tuple[dict[int, list[ActivityRunner]], dict[int, list[ActivityRunner]]] = ({}, {})
+        self._all: list[ActivityRunner] = []
+        self._place()
         self._select(0)
         self.supervisor: Callable[[], None] | None = None  # the main thread's supervisor runs first
 
@@ -176,26 +179,45 @@ class CyclicThread:
         return True
 
     def _pause(self) -> None:
-        self._housekeeping(())
+        self._housekeeping(self._all)
 
     def _run_schedule(self) -> None:
+        flags = self.region.flags
         for sid, index in self.select_flags:
-            if self.region.flags[index]:
-                self.region.flags[index] = 0
+            if flags[index]:
+                flags[index] = 0
                 self._select(sid)
-        active = self.schedules[self.selected]
+        schedules, outsides = self._plan  # one read: a live patch may replace both meanwhile
+        selected = self.selected
+        active = schedules[selected]
         for runner in active:
             runner.step()
         for runner in active:
             if runner.flushes:
                 runner.flush()
-        self._housekeeping(active)
+        outside = outsides[selected]
+        if outside:
+            self._housekeeping(outside)
 
-    def _housekeeping(self, active) -> None:
+    @staticmethod
+    def _housekeeping(outside: list[ActivityRunner]) -> None:
         """Activities outside the selected schedule still honour a request to clean."""
-        for runner in self.runners.values():
-            if runner not in active and (runner.lifecycle.cleaning_requested() or runner.state is State.CLEANING):
+        for runner in outside:
+            if runner.lifecycle.cleaning_requested() or runner.state is State.CLEANING:
                 runner.step()
+
+    def _place(self) -> None:
+        """Which runners each schedule leaves out (their housekeeping), made once per change of the
+        schedules or the runners rather than looked for every cycle."""
+        runners = list(self.runners.values())
+        schedules = self.schedules
+        self._plan = (schedules, {sid: [r for r in runners if r not in members] for sid, members in schedules.items()})
+        self._all = runners
+
+    def add_runner(self, name: str, runner: ActivityRunner) -> None:
+        """A live patch added an activity to this thread: scheduled by the patch's new schedules."""
+        self.runners[name] = runner
+        self._place()
 
     def _clean(self) -> bool:
         """Walk every activity of this thread to done, then the thread is done."""
@@ -221,6 +243,7 @@ class CyclicThread:
         """A live patch changed the schedules: takes effect from the next cycle."""
         self.schedules = {sid: [self.runners[a] for a in members if a in self.runners]
                           for sid, members in schedules.items()}
+        self._place()
         if self.selected not in self.schedules:
             self._select(0)
 

@@ -25,7 +25,17 @@ FAR_M = 1e3
 
 
 class SceneError(RuntimeError):
-    """The engine found the scene broken while running (NaN state, a body flown off)."""
+    """The engine found the scene broken while running (NaN state, a body flown off); `body` is the MJCF name of
+    the body it blames ("" when none), for the world to say where the scene declares it."""
+
+    def __init__(self, message: str, body: str = ""):
+        super().__init__(message)
+        self.body = body
+
+
+_UNSTABLE = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+             int(mujoco.mjtWarning.mjWARN_BADQACC))
+"""MuJoCo's warnings that it found NaN, infinite or huge values in the state and reset the simulation."""
 
 
 class Engine:
@@ -50,15 +60,18 @@ class Engine:
         # static geoms: on the world body, except the floor (a plane the robot rides above)
         self.static = np.array([g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] !=
                                 mujoco.mjtGeom.mjGEOM_PLANE], dtype=np.int32)
+        self.static_ids = [int(g) for g in self.static]
         self.static_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(g)) or f"geom {g}" for g in self.static]
         # movable bodies: those with a free joint; their poses as x, y, yaw
         free = [j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         self.body_qpos = [int(m.jnt_qposadr[j]) for j in free]
         self.body_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.jnt_bodyid[j])) or f"body {j}"
                            for j in free]
+        self.handles, self.handle_qpos, self.handle_dofs = _handles(m)
         # views and buffers made once
         self.qpos, self.qvel = d.qpos, d.qvel
         self.qfrc_constraint = d.qfrc_constraint
+        self._warned, self._warned_at = d.warning.number, d.warning.lastinfo  # live views of MuJoCo's counters
         self._fromto = np.zeros(6)
         self._rays: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._origin = np.zeros(3)
@@ -83,15 +96,47 @@ class Engine:
         qvel[vx_], qvel[vy_], qvel[wz_] = c * vx - s * vy, s * vx + c * vy, float(twist[2])
 
     def step(self) -> None:
-        """One physics step of `timestep`; a state gone non-finite or a body flown off stops the run."""
+        """One physics step of `timestep`; a state gone non-finite (MuJoCo resets it and counts a warning) or
+        a body flown off stops the run."""
         mujoco.mj_step(self.model, self.data)
+        warned = self._warned
+        for kind in _UNSTABLE:
+            if warned[kind]:
+                self._unstable(kind)
         qpos = self.qpos
-        for adr in self.body_qpos:
-            x, y = qpos[adr], qpos[adr + 1]
-            if not (abs(x) < FAR_M and abs(y) < FAR_M):  # also false for NaN
-                raise SceneError(f"scene '{self.name}': body '{self.body_names[self.body_qpos.index(adr)]}' left the "
-                                 f"scene or its state is not a number (x={x}, y={y}): the simulation exploded; "
-                                 "look at its mass, size and damping, or the robot's speed")
+        for i, adr in enumerate(self.body_qpos):
+            x, y, z = qpos[adr], qpos[adr + 1], qpos[adr + 2]
+            if not (abs(x) < FAR_M and abs(y) < FAR_M and abs(z) < FAR_M):  # also false for NaN
+                name = self.body_names[i]
+                raise SceneError(f"scene '{self.name}': body '{name}' left the scene or its state is not a number "
+                                 f"(x={x:.3g}, y={y:.3g}, z={z:.3g}): the simulation exploded; look at its mass, "
+                                 "size and damping, or the robot's speed", name)
+
+    def _unstable(self, kind: int) -> None:
+        m = self.model
+        dof = int(self._warned_at[kind])
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.dof_bodyid[dof])) if 0 <= dof < m.nv else None
+        what = {"QPOS": "position", "QVEL": "velocity", "QACC": "acceleration"}[
+            mujoco.mjtWarning(kind).name.removeprefix("mjWARN_BAD")]
+        blamed = f"body '{body}'" if body else f"degree of freedom {dof}"
+        raise SceneError(f"scene '{self.name}': {blamed} went to a value not a number, infinite or huge (its {what}) "
+                         f"at {self.data.time:.3f} s of simulation: the simulation exploded (MuJoCo reset it); look at "
+                         "its mass, size, damping and the forces on it", body or "")
+
+    def place_handle(self, i: int, position: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        """Handle i where its device is (its joints are the device's axes: the device's own coordinates)."""
+        qpos, qvel = self.qpos, self.qvel
+        for k, adr in enumerate(self.handle_qpos[i]):
+            qpos[adr] = position[k]
+        for k, adr in enumerate(self.handle_dofs[i]):
+            qvel[adr] = 0.0 if velocity is None else velocity[k]
+
+    def handle_force(self, i: int, out: np.ndarray) -> np.ndarray:
+        """The contacts' force on handle i in the last step, in its device's frame (N)."""
+        f = self.qfrc_constraint
+        for k, adr in enumerate(self.handle_dofs[i]):
+            out[k] = f[adr]
+        return out
 
     def contact_wrench(self, out: np.ndarray) -> np.ndarray:
         """The contacts' force and torque on the robot in the last step, in the robot's frame (N, N, N m)."""
@@ -102,17 +147,38 @@ class Engine:
         out[0], out[1], out[2] = c * fx + s * fy, -s * fx + c * fy, float(f[it])
         return out
 
-    def clearance(self, reach_m: float = 10.0) -> float:
+    def clearance(self, reach_m: float = FAR_M) -> float:
         """The smallest distance from the robot's geom to static geometry at its current placement
         (0 or less: touching or inside); `reach_m` when nothing is nearer."""
+        return self.clearances(None, reach_m)[0]
+
+    def clearances(self, front: tuple[bool, ...] | None, reach_m: float = FAR_M) -> tuple[float, float, float]:
+        """The robot's least distance (as `clearance`) to all static geometry, to the static geoms marked in
+        `front` (one flag per geom of `static`) and to the others: a hallway's end wall and its sides."""
         m, d = self.model, self.data
         mujoco.mj_kinematics(m, d)
-        best = reach_m
-        for g in self.static:
-            dist = mujoco.mj_geomDistance(m, d, self.robot_geom, int(g), reach_m, None)
+        best = ahead = beside = reach_m
+        robot = self.robot_geom
+        for i, g in enumerate(self.static_ids):
+            dist = mujoco.mj_geomDistance(m, d, robot, g, reach_m, None)
             if dist < best:
                 best = dist
-        return best
+            if front is not None and front[i]:
+                if dist < ahead:
+                    ahead = dist
+            elif dist < beside:
+                beside = dist
+        return best, ahead, beside
+
+    def trajectory_clearances(self, poses: np.ndarray, front: tuple[bool, ...] | None,
+                              reach_m: float = FAR_M) -> np.ndarray:
+        """`clearances` with the robot at each of `poses` (n, 3) in turn: (n, 3) of all, front, side; for a
+        run's log after the run (the world records them as it goes)."""
+        out = np.empty((len(poses), 3))
+        for i, pose in enumerate(np.asarray(poses, dtype=np.float64)):
+            self.place_robot(pose)
+            out[i] = self.clearances(front, reach_m)
+        return out
 
     def body_poses(self, out: np.ndarray) -> np.ndarray:
         """Each movable body's x, y and yaw (rows of out)."""
@@ -157,3 +223,22 @@ class Engine:
         np.copyto(dist, np.nan, where=mask)
         np.copyto(out, dist, casting="same_kind")
         return out
+
+
+def _handles(m) -> tuple[list[str], list[list[int]], list[list[int]]]:
+    """The scene's handles: bodies `handle_NAME` with the slide joints `handle_NAME_x`, `_y`, `_z`
+    (hapticop.sim.scene.Handle compiles to them; an MJCF file may have its own)."""
+    names, qpos, dofs = [], [], []
+    for b in range(m.nbody):
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or ""
+        if not body.startswith("handle_"):
+            continue
+        joints = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{body}_{a}") for a in "xyz"]
+        if min(joints) < 0 or any(m.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE or m.jnt_bodyid[j] != b
+                                  for j in joints):
+            raise ValueError(f"body '{body}' is a handle by its name, but lacks its slide joints {body}_x, "
+                             f"{body}_y and {body}_z")
+        names.append(body.removeprefix("handle_"))
+        qpos.append([int(m.jnt_qposadr[j]) for j in joints])
+        dofs.append([int(m.jnt_dofadr[j]) for j in joints])
+    return names, qpos, dofs

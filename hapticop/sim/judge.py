@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -99,6 +99,78 @@ class TimeWithin(_Strict):
                          "run's start (and be at rest at its end)")
 
 
+class MetricBound(_Strict):
+    """A bound on one of the run's metrics: any scene's (judge.json's `metrics`), or the hallway
+    experiment's (metrics.json) when the scene has a `hallway` task."""
+
+    name: str = Field(description="the metric, by its key")
+    min: float | None = Field(None, description="it must be at least this")
+    max: float | None = Field(None, description="it must be at most this")
+    equals: bool | int | float | str | None = Field(None, description="it must be exactly this")
+    relative_to: Literal["dist1_m", "dist2_m", "dist3_m"] | None = Field(
+        None, description="min and max are offsets from this distance of the scene's hallway task")
+    bounded_by: str | None = Field(None, description="a metric no smaller than this one: when this one is not "
+                                   "measured, it stands in, shown as a bound, if it meets max")
+    operators: tuple[str, ...] = Field((), description="only for runs of these operator variants (all if empty)")
+    unless_operators: tuple[str, ...] = Field((), description="not for runs of these operator variants")
+
+    @model_validator(mode="after")
+    def _some_bound(self) -> MetricBound:
+        if self.min is None and self.max is None and self.equals is None:
+            raise ValueError("a metric target needs min, max or equals")
+        if self.equals is not None and (self.min is not None or self.max is not None):
+            raise ValueError("equals goes alone, without min or max")
+        if self.bounded_by is not None and self.max is None:
+            raise ValueError("bounded_by stands in for an upper bound: give max")
+        return self
+
+    def applies(self, operator: str) -> bool:
+        """Whether it judges a run of this operator variant."""
+        return (not self.operators or operator in self.operators) and operator not in self.unless_operators
+
+    def limits(self, task: Mapping[str, float] | None = None) -> tuple[float | None, float | None]:
+        """min and max, offset by the task distance they are relative to."""
+        base = float((task or {})[self.relative_to]) if self.relative_to else 0.0
+        return (None if self.min is None else base + self.min, None if self.max is None else base + self.max)
+
+    def text(self, task: Mapping[str, float] | None = None) -> str:
+        """What is asked, as the end-of-run table shows it."""
+        if self.equals is not None:
+            return "no" if self.equals is False else "yes" if self.equals is True else f"{self.equals:g}" \
+                if isinstance(self.equals, (int, float)) else str(self.equals)
+        if self.relative_to and self.relative_to not in (task or {}):
+            return f"{self.relative_to} {self.min if self.min is not None else self.max:+g} (no hallway task)"
+        low, high = self.limits(task)
+        if low is not None and high is not None:
+            return f"{low:+.2f} to {high:+.2f}"
+        if low is not None:
+            return f">= {low:.2f}" if self.relative_to else f">= {low:g}"
+        return f"<= {high:g}"
+
+    def verdict(self, metrics: Mapping[str, object], task: Mapping[str, float] | None = None
+                ) -> tuple[object, bool | None, bool]:
+        """(the value judged, the verdict (None: not measured), whether the value is `bounded_by`'s)."""
+        value = metrics.get(self.name)
+        if self.relative_to and self.relative_to not in (task or {}):  # no hallway task: nothing to offset from
+            return value, None, False
+        if self.equals is not None:
+            if value is None or (isinstance(value, float) and value != value):
+                return value, None, False
+            return value, value == self.equals, False
+        low, high = self.limits(task)
+        stand_in = metrics.get(self.bounded_by) if self.bounded_by else None
+        if not _measured(value) and _measured(stand_in) and high is not None and float(stand_in) <= high:  # type: ignore[arg-type]
+            return stand_in, True, True
+        if not _measured(value):
+            return value, None, False
+        number = float(value)  # type: ignore[arg-type]
+        return value, (low is None or number >= low) and (high is None or number <= high), False
+
+
+def _measured(value: object) -> bool:
+    return value is not None and not (isinstance(value, float) and not math.isfinite(value))
+
+
 class Target(_Strict):
     """One task target: exactly one of its keys."""
 
@@ -109,6 +181,8 @@ class Target(_Strict):
     no_collision: NoCollision | None = Field(None, description="the robot never touches static geometry "
                                              "(`- no_collision` alone is enough)")
     time_within: TimeWithin | None = Field(None, description="the robot is at rest for good by a time")
+    metric: MetricBound | None = Field(None, description="a metric of the run within bounds (the hallway's "
+                                       "targets are such bounds: hapticop/sim/scenes/targets/hallway.yaml)")
 
     @model_validator(mode="before")
     @classmethod
@@ -201,13 +275,16 @@ def body_index(names: tuple[tuple[str, ...], ...], body: str) -> int | None:
     return next((i for i, aliases in enumerate(names) if body in aliases), None)
 
 
-def judge(run: Run, targets: tuple[Target, ...], metrics: Mapping[str, object] | None = None) -> list[dict]:
-    """One row per target: what was measured, what was asked, and the verdict."""
+def judge(run: Run, targets: tuple[Target, ...], metrics: Mapping[str, object] | None = None,
+          operator: str = "") -> list[dict]:
+    """One row per target (those for this operator variant): what was measured, what was asked, the verdict."""
     m = metrics or run_metrics(run)
     x, y = run.pose[:, 0], run.pose[:, 1]
     rows = []
     for target in targets:
         kind, spec = target.kind, getattr(target, target.kind)
+        if isinstance(spec, MetricBound) and not spec.applies(operator):
+            continue
         if isinstance(spec, Reach):
             inside = spec.region.contains(x, y)
             when = float(run.t[int(np.argmax(inside))] - run.t[0]) if inside.any() else None
@@ -242,6 +319,11 @@ def judge(run: Run, targets: tuple[Target, ...], metrics: Mapping[str, object] |
             took = float(m["at_rest_after_s"])  # type: ignore[arg-type]
             rows.append(_row("at rest for good after", took if took == took else "still moving", "s",
                              f"<= {spec.max_s:g}", took <= spec.max_s))
+        elif isinstance(spec, MetricBound):
+            value, ok, bounded = spec.verdict(m)
+            shown = value if _measured(value) else "not measured"
+            rows.append({**_row(spec.name.replace("_", " ") + (f" (bound: {spec.bounded_by})" if bounded else ""),
+                                shown, "", spec.text(), bool(ok)), "ok": ok})
         else:  # pragma: no cover - every kind is handled above
             raise AssertionError(kind)
     return rows

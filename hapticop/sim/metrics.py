@@ -13,12 +13,11 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.sim.hallway import HallwayGeometry, World
 from hapticop.sim.recording import TrajectoryRecorder, as_channels
 
 F64 = NDArray[np.float64]
@@ -103,7 +102,7 @@ def autonomous_reference_s(travel_m: float, v_cruise_mps: float, braking_decel_m
 
 def compute_metrics(
     data: TrajectoryRecorder | Mapping[str, np.ndarray],
-    geometry: HallwayGeometry,
+    geometry: Any,  # a hapticop.sim.hallway_task.Hallway (not imported: it imports the judge, which imports this)
     *,
     v_cruise_mps: float | None = None,
     braking_decel_mps2: float = 0.5,
@@ -111,20 +110,22 @@ def compute_metrics(
     force_limit_n: float = 10.0,
     workspace_m: float = 0.05,
     near_stop_m: float = 0.5,
-    world: World | None = None,
 ) -> RunMetrics:
     """§5's metrics from a run's log. v_cruise_mps (the operator profile's cruise speed) is needed for T_ref;
-    a_b and tau_r default to §9.1's 0.5 m/s^2 and §2's 0.15 s."""
+    a_b and tau_r default to §9.1's 0.5 m/s^2 and §2's 0.15 s. The clearances are the log's (the world
+    records them as MuJoCo measures them), else measured the same way on the hallway's scene."""
     d = as_channels(data)
     t, pose = d["t"].astype(np.float64), d["pose"].astype(np.float64)
     if len(t) < 2:
         raise ValueError("need at least two samples")
     g = geometry
-    world = world or World.from_geometry(g)
-    fp = g.footprint
-    clear_all = d["clearance"] if "clearance" in d else world.clearances(pose, fp)
-    front = world.clearances(pose, fp, kinds=("end",))
-    side = world.clearances(pose, fp, kinds=("side", "pillar"))
+    if "front_clearance" in d and "side_clearance" in d:
+        front, side = d["front_clearance"].astype(np.float64), d["side_clearance"].astype(np.float64)
+        clear_all = d["clearance"] if "clearance" in d else np.minimum(front, side)
+    else:
+        measured = g.clearances(pose)
+        clear_all = d["clearance"] if "clearance" in d else measured[:, 0]
+        front, side = measured[:, 1], measured[:, 2]
     speed = np.abs(d["robot_velocity"][:, 0]) if "robot_velocity" in d else _speed_from_poses(t, pose)
 
     end, ended_by, still_start = _run_end(t, pose[:, 0], speed, clear_all, g)
@@ -205,11 +206,11 @@ def _first(mask: NDArray[np.bool_]) -> int:
     return int(np.argmax(mask)) if mask.any() else len(mask)
 
 
-def _run_end(t: F64, x: F64, speed: F64, clearance: F64, g: HallwayGeometry) -> tuple[int, EndReason, int]:
+def _run_end(t: F64, x: F64, speed: F64, clearance: F64, g: Any) -> tuple[int, EndReason, int]:
     """(end index, why, first index of the final still period) by §2's rules, evaluated on the log."""
     n = len(t)
     idx = np.arange(n)
-    still = (speed < g.still_speed_mps) & (x >= 0.5 * (g.entrance_x_m + g.length_m))
+    still = (speed < g.still_speed_mps) & (x >= g.middle_x_m)
     streak_start = np.maximum.accumulate(np.where(still, -1, idx)) + 1
     held = still & (t - t[np.minimum(streak_start, n - 1)] >= g.still_time_s - 1e-9)
     i_stop, i_crash = _first(held), _first(clearance <= 0.0)

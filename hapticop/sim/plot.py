@@ -9,17 +9,21 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hapticop.devices.ropod.body import Footprint
-from hapticop.sim.hallway import HallwayGeometry
 from hapticop.sim.recording import TrajectoryRecorder, as_channels
 
+if TYPE_CHECKING:
+    from hapticop.sim.hallway_task import Hallway
 
-def scene_outlines(engine) -> list[np.ndarray]:
+
+def scene_outlines(engine, grow_m: float = 0.0) -> list[np.ndarray]:
     """Each static geom of a loaded scene (hapticop.sim.engine) seen from above: a box's four corners, any
-    other shape a circle of its radius; (k, 2) arrays of x, y."""
+    other shape a circle of its radius; (k, 2) arrays of x, y, in the order of `engine.static`. `grow_m`
+    widens each by that much on every side (a distance drawn around it)."""
     import mujoco
 
     m, d = engine.model, engine.data
@@ -29,17 +33,17 @@ def scene_outlines(engine) -> list[np.ndarray]:
         centre, size = d.geom_xpos[g, :2], m.geom_size[g]
         if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
             turn = d.geom_xmat[g].reshape(3, 3)[:2, :2]
-            local = np.array([(1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0)]) * size[:2]
+            local = np.array([(1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0)]) * (size[:2] + grow_m)
             outlines.append(centre + local @ turn.T)
         else:
             a = np.linspace(0.0, 2.0 * np.pi, 33)
-            outlines.append(centre + size[0] * np.column_stack([np.cos(a), np.sin(a)]))
+            outlines.append(centre + (size[0] + grow_m) * np.column_stack([np.cos(a), np.sin(a)]))
     return outlines
 
 
 def plot_run(
     data: TrajectoryRecorder | Mapping[str, np.ndarray],
-    geometry: HallwayGeometry | None,
+    geometry: Hallway | None,
     path: str | Path,
     *,
     walls: Sequence[np.ndarray] = (),
@@ -49,7 +53,8 @@ def plot_run(
     dpi: int = 110,
 ) -> Path:
     """Write the PNG and return its path. Needs the "t" and "pose" channels; forces and velocities if logged.
-    Without a hallway (`geometry` None) the path is drawn among `walls` (`scene_outlines`)."""
+    In a hallway its scene's static geometry is drawn, with dist1 around the sides and dist2 before the end
+    wall; without one (`geometry` None) the path is drawn among `walls` (`scene_outlines`)."""
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -63,18 +68,22 @@ def plot_run(
     FigureCanvasAgg(fig)  # Agg, without pyplot: no global state, no display needed
     top, mid, low = fig.subplots(3, 1, height_ratios=[1.4, 1, 1])
 
-    # Top view: walls, comfort lines at dist1, the stop line at dist2, the path and footprints.
+    # Top view: the scene's static geometry, dist1 around its sides, dist2 before its end wall, the path.
     if g is not None:
-        segs, _ = g.segments()
-        for s in segs:
-            top.plot(s[:, 0], s[:, 1], color="black", lw=2.5, solid_capstyle="butt")
-        h, inner = 0.5 * g.width_m, 0.5 * g.width_m - g.dist1_m
-        for y, label in ((inner, "dist1 from the side walls"), (-inner, None)):
-            top.plot([g.entrance_x_m, g.length_m], [y, y], ls=":", color="tab:green", lw=1, label=label)
-        top.plot([g.stop_line_x_m] * 2, [-h, h], ls="--", color="tab:red", lw=1, label="dist2 stop line")
+        engine = g.engine()
+        walls = scene_outlines(engine)
+        for grow, front, style, label in (
+                (g.dist1_m, False, dict(ls=":", color="tab:green"), "dist1 from the sides"),
+                (g.dist2_m, True, dict(ls="--", color="tab:red"), "dist2 before the end wall")):
+            for i, outline in enumerate(scene_outlines(engine, grow)):
+                if g.front[i] == front:
+                    closed = np.vstack([outline, outline[:1]])
+                    top.plot(closed[:, 0], closed[:, 1], lw=1, label=label, **style)
+                    label = None
     for outline in walls:
         top.fill(outline[:, 0], outline[:, 1], facecolor="0.3", edgecolor="black", lw=0.8)
     fp = g.footprint if g is not None else footprint or Footprint()
+    reach = np.vstack([*walls, pose[:, :2]]) if len(walls) else pose[:, :2]
     every = max(1, int(round(footprint_every_s / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
     for c in fp.corners(pose[::every]):
         top.fill(c[:, 0], c[:, 1], facecolor="tab:blue", alpha=0.08, edgecolor="tab:blue", lw=0.5)
@@ -82,9 +91,8 @@ def plot_run(
     top.fill(c[:, 0], c[:, 1], facecolor="none", edgecolor="tab:blue", lw=1.5)
     top.plot(pose[:, 0], pose[:, 1], color="tab:blue", lw=1.2, label="robot centre")
     top.set_aspect("equal")
-    if g is not None:
-        top.set_xlim(min(g.entrance_x_m, float(pose[:, 0].min())) - 0.3, g.length_m + 0.3)
-        top.set_ylim(-h - 0.3, h + 0.3)
+    top.set_xlim(float(reach[:, 0].min()) - 0.3, float(reach[:, 0].max()) + 0.3)  # not the grown outlines
+    top.set_ylim(float(reach[:, 1].min()) - 0.3, float(reach[:, 1].max()) + 0.3)
     top.set_xlabel("x [m]")
     top.set_ylabel("y [m] (left +)")
     top.set_title(title or f"{g.name if g is not None else 'scene'}: run of {t[-1] - t[0]:.1f} s")

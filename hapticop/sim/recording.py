@@ -25,7 +25,9 @@ CHANNELS: dict[str, tuple[tuple[int, ...], type]] = {
     "force_env": ((3,), np.float64),  # environmental force F_env on the handle [N]
     "force_hand": ((3,), np.float64),  # the hand's force on the handle [N]
     "force_device": ((3,), np.float64),  # the whole force sent to the device, after saturation [N]
-    "clearance": ((), np.float64),  # footprint clearance to all walls [m]
+    "clearance": ((), np.float64),  # footprint clearance to all static geometry [m] (MuJoCo's)
+    "front_clearance": ((), np.float64),  # ... to a hallway's end wall [m]
+    "side_clearance": ((), np.float64),  # ... to everything else [m]
     "pc_power": ((), np.float64),  # power the passivity controller dissipates [W]
     "scan": ((), np.bool_),  # a new scan reached the force model in this cycle
     "risk_true": ((), np.float64),  # ground-truth risk rho* from the undelayed true state
@@ -55,6 +57,7 @@ class TrajectoryRecorder:
         self.force_env, self.force_hand, self.force_device = d["force_env"], d["force_hand"], d["force_device"]
         self.clearance, self.pc_power, self.scan, self.risk_true = (
             d["clearance"], d["pc_power"], d["scan"], d["risk_true"])
+        self.front_clearance, self.side_clearance = d["front_clearance"], d["side_clearance"]
 
     def append(
         self,
@@ -70,6 +73,8 @@ class TrajectoryRecorder:
         force_hand: ArrayLike | None = None,
         force_device: ArrayLike | None = None,
         clearance: float | None = None,
+        front_clearance: float | None = None,
+        side_clearance: float | None = None,
         pc_power: float | None = None,
         scan: bool | None = None,
         risk_true: float | None = None,
@@ -109,6 +114,12 @@ class TrajectoryRecorder:
         if clearance is not None:
             self.clearance[i] = clearance
             w["clearance"] = True
+        if front_clearance is not None:
+            self.front_clearance[i] = front_clearance
+            w["front_clearance"] = True
+        if side_clearance is not None:
+            self.side_clearance[i] = side_clearance
+            w["side_clearance"] = True
         if pc_power is not None:
             self.pc_power[i] = pc_power
             w["pc_power"] = True

@@ -16,9 +16,10 @@ import math
 from typing import Literal
 from xml.sax.saxutils import quoteattr
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from hapticop.devices.ropod.body import Body
+from hapticop.sim.judge import Target
 
 _ROBOT = Body()
 
@@ -102,6 +103,57 @@ class Lidar(_Strict):
     max_range_m: float = Field(10.0, gt=0, description="farther returns count as none")
 
 
+AXES = ("x", "y", "z")
+
+
+class Handle(_Strict):
+    """A device's handle as a body of the scene: a sphere put, every step, where the device's position says,
+    which touches the scene's walls and bodies. The contacts' force on it is published in the device's
+    frame, so a haptic device (a Falcon) can feel the scene. The contact is a spring and damper on the
+    depth: F = stiffness * depth + damping * approach speed (MuJoCo's soft contact, set to these values)."""
+
+    name: str = Field(pattern=r"^[a-z][a-z0-9_]*$", max_length=40, description="its ports on the world are "
+                      "NAME_handle_position, NAME_handle_velocity (in) and NAME_handle_force (out)")
+    origin_m: tuple[float, float, float] = Field(description="where the device frame's origin is in the scene (m)")
+    axes: tuple[str, str, str] = Field(("x", "y", "z"), description="the device's x, y and z axes as scene axes "
+                                       "('x', '-y', ...): a Falcon (x right, y up, z towards its operator) facing "
+                                       "the scene's +x is [-y, z, -x]")
+    radius_m: float = Field(0.005, gt=0, le=0.5, description="the sphere's radius: the tip that touches (m)")
+    mass_kg: float = Field(0.1, gt=0, description="its mass as bodies it pushes feel it")
+    stiffness_n_per_m: float = Field(2000.0, gt=0, le=1e6, description="the contact's stiffness on the depth")
+    damping_ns_per_m: float = Field(2.0, ge=0, le=1e4, description="the contact's damping on the approach speed")
+    friction: float = Field(0.0, ge=0, description="sliding friction of the tip (0: frictionless; with friction "
+                            "the normal force departs from the equation by a few per cent, MuJoCo's pyramidal cone)")
+
+    @field_validator("axes")
+    @classmethod
+    def _a_rotation(cls, axes: tuple[str, str, str]) -> tuple[str, str, str]:
+        """A right-handed frame: each scene axis once, with the handedness of x, y, z."""
+        for a in axes:
+            if a.lstrip("+-") not in AXES or a.count("-") + a.count("+") > 1:
+                raise ValueError(f"axis {a!r} is none of x, y, z, -x, -y, -z")
+        if sorted(a.lstrip("+-") for a in axes) != list(AXES):
+            raise ValueError(f"{list(axes)} names a scene axis twice: each of x, y, z once")
+        if round(float(_det(handle_rotation(axes)))) != 1:
+            raise ValueError(f"{list(axes)} is a left-handed frame: change one sign")
+        return axes
+
+
+def handle_rotation(axes: tuple[str, str, str]) -> list[list[float]]:
+    """The device's axes as columns of scene vectors: R with p_scene = origin + R p_device."""
+    columns = []
+    for a in axes:
+        v = [0.0, 0.0, 0.0]
+        v[AXES.index(a.lstrip("+-"))] = -1.0 if a.startswith("-") else 1.0
+        columns.append(v)
+    return columns
+
+
+def _det(c: list[list[float]]) -> float:
+    (a, b, x), (d, e, y), (g, h, z) = c
+    return a * (e * z - y * h) - d * (b * z - x * h) + g * (b * y - x * e)
+
+
 class Robot(_Strict):
     """The ropod: a rigid rectangular base moved by the plant (hapticop.devices.ropod.plant)."""
 
@@ -114,26 +166,17 @@ class Robot(_Strict):
     lidar: Lidar = Field(default_factory=Lidar, description="the scanner on it")
 
 
-class Pillar(_Strict):
-    """A pillar against a side wall, for the judge's side clearance (the scene's boxes are its geometry)."""
-
-    x_m: float = Field(description="its centre along the hallway")
-    along_m: float = Field(description="its length along the hallway")
-    depth_m: float = Field(description="how far it stands out of the wall")
-    side: Literal["left", "right"] = Field("right", description="the wall it stands against")
-
-
 class HallwayTask(_Strict):
-    """What the hallway experiment's judge measures against (docs/hallway-experiment.md §2, §5)."""
+    """What the hallway experiment's metrics measure against (docs/hallway-experiment.md §2, §5): the
+    clearances themselves are MuJoCo's, from the robot's geom to the scene's static geometry."""
 
-    name: str = Field(description="H1..H6 of docs/hallway-experiment.md §2")
-    width_m: float = Field(gt=0, description="between the side walls")
-    length_m: float = Field(gt=0, description="x of the end wall's face")
-    entrance_x_m: float = Field(0.0, description="x of the open entrance")
+    name: str = Field(description="H1..H6 of docs/hallway-experiment.md §2, or a name of the user's own")
+    end_wall: tuple[str, ...] = Field(("end",), min_length=1, description="the static geometry (names of walls, "
+                                      "boxes or cylinders) the stop is measured against; all the rest is the sides")
+    middle_x_m: float = Field(description="a standstill ends the run only past this x (the hallway's middle)")
     dist1_m: float = Field(0.40, description="side clearance to keep")
     dist2_m: float = Field(0.50, description="where the front should stop before the end wall")
     dist3_m: float = Field(0.10, description="virtual bumper: nearer counts as a collision")
-    pillars: tuple[Pillar, ...] = Field((), description="pillars against the side walls")
 
 
 class Scene(_Strict):
@@ -146,8 +189,12 @@ class Scene(_Strict):
     boxes: tuple[Block3, ...] = Field((), description="more static boxes: pillars, shelves")
     cylinders: tuple[Cylinder, ...] = Field((), description="static upright cylinders")
     bodies: tuple[Movable, ...] = Field((), description="movable bodies")
+    handles: tuple[Handle, ...] = Field((), description="devices' handles in the scene, each moved by its device")
     robot: Robot = Field(default_factory=Robot, description="the ropod: its start, body and LIDAR")
-    hallway: HallwayTask | None = Field(None, description="the hallway experiment's task, for its judge")
+    hallway: HallwayTask | None = Field(None, description="the hallway experiment's task, for its metrics")
+    targets: tuple[Target, ...] | str = Field((), description="task targets a run in the scene is judged by "
+                                              "(docs/scenes.md, the judge), or a file of them beside the scene "
+                                              "('hallway': the hallway experiment's, shipped)")
     timestep_s: float = Field(0.001, gt=0, le=0.01, description="the engine's step: the simulators' period")
 
     def material(self, name: str) -> Material | None:
@@ -215,5 +262,28 @@ def to_mjcf(scene: Scene, name: str = "scene") -> str:
                 f'      <geom name="bodies[{i}]" type="{kind}" size="{size}" mass="{_f(b.mass_kg or 1.0)}" '
                 f'{_geom_attrs(scene, b.material, b.friction)}/>',
                 "    </body>"]
+    for h in scene.handles:
+        out += _handle_mjcf(h)
     out += ["  </worldbody>", "</mujoco>"]
     return "\n".join(out) + "\n"
+
+
+HANDLE_SOLIMP = 0.99
+"""The handle's contact impedance, constant over depth: with stiffness and damping given directly
+(negative solref), MuJoCo's contact force on a body of mass m is then m (k depth + b speed)."""
+
+
+def _handle_mjcf(h: Handle) -> list[str]:
+    """A handle: a sphere on three slide joints along the device's axes from its origin, so the joints'
+    positions are the device's and their constraint force is the contact force in the device frame. Its
+    weight compensated (gravcomp); its contact parameters win over the other geom's (priority)."""
+    n, m = f"handle_{h.name}", h.mass_kg
+    joints = [f'      <joint name="{n}_{a}" type="slide" axis="{_f(*column)}"/>'
+              for a, column in zip(AXES, handle_rotation(h.axes), strict=True)]
+    condim = 3 if h.friction > 0 else 1
+    return ([f'    <body name="{n}" pos="{_f(*h.origin_m)}" gravcomp="1">'] + joints +
+            [f'      <geom name="{n}" type="sphere" size="{_f(h.radius_m)}" mass="{_f(m)}" priority="1" '
+             f'condim="{condim}" friction="{_f(h.friction, 0.005, 0.0001)}" '
+             f'solref="{_f(-h.stiffness_n_per_m / m, -h.damping_ns_per_m / m)}" '
+             f'solimp="{_f(HANDLE_SOLIMP, HANDLE_SOLIMP, 0.001)}" rgba="0.9 0.3 0.2 1"/>',
+             "    </body>"])

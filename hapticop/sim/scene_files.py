@@ -10,14 +10,15 @@ overlaps, a robot that starts inside something, and a scene MuJoCo cannot load (
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.model_errors import diagnostics_from
 from hapticop.composition.yamlsource import SourceError, parse_text, read_text
+from hapticop.sim.judge import Target
 from hapticop.sim.scene import Scene, to_mjcf
 
 SHIPPED = Path(__file__).resolve().parent / "scenes"
@@ -32,6 +33,29 @@ class Loaded:
     xml: str
     scene: Scene | None
     file: str  # where it came from ("" inline)
+    places: dict[str, tuple[tuple, int]] = field(default_factory=dict)
+    """A movable body's or handle's MJCF name: its path in the scene (and a body's name, if it has one) and its
+    line in `file` (0: unknown)."""
+
+    def where(self, mjcf_name: str, inline: str = "scene") -> str:
+        """`file:line: path` of what the scene calls `mjcf_name` (what is known of it), for a message at run time;
+        an inline scene's path starts with `inline`, where the composition has it."""
+        path, line = self.places.get(mjcf_name, ((mjcf_name,) if mjcf_name else (), 0))
+        if len(path) == 3:  # a named body: its name after its path
+            path, called = path[:2], f" '{path[2]}'"
+        else:
+            called = ""
+        dotted = ".".join(str(part) for part in (() if self.file else (inline,)) + path) + called
+        return f"{self.file}{f':{line}' if line else ''}: {dotted}" if self.file else dotted
+
+
+def _places(scene: Scene, line) -> dict[str, tuple[tuple, int]]:
+    """Where a scene declares each body the engine may blame at run time; `line(path)` finds its line."""
+    named = {f"bodies[{i}]": ("bodies", i) for i in range(len(scene.bodies))}
+    named.update({f"handle_{h.name}": ("handles", i) for i, h in enumerate(scene.handles)})
+    named["robot"] = ("robot",)
+    called = {f"bodies[{i}]": b.name for i, b in enumerate(scene.bodies) if b.name}
+    return {name: (path + ((called[name],) if name in called else ()), line(path)) for name, path in named.items()}
 
 
 def find(name: str, folder: Path | None = None) -> Path | None:
@@ -54,7 +78,9 @@ def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tu
     """The scene `ref` names, checked; or None and the findings (paths under `prefix` for an inline one)."""
     if isinstance(ref, Scene):
         found = check(ref, prefix)
-        return (None if found else Loaded(to_mjcf(ref), ref, "")), found
+        if isinstance(ref.targets, str) and not found:
+            ref, found = with_targets(ref, folder, Diagnostic("", "", prefix + ("targets",)))
+        return (None if found else Loaded(to_mjcf(ref), ref, "", _places(ref, lambda path: 0))), found
     path = find(ref, folder)
     if path is None:
         return None, [Diagnostic("scene-file", f"no scene '{ref}': not a shipped scene "
@@ -76,7 +102,41 @@ def load(ref: str | Scene, folder: Path | None = None, prefix: tuple = ()) -> tu
     except ValidationError as error:
         return None, [source.place(d) for d in diagnostics_from(error, Scene)]
     found = [source.place(d) for d in check(scene, ())]
-    return (None if found else Loaded(to_mjcf(scene, path.stem), scene, str(path))), found
+    if isinstance(scene.targets, str) and not found:
+        scene, found = with_targets(scene, path.parent, source.place(Diagnostic("", "", ("targets",))))
+    if found:
+        return None, found
+    places = _places(scene, lambda at: source.locate(at)[0] or 0)
+    return Loaded(to_mjcf(scene, path.stem), scene, str(path), places), found
+
+
+class TargetsFile(BaseModel):
+    """A file of targets: what it is, and the targets."""
+
+    model_config = ConfigDict(extra="forbid")
+    doc: str = ""
+    targets: tuple[Target, ...]
+
+
+def with_targets(scene: Scene, folder: Path | None, named_at: Diagnostic) -> tuple[Scene, list[Diagnostic]]:
+    """The scene with the targets of the file its `targets` names (a shipped name such as 'hallway', or a
+    path beside the scene), or the findings located in that file (`named_at`: where the scene names it)."""
+    name = str(scene.targets)
+    shipped = SHIPPED / "targets" / f"{name}.yaml"
+    path = shipped if Path(name).suffix == "" and shipped.is_file() else find(name, folder)
+    if path is None:
+        known = ", ".join(sorted(p.stem for p in (SHIPPED / "targets").glob("*.yaml")))
+        return scene, [Diagnostic("scene-targets", f"no targets file '{name}': not a shipped one ({known}) nor a "
+                                  "file beside the scene", named_at.path, file=named_at.file, line=named_at.line,
+                                  column=named_at.column)]
+    try:
+        source = parse_text(read_text(path, "a targets file"), str(path))
+        listed = TargetsFile.model_validate(source.tree)
+    except SourceError as error:
+        return scene, [error.diagnostic]
+    except ValidationError as error:
+        return scene, [source.place(d) for d in diagnostics_from(error, TargetsFile)]
+    return scene.model_copy(update={"targets": listed.targets}), []
 
 
 def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:
@@ -102,6 +162,21 @@ def check(scene: Scene, prefix: tuple) -> list[Diagnostic]:
         if body.shape == "cylinder" and (body.radius_m is None or body.height_m is None):
             found.append(Diagnostic("scene-shape", "a movable cylinder needs radius_m and height_m",
                                     prefix + ("bodies", i)))
+    seen: set[str] = set()
+    for i, handle in enumerate(scene.handles):
+        if handle.name in seen:
+            found.append(Diagnostic("scene-handle", f"a second handle named '{handle.name}': its ports would be "
+                                    "the first's", prefix + ("handles", i, "name"), hint="give each handle a name "
+                                    "of its own"))
+        seen.add(handle.name)
+    if scene.hallway is not None:
+        names = {mjcf for mjcf, _ in scene.static_names()} | {getattr(scene, kind)[i].name
+                                                                for _, (kind, i) in scene.static_names()}
+        for j, wall in enumerate(scene.hallway.end_wall):
+            if wall not in names:
+                known = ", ".join(sorted(n for n in names if n)) or "none"
+                found.append(Diagnostic("scene-task", f"the hallway's end wall '{wall}' is no static geometry of "
+                                        "the scene", prefix + ("hallway", "end_wall", j), expected=f"one of: {known}"))
     if found:
         return found
     xml = to_mjcf(scene)
@@ -155,7 +230,9 @@ def _overlaps(scene: Scene, xml: str, prefix: tuple) -> list[Diagnostic]:
     movers = [("robot", engine.robot_geom, ("robot", "start"))] + [
         (f"body '{b.name or i}'", mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"bodies[{i}]"), ("bodies", i,
                                                                                                   "position_m"))
-        for i, b in enumerate(scene.bodies)]
+        for i, b in enumerate(scene.bodies)] + [
+        (f"handle '{h.name}'", mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"handle_{h.name}"),
+         ("handles", i, "origin_m")) for i, h in enumerate(scene.handles)]
     for what, g, path in movers:
         for name in names:
             depth = mujoco.mj_geomDistance(m, d, g, geom[name], 0.01, None)

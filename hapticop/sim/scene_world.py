@@ -7,9 +7,9 @@ scene (where the simulated LIDAR scans from), the contacts' wrench on the robot 
 force: a pushed box slows it, a wall stops it) and the movable bodies' poses (the LIDAR sees them where
 they are). The robot touching static geometry is a collision. Once the operator drives it records the run
 (robot pose and velocity, handle, forces, clearance) and raises `finished` when the operator is done and
-the robot still, the robot crashes, or time is up. With the scene's `hallway` task the run is judged by
-the hallway experiment's metrics and targets (docs/hallway-experiment.md §5, §6), and by the `targets`
-declared on the world with the judge users configure (hapticop.sim.judge, docs/scenes.md §5).
+the robot still, the robot crashes, or time is up. It is judged by the targets its scene and its params
+declare, with the judge users configure (hapticop.sim.judge, docs/scenes.md §5); with the scene's
+`hallway` task, on the hallway experiment's metrics among them (docs/hallway-experiment.md §5, §6).
 """
 
 from __future__ import annotations
@@ -26,8 +26,11 @@ from pydantic import Field, model_validator
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Display, Interface, Params, Port
 from hapticop.composition.diagnostics import Diagnostic
-from hapticop.sim.judge import Targets
+from hapticop.sim.judge import STILL_MPS, Target, Targets
 from hapticop.sim.scene import Scene
+
+STILL_S = 1.0
+"""The robot still this long, with the operator done, ends the run (docs/hallway-experiment.md §2)."""
 
 
 class SceneWorldParams(Params):
@@ -41,9 +44,10 @@ class SceneWorldParams(Params):
     targets: Targets = ()
     time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
     plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
-    judge: bool = Field(True, description="judge the run by the hallway experiment's targets; false for an "
-                        "application that does not drive the robot down the hallway (the desk): its "
-                        "trajectory is kept, but nothing is judged")
+    judge: bool = Field(True, description="judge the run as a hallway run: the scene's hallway task's metrics "
+                        "(metrics.json) with the verdicts of the targets on them; false for an application that "
+                        "does not drive the robot down a hallway (the desk): its trajectory is kept, the scene's "
+                        "targets do not apply, only the world's own `targets` are judged")
 
     @model_validator(mode="after")
     def _hallway_names_the_scene(self) -> SceneWorldParams:
@@ -62,16 +66,33 @@ def _loaded(params: SceneWorldParams, folder: Path | None = None):
 
 def _count_bodies(params: SceneWorldParams) -> int:
     """Movable bodies of the scene, for the shape of `body_poses` (0 when it cannot be read: validation says why)."""
+    return _scene_parts(params)[0]
+
+
+def _scene_parts(params: SceneWorldParams) -> tuple[int, tuple[str, ...]]:
+    """The scene's movable bodies (how many) and handles (their names), for the world's ports; none when it
+    cannot be read (validation says why)."""
     if isinstance(params.scene, Scene):
-        return len(params.scene.bodies)
+        return len(params.scene.bodies), tuple(h.name for h in params.scene.handles)
     loaded, _ = _loaded(params)
     if loaded is None:
-        return 0
+        return 0, ()
     if loaded.scene is not None:
-        return len(loaded.scene.bodies)
+        return len(loaded.scene.bodies), tuple(h.name for h in loaded.scene.handles)
     from hapticop.sim.engine import Engine
 
-    return Engine(loaded.xml).bodies
+    engine = Engine(loaded.xml)
+    return engine.bodies, tuple(engine.handles)
+
+
+def _handle_ports(name: str) -> tuple[dict[str, Port], dict[str, Port]]:
+    """A handle's ports on the world: its device's position and velocity in, the contacts' force out."""
+    return ({f"{name}_handle_position": Port("float64", (3,), "m", f"where handle '{name}' is: its device's "
+                                             "position, device frame"),
+             f"{name}_handle_velocity": Port("float64", (3,), "m/s", f"handle '{name}''s velocity, device frame "
+                                             "(unconnected: at rest)", required=False)},
+            {f"{name}_handle_force": Port("float64", (3,), "N", f"the contacts' force on handle '{name}', device "
+                                          "frame")})
 
 
 class SceneWorld(Block):
@@ -102,7 +123,7 @@ class SceneWorld(Block):
         "operator_done": Port("uint8", (), "1", "the operator believes the task is over"),
     }
     outputs = {}
-    flags_written = {"finished": "the operator is done, the robot crashed, or time is up"}
+    flags_written = {"finished": "the operator is done, the robot crashed, time is up, or the simulation exploded"}
 
     @classmethod
     def interface(cls, params: SceneWorldParams) -> Interface:
@@ -113,12 +134,16 @@ class SceneWorld(Block):
                                    "frame (the plant's external force)"),
             "collision": Port("uint8", (), "1", "1 while the robot touches static geometry"),
         }
-        bodies = _count_bodies(params)
+        bodies, handles = _scene_parts(params)
         if bodies:
             outputs["body_poses"] = Port("float64", (bodies, 3), "m, m, rad", "each movable body's x, y and yaw, "
                                          "in the order the scene lists them")
         base = super().interface(params)
         inputs = dict(base.inputs)
+        for name in handles:
+            handle_in, handle_out = _handle_ports(name)
+            inputs.update(handle_in)
+            outputs.update(handle_out)
         if not params.judge:  # nobody's run to judge: the operator's ports may stay unconnected
             for name in ("operator_time", "operator_done"):
                 inputs[name] = dataclasses.replace(inputs[name], required=False)
@@ -139,14 +164,15 @@ class SceneWorld(Block):
     def promises(cls, params: SceneWorldParams) -> tuple[str, ...]:
         """The trajectory (when an operator's clock or targets keep it); the hallway's metrics, the targets'
         verdicts and the picture when judged."""
-        if not params.judge and not params.targets and params.operator is None:
+        targets = _scene_targets(params)
+        if not params.judge and not targets and params.operator is None:
             return ()  # nothing keeps a trajectory: the streams (--record) are the run's record
         promised = ["trajectory.npz"]
         if params.judge:
             promised += ["metrics.json", "results.json"]
-        if params.targets:
+        if targets:
             promised += ["judge.json", "results.json"]
-        if params.plot and (params.judge or params.targets):
+        if params.plot and (params.judge or targets):
             promised.append("run.png")
         return tuple(dict.fromkeys(promised))
 
@@ -156,14 +182,21 @@ class SceneWorld(Block):
 
     def create(self) -> None:
         from hapticop.sim.engine import Engine
+        from hapticop.sim.hallway_task import Hallway
         from hapticop.sim.world_share import PublishedScene, publish_world
 
         loaded, found = _loaded(self.params)
         if loaded is None:
             raise ValueError("; ".join(d.to_text() for d in found))
+        self.loaded = loaded
         self.scene = scene = loaded.scene or Scene()
         self.engine = Engine(loaded.xml, self.name)
-        self.geometry = _judged_geometry(scene)
+        self.hallway = Hallway.of(scene, loaded.xml) if scene.hallway is not None else None
+        self.front = self.hallway.front if self.hallway is not None else None  # the end wall, for its clearance
+        # the scene's targets and the world's: the hallway's table judges the bounds on its metrics, the rest
+        # are the judge's rows (judge.json)
+        self.targets = _all_targets(self.params, scene)
+        self.scene_targets = _generic(self.params, scene, self.targets)
         shared = PublishedScene.of(scene, loaded.xml)
         self.start = shared.start
         publish_world(self.run_dir, self.name, shared)
@@ -178,15 +211,21 @@ class SceneWorld(Block):
         self.contact = np.zeros(capacity)  # |contact force| on the robot, per recorded sample
         self.body_track = np.zeros((capacity, self.engine.bodies, 3))
         self.body_aliases = _body_aliases(scene if loaded.scene is not None else None, self.engine.body_names)
+        self.handles = [(getattr(self.inputs, f"{n}_handle_position"), getattr(self.inputs, f"{n}_handle_velocity"),
+                         getattr(out, f"{n}_handle_force"), np.zeros(3)) for n in self.engine.handles]
 
     def compute(self) -> None:
         inputs, engine, out = self.inputs, self.engine, self.outputs
         if inputs.robot_pose.seq:
             place(self.start, inputs.robot_pose.value, self.pose)
         engine.place_robot(self.pose, inputs.robot_twist.value if inputs.robot_twist.seq else None)
-        engine.step()
+        self._place_handles()
+        try:
+            engine.step()
+        except RuntimeError as error:  # SceneError: said where the scene declares what exploded
+            raise self._located(error) from None
         engine.place_robot(self.pose)  # the step moved the robot's joints; the plant moves the robot
-        clearance = engine.clearance()
+        clearance, self.front_clearance, self.side_clearance = engine.clearances(self.front)
         engine.contact_wrench(self.wrench)
         out.collision.value[...] = clearance <= 0.0
         out.pose_in_hallway.publish()
@@ -195,31 +234,59 @@ class SceneWorld(Block):
         if self.bodies is not None:
             engine.body_poses(self.bodies)
             out.body_poses.publish()
-        if (inputs.operator_time.seq or self.params.targets) and not self.ended:
+        for i, (_, _, force, _) in enumerate(self.handles):
+            engine.handle_force(i, force.value)
+            force.publish()
+        if (inputs.operator_time.seq or self.scene_targets) and not self.ended:
             if self.started_ns is None and not inputs.operator_time.seq:  # no operator: the run is the whole run
                 self.started_ns = self.clock.now_ns()
             # a collision ends the run (a crash), unless the scene is judged by targets of its own: then it is counted
             touching = clearance <= 0.0
-            self.judge(clearance, touching and (self.params.judge or not self.params.targets))
+            self.judge(clearance, touching and (self.params.judge or not self.scene_targets))
             i = self.recorder.n - 1
             wrench = self.wrench
             self.contact[i] = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1])
             if self.bodies is not None:
                 self.body_track[i] = self.bodies
 
+    def _located(self, error: RuntimeError) -> RuntimeError:
+        """A scene's explosion said once, where the scene declares what exploded, and `finished` raised (a
+        running failure alone does not end a run); anything else as it is."""
+        from hapticop.sim.engine import SceneError
+
+        if not isinstance(error, SceneError):
+            return error
+        where = self.loaded.where(error.body, f"activities.{self.name}.params.scene")
+        self.ended = "the simulation exploded"
+        self.flags["finished"] = True  # nothing simulated is real any more: the composition ends the run on it
+        return SceneError(f"{where}: {error}", error.body)
+
+    def _place_handles(self) -> None:
+        """Each handle where its device last said, moving at its velocity; a position that is not finite or
+        beyond 10 m is not taken (the handle stays where it was)."""
+        for i, (position, velocity, _, last) in enumerate(self.handles):
+            if position.seq:
+                p = position.value
+                x, y, z = float(p[0]), float(p[1]), float(p[2])
+                if abs(x) < 10.0 and abs(y) < 10.0 and abs(z) < 10.0:  # also false for NaN
+                    last[0], last[1], last[2] = x, y, z
+            v = velocity.value
+            moving = velocity.valid and abs(float(v[0])) + abs(float(v[1])) + abs(float(v[2])) < 100.0
+            self.engine.place_handle(i, last, v if moving else None)
+
     def clean(self) -> None:
         self._hallway_clean()
-        if self.params.targets and self.recorder.n >= 2:
+        if self.scene_targets and self.recorder.n >= 2:
             self._judge_targets()
 
     def prepare(self, pose: np.ndarray) -> None:
-        """The judge's state, once `geometry` is known; `pose` is the output the robot's pose goes to."""
+        """The judge's state; `pose` is the output the robot's pose goes to."""
         from hapticop.sim.recording import TrajectoryRecorder
 
         p = self.params
-        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000, meta={"hallway": self.geometry.name})
+        self.recorder = TrajectoryRecorder(int(p.time_limit_s * 1000) + 1000,
+                                           meta={"hallway": self.hallway.name if self.hallway else "scene"})
         self.pose = pose
-        self.pose[:] = self.geometry.start
         self.started_ns: int | None = None  # when the operator started driving, on the system's clock
         self.ended = ""
         self.still_since: float | None = None
@@ -263,11 +330,12 @@ class SceneWorld(Block):
                              cmd_exec=self.executed if executed.seq else None,
                              handle_position=inputs.handle_position.value, handle_velocity=inputs.handle_velocity.value,
                              force_env=force.value if force.valid else self.nothing, force_hand=inputs.hand_force.value,
-                             force_device=inputs.device_force.value, clearance=clearance)
-        g = self.geometry
-        moving = abs(vx) >= g.still_speed_mps or abs(vy) >= g.still_speed_mps
+                             force_device=inputs.device_force.value, clearance=clearance,
+                             front_clearance=self.front_clearance if self.front is not None else None,
+                             side_clearance=self.side_clearance if self.front is not None else None)
+        moving = abs(vx) >= STILL_MPS or abs(vy) >= STILL_MPS
         self.still_since = None if moving else (t if self.still_since is None else self.still_since)
-        still = self.still_since is not None and t - self.still_since >= g.still_time_s
+        still = self.still_since is not None and t - self.still_since >= STILL_S
         if crashed:
             self.ended = "crash"
         elif inputs.operator_done.value and still:  # the judge's rule: stopped, and still for a while
@@ -293,7 +361,7 @@ class SceneWorld(Block):
         if not self.params.judge:
             self.log.info("not a hallway run: trajectory kept, nothing judged")
             return
-        metrics = compute_metrics(self.recorder, self.geometry, v_cruise_mps=_cruise_speed(operator))
+        metrics = compute_metrics(self.recorder, self.hallway, v_cruise_mps=_cruise_speed(operator))
         extra = {key: value for key, value in self.extremes.items() if math.isfinite(value)}
         (self.run_dir / "metrics.json").write_text(metrics_json(metrics, extra or None))
         self.log.always("run ended at %.3f s after the operator started: %s", end_time_s(metrics, self.recorder),
@@ -302,8 +370,8 @@ class SceneWorld(Block):
             try:
                 from hapticop.sim.plot import plot_run
 
-                plot_run(self.recorder, self.geometry, self.run_dir / "run.png",
-                         title=f"{self.geometry.name}, {self.variant} operator")
+                plot_run(self.recorder, self.hallway, self.run_dir / "run.png",
+                         title=f"{self.hallway.name}, {self.variant} operator")
             except RuntimeError as error:  # matplotlib missing: the numbers are still there
                 self.log.warning("no picture of the run: %s", error)
         self._results(metrics)
@@ -313,8 +381,8 @@ class SceneWorld(Block):
         """The rows `hapticop compose` prints at the end (results.json: any block may leave one)."""
         from hapticop.sim.targets import judged_rows
 
-        results = {"title": f"hallway {self.geometry.name}, {self.variant} operator",
-                   "rows": judged_rows(m, self.geometry, self.variant, end_time_s(m, self.recorder)),
+        results = {"title": f"hallway {self.hallway.name}, {self.variant} operator",
+                   "rows": judged_rows(m, self.hallway, self.variant, self.targets, end_time_s(m, self.recorder)),
                    "picture": "run.png" if (self.run_dir / "run.png").exists() else None}
         (self.run_dir / "results.json").write_text(json.dumps(results, indent=2))
 
@@ -348,7 +416,7 @@ class SceneWorld(Block):
                   bodies=self.body_track[:n], body_names=self.body_aliases, footprint=(r.length_m, r.width_m),
                   ended=self.ended)
         metrics = run_metrics(run)
-        rows = judge(run, self.params.targets, metrics)
+        rows = judge(run, self.scene_targets, metrics, self.variant)
         ok = all(row["ok"] for row in rows)
         (self.run_dir / "judge.json").write_text(json.dumps(json_plain({"metrics": metrics, "targets": rows, "ok": ok}),
                                                             indent=2))
@@ -361,6 +429,33 @@ class SceneWorld(Block):
             table = {"title": f"scene {self.name}", "rows": metric_rows(metrics) + rows,
                      "picture": self._plot_scene()}
         results.write_text(json.dumps(json_plain(table), indent=2))
+
+
+def _all_targets(params: SceneWorldParams, scene: Scene) -> tuple[Target, ...]:
+    """The targets the scene declares (its file's, resolved when loaded), unless the world is not to judge the
+    run by them (`judge: false`), and the world's own."""
+    declared = scene.targets if params.judge and isinstance(scene.targets, tuple) else ()
+    return declared + tuple(params.targets)
+
+
+def _generic(params: SceneWorldParams, scene: Scene, targets: tuple[Target, ...]) -> tuple[Target, ...]:
+    """The targets the generic judge gives rows (judge.json): all but the bounds on the hallway's metrics of a
+    judged hallway run, which its table shows."""
+    if not (params.judge and scene.hallway is not None):
+        return targets
+    from hapticop.sim.targets import hallway_metric
+
+    return tuple(t for t in targets if t.metric is None or not hallway_metric(t.metric.name))
+
+
+def _scene_targets(params: SceneWorldParams) -> tuple[Target, ...]:
+    """`_generic` of the params' scene, when it can be read (validation says why not)."""
+    if isinstance(params.scene, Scene) and not isinstance(params.scene.targets, str):
+        scene = params.scene
+    else:
+        loaded, _ = _loaded(params)
+        scene = loaded.scene if loaded is not None and loaded.scene is not None else Scene()
+    return _generic(params, scene, _all_targets(params, scene))
 
 
 def _body_aliases(scene: Scene | None, mjcf_names: list[str]) -> tuple[tuple[str, ...], ...]:
@@ -382,6 +477,12 @@ def _target_findings(params: SceneWorldParams, loaded) -> list[Diagnostic]:
 
     found = []
     for i, target in enumerate(params.targets):
+        bound = target.metric
+        if bound is not None and bound.relative_to and (loaded.scene is None or loaded.scene.hallway is None):
+            found.append(Diagnostic("scene-target", f"the bound on {bound.name} is relative to {bound.relative_to}, "
+                                    "a distance of the scene's hallway task, which the scene has not",
+                                    ("params", "targets", i, "metric", "relative_to"),
+                                    hint="absolute bounds, or a 'hallway:' task in the scene"))
         push = target.push_body
         if push is not None and body_index(aliases, push.body) is None:
             known = ", ".join(a[0] for a in aliases) or "none"
@@ -389,25 +490,6 @@ def _target_findings(params: SceneWorldParams, loaded) -> list[Diagnostic]:
                                     f"the scene", ("params", "targets", i, "push_body", "body"),
                                     expected=f"one of: {known}"))
     return found
-
-
-def _judged_geometry(scene: Scene):
-    """The hallway experiment's task constants for the judge (metrics and targets) from the scene."""
-    from hapticop.devices.ropod.body import Footprint
-    from hapticop.sim.hallway import HallwayGeometry, LidarModel, Pillar, SensorMount
-
-    r, task = scene.robot, scene.hallway
-    lidar = LidarModel(mount=SensorMount(x_m=r.lidar.x_m, y_m=r.lidar.y_m, yaw_rad=math.radians(r.lidar.yaw_deg)),
-                       noise_sigma_m=r.lidar.noise_sigma_m, min_range_m=r.lidar.min_range_m,
-                       max_range_m=r.lidar.max_range_m)
-    common = dict(start=(r.start[0], r.start[1], math.radians(r.start[2])), lidar=lidar,
-                  footprint=Footprint(length_m=r.length_m, width_m=r.width_m))
-    if task is None:
-        return HallwayGeometry(name="scene", **common)
-    return HallwayGeometry(name=task.name, width_m=task.width_m, length_m=task.length_m,
-                           entrance_x_m=task.entrance_x_m, dist1_m=task.dist1_m, dist2_m=task.dist2_m,
-                           dist3_m=task.dist3_m, pillars=tuple(Pillar(p.x_m, p.along_m, p.depth_m, p.side)
-                                                               for p in task.pillars), **common)
 
 
 def end_time_s(metrics, recorder) -> float:

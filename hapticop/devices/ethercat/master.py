@@ -68,13 +68,16 @@ def find_master(interface: str) -> SoemMaster | None:
 
 class SoemMaster:
     def __init__(self, interface: str, expected: Sequence[ExpectedSlave], receive_timeout_us: int = 2000,
-                 state_timeout_s: float = 2.0, frame_timeout_us: int | None = None, cycle_ns: int = 1_000_000):
+                 state_timeout_s: float = 2.0, frame_timeout_us: int | None = None, cycle_ns: int = 1_000_000,
+                 mailbox_timeout_us: int | None = None):
         import pysoem
 
         self.pysoem = pysoem
         pysoem.settings.always_release_gil = True
         if frame_timeout_us is not None:  # SOEM's EC_TIMEOUTRET: how long a configuration datagram may take
             pysoem.settings.timeouts.ret = frame_timeout_us
+        if mailbox_timeout_us is not None:  # SOEM's EC_TIMEOUTRXM: how long a slave may take to answer over CoE
+            pysoem.settings.timeouts.rx_mailbox = mailbox_timeout_us
         self.interface = interface
         self.expected = list(expected)
         self.receive_timeout_us = receive_timeout_us

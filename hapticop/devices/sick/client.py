@@ -75,12 +75,14 @@ class ColaClient:
         min_range_m: float = scan.MIN_RANGE_M,
         max_read_bytes: int = 256 * 1024,
         max_telegram: int = MAX_TELEGRAM,
+        sockets: Callable[[int, int], socket.socket] = socket.socket,
     ):
         if not 0 < backoff[0] <= backoff[1]:
             raise ValueError("backoff must be (first delay, longest delay) with 0 < first <= longest")
         infos = socket.getaddrinfo(host, port, socket.AF_UNSPEC, socket.SOCK_STREAM)  # once, not in a cycle
         self._family, _, _, _, self._address = infos[0]
         self.host, self.port = host, port
+        self._sockets = sockets  # socket.socket, or in-memory streams under the virtual clock (devices.memory_stream)
         self.backoff = backoff
         self._clock = clock_ns
         self.points = points
@@ -209,7 +211,7 @@ class ColaClient:
         if self.connects:
             self.reconnects += 1
         self.connects += 1
-        sock = socket.socket(self._family, socket.SOCK_STREAM)
+        sock = self._sockets(self._family, socket.SOCK_STREAM)
         sock.setblocking(False)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock = sock

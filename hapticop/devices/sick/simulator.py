@@ -55,13 +55,15 @@ class TiMSimulator:
         max_range_m: float = 10.0,
         max_catchup: int = 15,
         max_backlog: int = 1 << 20,
+        sockets: Callable[[int, int], socket.socket] = socket.socket,
     ):
         self.device = TiMDevice(
             ranges_m=ranges_m, noise_std_m=noise_std_m, rng=rng, scan_rate_hz=scan_rate_hz,
             serial_number=serial_number, device_name=device_name, firmware=firmware, uptime_us=uptime_us,
             telegram_counter=telegram_counter, tx_delay_us=tx_delay_us, max_range_m=max_range_m,
         )
-        self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        # socket.socket, or in-memory streams under the virtual clock (devices.memory_stream)
+        self._listener = sockets(socket.AF_INET, socket.SOCK_STREAM)
         self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self._listener.bind((host, port))
         self._listener.listen(4)
@@ -86,13 +88,11 @@ class TiMSimulator:
         self.refused_connections = 0
         self.bytes_sent = 0
         self.bytes_received = 0
-        # threaded mode
+        # threaded mode (its wake-up pair made by `start`: a stepped simulator has no socket of its own)
         self._lock = threading.RLock()
         self._thread: threading.Thread | None = None
         self._stopping = threading.Event()
-        self._wake_r, self._wake_w = socket.socketpair()
-        self._wake_r.setblocking(False)
-        self._wake_w.setblocking(False)
+        self._wake: tuple[socket.socket, socket.socket] | None = None
 
     # -- the device's clock and scans, as the tests read them ---------------------------------
 
@@ -271,7 +271,8 @@ class TiMSimulator:
         """The sockets a stepped simulator has work on when they are readable: a client
         connecting, a command arriving."""
         conn = self._conn
-        return (self._listener.fileno(),) if conn is None else (self._listener.fileno(), conn.fileno())
+        fds = (self._listener.fileno(),) if conn is None else (self._listener.fileno(), conn.fileno())
+        return tuple(fd for fd in fds if fd >= 0)  # in-memory streams have none
 
     # -- threaded mode ---------------------------------------------------------------------
 
@@ -280,6 +281,9 @@ class TiMSimulator:
         if self._thread is not None:
             raise RuntimeError("already started")
         self._stopping.clear()
+        self._wake = socket.socketpair()
+        for end in self._wake:
+            end.setblocking(False)
         self._thread = threading.Thread(target=self._serve, name=f"tim561-sim:{self.port}", daemon=True)
         self._thread.start()
         return self
@@ -289,17 +293,21 @@ class TiMSimulator:
         if thread is None:
             return
         self._stopping.set()
+        wake_r, wake_w = self._wake  # type: ignore[misc]
         try:
-            self._wake_w.send(b"x")
+            wake_w.send(b"x")
         except OSError:
             pass
         thread.join(timeout=5.0)
-        self._thread = None
+        self._thread = self._wake = None
+        wake_r.close()
+        wake_w.close()
 
     def _serve(self) -> None:
+        wake_r = self._wake[0]  # type: ignore[index]
         selector = selectors.DefaultSelector()
         selector.register(self._listener, selectors.EVENT_READ)
-        selector.register(self._wake_r, selectors.EVENT_READ)
+        selector.register(wake_r, selectors.EVENT_READ)
         watched: tuple[socket.socket, int] | None = None  # (socket, events) registered
         try:
             while not self._stopping.is_set():
@@ -322,9 +330,9 @@ class TiMSimulator:
                     watched = (conn, events)
                 timeout = 0.1 if due is None else min(max((due - self._clock()) / 1e9, 0.0), 0.1)
                 for key, _ in selector.select(timeout):
-                    if key.fileobj is self._wake_r:
+                    if key.fileobj is wake_r:
                         try:
-                            self._wake_r.recv(64)
+                            wake_r.recv(64)
                         except OSError:
                             pass
         finally:
@@ -335,8 +343,6 @@ class TiMSimulator:
         with self._lock:
             self._disconnect()
             self._listener.close()
-            self._wake_r.close()
-            self._wake_w.close()
 
     def __enter__(self) -> TiMSimulator:
         return self

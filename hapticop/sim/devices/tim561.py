@@ -1,4 +1,5 @@
-"""The simulated TiM561: CoLa A on a loopback port, scanning the simulated hallway from where the robot is.
+"""The simulated TiM561: CoLa A on a loopback port (an in-memory stream under the virtual clock), scanning the
+simulated hallway from where the robot is.
 
 It serves the LIDAR block as the scanner would (hapticop.devices.sick.simulator serves the
 device model over TCP) at an address it publishes in the run directory. The walls come from
@@ -57,7 +58,10 @@ class Tim561Simulator(Block):
 
     def configure_resources(self) -> bool:
         """Open the scanner once the world has published its hallway or scene, and say where it listens."""
+        import socket
+
         from hapticop.devices.link import publish_address
+        from hapticop.devices.memory_stream import MEMORY_SOCKETS
         from hapticop.devices.sick.device_model import ANGLES_RAD
         from hapticop.devices.sick.simulator import TiMSimulator
         from hapticop.sim.world_share import find_world
@@ -78,8 +82,12 @@ class Tim561Simulator(Block):
 
         self.engine = Engine(found.xml, world)  # the scene: MuJoCo casts the rays
         self.limits = (found.min_range_m, found.max_range_m, found.yaw_rad)
+        # Under the virtual clock the LIDAR block runs in this thread too: the same CoLa A bytes through
+        # in-memory streams (the block looks for the address there as well), no socket.
+        sockets = MEMORY_SOCKETS if self.clock.virtual else socket.socket
         self.device = TiMSimulator("127.0.0.1", 0, ranges_m=self._scan, noise_std_m=found.noise_sigma_m,
-                                   rng=self.rng, clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz)
+                                   rng=self.rng, clock_ns=self.clock.now_ns, scan_rate_hz=self.params.scan_rate_hz,
+                                   sockets=sockets)
         self.fault = "none"
         # The first step sets the scans' schedule. A thread at the scan rate may wake later for
         # that step than for the next ones; stepping half a period ahead of the clock sends each
