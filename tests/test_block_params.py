@@ -14,13 +14,13 @@ from hapticop.devices.ropod.velocity_controller import PlatformControllerParams
 from hapticop.haptics.force_models import BrakingFieldParams, ThesisParams
 from hapticop.haptics.governor import BlindPolicy, GovernorParams
 from hapticop.haptics.handle import CentringParams, DrivingParams
-from hapticop.haptics.scan_filter import MovingAverageParams, MovingMedianParams
+from hapticop.haptics.scan_filter import MovingMedianParams
 
 
 def test_the_haptic_controllers_defaults_are_the_libraries():
     p = HapticControllerParams()
     assert (p.centring, p.driving, p.blind) == (CentringParams(), DrivingParams(), BlindPolicy())
-    assert p.force_model == BrakingFieldParams() and p.scan_filter == MovingAverageParams()
+    assert p.force_model == BrakingFieldParams() and p.scan_filter is None
     assert p.governor is None  # the governor is chosen, not implied
 
 

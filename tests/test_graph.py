@@ -116,10 +116,12 @@ def test_an_unknown_view_lists_the_views():
 # Edge crossings the layered layout may draw at most (counted with `crossings`): what it drew before
 # it packed parts, chose its direction and kept its best ordering, and, for a composition changed
 # since, what it drew once the change came (the hallway's scene world feeds its contact force back
-# to the plant: one stream against the flow, 21 -> 38 crossings in the dataflow). A change to the
+# to the plant: one stream against the flow, 21 -> 38 crossings in the dataflow; the scan rendered by
+# scan_field between the LIDAR and the haptic controller: one layer more, which the Falcon's two
+# streams to the controller now cross, 38 -> 45, the picture checked by eye). A change to the
 # layout may not draw more.
 CROSSINGS_BEFORE = {
-    ("hallway", "dataflow"): 38, ("hallway", "nets"): 184, ("hallway", "all"): 248,
+    ("hallway", "dataflow"): 45, ("hallway", "nets"): 184, ("hallway", "all"): 248,
     ("teleop", "dataflow"): 50, ("teleop", "nets"): 185, ("teleop", "all"): 284,
     ("teleop_sim", "dataflow"): 108, ("teleop_sim", "nets"): 184, ("teleop_sim", "all"): 328,
     ("wall", "dataflow"): 10, ("wall", "nets"): 1, ("wall", "all"): 11,

@@ -345,10 +345,10 @@ def test_patching_a_patched_description_removes_what_was_added(hallway):
 
 def test_changing_max_age_is_a_live_stream_change(hallway):
     tree, old = hallway
-    new_tree = apply_patch(tree, {"streams": {"scan_ranges": {"max_age": "300ms"}}})
+    new_tree = apply_patch(tree, {"streams": {"rendered_scan": {"max_age": "300ms"}}})
     plan = plan_changes(old, validate_patched(new_tree).composition)
-    assert plan.changed_streams == ["scan_ranges"] and not plan.unsupported
-    assert "stream 'scan_ranges': max_age 200ms -> 300ms" in plan.describe()
+    assert plan.changed_streams == ["rendered_scan"] and not plan.unsupported
+    assert "stream 'rendered_scan': max_age 200ms -> 300ms" in plan.describe()
 
 
 def test_what_a_run_records_cannot_change_live(hallway):

@@ -42,7 +42,7 @@ def test_the_haptic_controllers_outputs_replay_equal_to_the_bit(recorded):
     path = recorded / "hallway.mcap"
     [haptic] = replay(path)  # by default: the haptic controller
     assert (haptic.activity, haptic.block, haptic.thread) == ("haptic", "haptic_controller", "main")
-    assert set(haptic.inputs) == {"handle_position", "handle_velocity", "scan_ranges", "scan_angles",
+    assert set(haptic.inputs) == {"handle_position", "handle_velocity", "rendered_scan",
                                   "platform_velocity"}
     compared = {c.stream: c for c in haptic.compared}
     assert set(compared) == {"handle_force", "velocity_setpoint", "environment_force"}
@@ -68,7 +68,7 @@ def test_a_replay_is_a_rewritten_composition_that_validates(recorded):
     assert composition.threads[PACED].schedules[0] == ["recorded", "haptic"]
     inputs = {name: spec for name, spec in composition.streams.items()
               if any(r.startswith("haptic.") for r in spec.readers)}
-    assert set(inputs) == {"handle_position", "handle_velocity", "scan_ranges", "scan_angles", "platform_velocity"}
+    assert set(inputs) == {"handle_position", "handle_velocity", "rendered_scan", "platform_velocity"}
     assert all(spec.writer.startswith("recorded.") for spec in inputs.values())
     for name, spec in inputs.items():  # each stream as the run had it: its policy and max_age
         assert spec.policy == run.loaded.composition.streams[name].policy
@@ -113,8 +113,8 @@ def test_a_changed_parameter_is_a_mismatch(recorded, tmp_path):
 
 
 @pytest.mark.parametrize(("change", "expected"), [
-    ({"without_topic": "/streams/scan_ranges"},
-     "activity 'haptic' cannot be replayed: its input stream 'scan_ranges' was not recorded"),
+    ({"without_topic": "/streams/rendered_scan"},
+     "activity 'haptic' cannot be replayed: its input stream 'rendered_scan' was not recorded"),
     ({"attachments": False}, "no composition.yaml attached"),
     ({"without_topic": "/streams/cycles/haptic"},  # a recording made before cycles were recorded
      "activity 'haptic' cannot be replayed: its cycles ('cycles/haptic') were not recorded"),

@@ -8,6 +8,8 @@ their defaults, units and descriptions are written there once.
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import numpy as np
 from pydantic import Field
 
@@ -19,6 +21,7 @@ from hapticop.haptics.governor import (
     BlindPolicy,
     GovernorParams,
     govern_cycle,
+    govern_field,
     govern_scan,
     limit_blind_by,
     stop_gap,
@@ -31,6 +34,7 @@ from hapticop.haptics.handle import (
     DrivingParams,
     handle_to_twist,
 )
+from hapticop.haptics.scan_field import ANGLE, ROWS
 from hapticop.haptics.scan_filter import MovingAverageParams, ScanFilterParams, make_scan_filter
 
 
@@ -46,9 +50,10 @@ class HapticControllerParams(Params):
     governor: GovernorParams | None = Field(
         None, description="the robot-side speed governor S1 ({} for its defaults); null: none")
     blind: BlindPolicy = Field(default_factory=BlindPolicy)
-    scan_filter: ScanFilterParams = Field(
-        default_factory=MovingAverageParams, discriminator="kind",
-        description="the per-beam filter of each scan: 'kind' moving_average or moving_median")
+    scan_filter: Annotated[ScanFilterParams, Field(discriminator="kind")] | None = Field(
+        None, description="the per-beam filter of a raw scan on the ranges input: 'kind' moving_average or "
+        "moving_median; null: the 3-beam moving average. With the scan_field input connected instead, the "
+        "scan_field activity declares it (set here, validation refuses it)")
     correction_feel: CorrectionFeelParams | None = Field(
         None, description="shared control: render the robot's correction of the command (the velocity_correction "
         "input) as part of the environmental force ({} for its defaults); null: not felt")
@@ -82,8 +87,13 @@ class HapticController(Block):
             inputs={
                 "handle_position": Port("float64", (3,), "m"),
                 "handle_velocity": Port("float64", (3,), "m/s"),
-                "ranges": Port("float32", n, "m"),
-                "angles": Port("float32", n, "rad"),
+                "ranges": Port("float32", n, "m", "the raw scan, filtered and rendered in this loop "
+                               "(unconnected: the scan_field input)", required=False),
+                "angles": Port("float32", n, "rad", required=False),
+                "scan_field": Port("float64", (ROWS, params.scan_points), "m, rad, m, m",
+                                   "the scan rendered beside the loop by a scan_field block (filtered ranges, "
+                                   "angles, robot-frame points); once fed, it replaces ranges and angles",
+                                   required=False),
                 "platform_velocity": Port("float64", (3,), "m/s, m/s, rad/s", required=False),
                 "predicted_travel": Port("float64", (3,), "m, m, rad", "the robot's motion since the scan, "
                                          "predicted (a pose_predictor's travel): the scan is rendered from "
@@ -100,6 +110,8 @@ class HapticController(Block):
             flags_read=dict(cls.flags_read),
             flags_written=dict(cls.flags_written),
             rate=RateRange(500.0, 2000.0, "the haptic loop renders stiff forces only near 1 kHz"),
+            one_of=(("ranges", "scan_field"),),  # the scan, raw or rendered beside the loop
+            input_params={"scan_filter": "ranges"},  # a rendered scan comes filtered by its own block's
         )
 
     # -- life cycle -------------------------------------------------------------------------
@@ -161,7 +173,9 @@ class HapticController(Block):
                 port.value[:] = 0.0
                 port.publish()
             return
-        ranges = p_in.ranges
+        if not self.use_field and p_in.scan_field.meta[0]:  # the first rendered scan: the laws take its angles
+            self._build_scan_laws()
+        ranges = p_in.scan_field if self.use_field else p_in.ranges
         if ranges.meta[0] != self.scan_seq:  # a scan not taken yet (it may have come while configuring)
             self._take_scan()
         scan_ok = ranges.valid
@@ -205,7 +219,18 @@ class HapticController(Block):
 
     # -- helpers ------------------------------------------------------------------------------
     def _take_scan(self) -> None:
-        """What depends on the scan alone, once per scan (15 Hz), not per cycle: filter, field, governor."""
+        """What depends on the scan alone, once per scan (15 Hz), not per cycle: filter, field, governor.
+        A scan_field input comes filtered and as points: only the model's and the governor's choices
+        of points are left to do here (docs/haptics.md)."""
+        if self.use_field:
+            field = self.inputs.scan_field
+            self.scan_seq = int(field.meta[0])
+            self.model.update_field(field.value)
+            if self.beams_shared:
+                self.stop_gap_m = stop_gap(self.beams, self.governor)  # type: ignore[arg-type]
+            elif self.governor is not None:
+                self.stop_gap_m = govern_field(field.value, self.beams, self.governor)
+            return
         ranges = self.inputs.ranges
         self.scan_seq = int(ranges.meta[0])
         filtered = self.filter.apply(ranges.value)  # NaN beams are free space
@@ -244,9 +269,14 @@ class HapticController(Block):
     def _build_scan_laws(self) -> None:
         """The scan filter, the force model and the governor: all hang on the scan's angles."""
         p = self.params
-        self.filter = make_scan_filter(p.scan_filter)
-        angles = self.filter.configure(self.inputs.angles.value if self.inputs.angles.valid
-                                       else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))
+        field = self.inputs.scan_field
+        self.use_field = bool(field.meta[0])  # a scan_field block feeds it: its scans come rendered
+        self.filter = make_scan_filter(p.scan_filter or MovingAverageParams())
+        if self.use_field:  # the field's filtered beams, padded to scan_points with beams that see nothing
+            angles = field.value[ANGLE].copy()
+        else:
+            angles = self.filter.configure(self.inputs.angles.value if self.inputs.angles.valid
+                                           else np.linspace(-0.75 * np.pi, 0.75 * np.pi, p.scan_points))
         self.model = make_force_model(p.force_model, angles)
         self.governor = governor = p.governor
         # The braking field's scan points serve the governor too when both select the same side

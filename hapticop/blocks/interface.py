@@ -107,6 +107,12 @@ class Interface:
     rate: RateRange | None = None
     needs: tuple[Need, ...] = ()
     provides: frozenset[str] = frozenset()
+    # Inputs that are alternatives (the same thing in two forms, e.g. a raw scan or one rendered beside
+    # the loop): exactly one of each group is connected. Validation says so, located.
+    one_of: tuple[tuple[str, ...], ...] = ()
+    # Parameters that configure one input alone (None: its default): set while that input is unconnected
+    # they would do nothing (the value that counts is declared elsewhere), which validation refuses, located.
+    input_params: dict[str, str] = field(default_factory=dict)
 
 
 class Params(BaseModel):

@@ -41,6 +41,7 @@ BUILTIN: dict[str, str] = {
     "ropod_controller": "hapticop.blocks.ropod:RopodController",
     "ropod_truth": "hapticop.blocks.ropod_truth:RopodTruth",
     "haptic_controller": "hapticop.blocks.haptic:HapticController",
+    "scan_field": "hapticop.blocks.scan_field:ScanFieldBlock",
     "shared_control": "hapticop.blocks.shared:SharedControl",
     "virtual_wall": "hapticop.blocks.effects:VirtualWall",
     "spring_damper": "hapticop.blocks.effects:SpringDamper",

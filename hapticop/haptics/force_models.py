@@ -38,6 +38,7 @@ from hapticop.haptics.handle import (
     TWIST_VX,
     TWIST_VY,
 )
+from hapticop.haptics.scan_field import RANGE
 from hapticop.parameters import parameters
 
 Vec = NDArray[np.float64]
@@ -65,6 +66,11 @@ class ForceModel(ABC):
 
     def update_scan(self, ranges: NDArray[np.floating]) -> None:
         """Take a new scan: (n,) ranges in m from the scanner, NaN where invalid."""
+
+    def update_field(self, field: NDArray[np.float64]) -> None:
+        """Take a scan already rendered beside the loop (``hapticop.haptics.scan_field``; configure
+        with its angles row): the same state as ``update_scan`` of its filtered ranges."""
+        self.update_scan(field[RANGE])
 
     @abstractmethod
     def render(self, handle_pos: Vec, robot_twist: Vec, out_force: Vec, scan_age_s: float = 0.0,
@@ -381,8 +387,16 @@ class BrakingField(ForceModel):
         return 1.0 - (1.0 - urgency) * (1.0 - prox)
 
     def update_scan(self, ranges: NDArray[np.floating]) -> None:
+        self.beams.load(ranges)
+        self._points_loaded()
+
+    def update_field(self, field: NDArray[np.float64]) -> None:
+        self.beams.load_points(field)  # the points are the field's: two copies, no trigonometry
+        self._points_loaded()
+
+    def _points_loaded(self) -> None:
+        """The scan's corridor gap and side points, once per scan."""
         p, beams = self.params, self.beams
-        beams.load(ranges)
         self._corridor_gap = beams.corridor_gap(p.corridor_margin_m, p.robust_k)
         beams.select_sides(p.window_rear_m, p.window_ahead_m)
 

@@ -98,7 +98,19 @@ class BeamGeometry:
         np.multiply(r, self.sin, out=self.py)
         if lidar.y_m:  # usually on the centre line: nothing to add
             self.py += lidar.y_m
-        self._dy_shift = math.nan  # new points: the cached lateral term is stale
+        self._forget()
+
+    def load_points(self, field: NDArray[np.float64]) -> None:
+        """Take points another ``BeamGeometry`` loaded (a ``hapticop.haptics.scan_field`` array: rows
+        range, angle, x, y): what ``load`` of its ranges would give, for the price of two copies."""
+        np.less(field[0], self.FAR_M, out=self._valid)  # False for NaN
+        np.copyto(self.px, field[2])
+        np.copyto(self.py, field[3])
+        self._forget()
+
+    def _forget(self) -> None:
+        """New points: what was cached of the last ones is stale."""
+        self._dy_shift = math.nan  # the cached lateral term
         self._corridor = (math.nan, 0, math.inf)  # (margin, k, gap) of the last corridor_gap: none yet
 
     def corridor_gap(self, margin_m: float, k: int) -> float:

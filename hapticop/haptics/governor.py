@@ -77,6 +77,17 @@ def govern_scan(ranges: NDArray[np.floating], beams: BeamGeometry, params: Gover
     """S1's work on a new scan (15 Hz): load it into ``beams``, select the side points, and return
     the stop gap ``g`` (front-of-footprint gap to the corridor's obstacles − dist2) for ``govern_cycle``."""
     beams.load(ranges)
+    return _govern_loaded(beams, params)
+
+
+def govern_field(field: NDArray[np.float64], beams: BeamGeometry, params: GovernorParams = GovernorParams()) -> float:
+    """``govern_scan`` for a scan rendered beside the loop (``hapticop.haptics.scan_field``): its
+    points are taken as they are."""
+    beams.load_points(field)
+    return _govern_loaded(beams, params)
+
+
+def _govern_loaded(beams: BeamGeometry, params: GovernorParams) -> float:
     beams.select_sides(params.window_rear_m, params.window_ahead_m)
     return stop_gap(beams, params)
 

@@ -268,6 +268,43 @@ def streams(cg: G.CompositionGraph) -> Check:
                              hint="add a stream whose 'to' lists it")
 
 
+def alternative_inputs(cg: G.CompositionGraph) -> Check:
+    """Of inputs declared as alternatives (``Interface.one_of``) exactly one is connected, and a
+    parameter that configures one input alone (``Interface.input_params``) is not set while that
+    input is unconnected: it would do nothing, and the value that counts is declared elsewhere."""
+    if any(c == "streams" for c, _ in cg.loaded.broken):
+        return  # the stream that fed an input may be the broken one
+    for node, data in cg.nodes_of("activity"):
+        name, resolved = node[1], data["resolved"]
+        iface = resolved.interface
+        for group in iface.one_of:
+            connected = [(p, path) for p in group if (path := _fed_by(cg, name, p)) is not None]
+            names = " or ".join(f"'{name}.{p}'" for p in group)
+            if not connected:
+                yield Diagnostic("input-unconnected", f"'{name}' needs one of {names} connected, and none is",
+                                 ("activities", name), hint="add a stream whose 'to' lists one of them")
+            for p, path in connected[1:]:
+                yield Diagnostic("inputs-alternative", f"'{name}.{p}' and '{name}.{connected[0][0]}' are "
+                                 f"alternatives (the same input in two forms): connect one of {names}", path)
+        for param, port in iface.input_params.items():
+            if getattr(resolved.params, param, None) is not None and _fed_by(cg, name, port) is None:
+                yield Diagnostic("param-unused", f"'{name}.params.{param}' configures the input '{port}' alone, "
+                                 "which is not connected: it would do nothing", ("activities", name, "params", param),
+                                 hint=f"declare it on the activity that feeds '{name}' in place of '{port}' "
+                                 f"(once), or connect '{name}.{port}'")
+
+
+def _fed_by(cg: G.CompositionGraph, activity: str, port: str) -> tuple | None:
+    """The path of the stream entry that feeds this input, or None."""
+    node = G.port(activity, port)
+    if node not in cg.g:
+        return None
+    for _, _, data in cg.g.in_edges(node, data=True):
+        if data["kind"] == "reads":
+            return data["path"]
+    return None
+
+
 def _thread_safety(cg, snode, spec, wnode, rnode, rdata) -> Check:
     writer_threads = cg.threads_of(wnode[1])
     reader_threads = cg.threads_of(rnode[1])
@@ -365,4 +402,4 @@ def recording(cg: G.CompositionGraph) -> Check:
 
 
 CHECKS = (unknown_activities, needs, reserved_names, schedules, main_thread_and_mediator, own_processes, rates,
-          streams, cpus, latencies, busy_waits, recording)
+          streams, alternative_inputs, cpus, latencies, busy_waits, recording)
