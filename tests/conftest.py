@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import atexit
 import fcntl
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -18,6 +22,13 @@ SYSTEMS = ROOT / "systems"
 CORPUS = Path(__file__).resolve().parent / "corpus"
 SHARED_TESTDATA = ROOT.parent / "shared" / "testdata"
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
+
+
+# Side by side (pytest -n), two workers may run systems of the same name: each worker gets its own
+# runtime directory, so their control sockets (XDG_RUNTIME_DIR/hapticop/NAME.sock) never meet.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix=f"hapticop-{os.environ['PYTEST_XDIST_WORKER']}-")
+    atexit.register(shutil.rmtree, os.environ["XDG_RUNTIME_DIR"], ignore_errors=True)
 
 
 # the shipped and pinned compositions on two hosts name key directories beside them that no checkout
