@@ -117,6 +117,24 @@ def _scan_field_block() -> BlockHarness:
     return block
 
 
+def _rendered(scene: int) -> BlockHarness:
+    """The scan_field block after rendering the scan of SCENES[scene]."""
+    renderer = _scan_field_block()
+    _, ranges, angles = SCENES[scene]
+    renderer.feed("ranges", ranges)
+    renderer.feed("angles", angles)
+    renderer.step()
+    return renderer
+
+
+def _haptic_fed_from(renderer: BlockHarness) -> BlockHarness:
+    """A configured haptic controller that holds the renderer's field."""
+    harness = _haptic("field")
+    harness.feed("scan_field", renderer.outputs.field.value)
+    harness.configure()
+    return harness
+
+
 def test_the_haptic_controller_fed_by_the_block_commands_and_pushes_as_fed_by_the_scan():
     """The blocks as the hallway wires them: the scan_field block on the LIDAR's side, the haptic
     controller reading its field; against the controller filtering the same scans itself."""
@@ -150,14 +168,7 @@ def test_the_haptic_controller_fed_by_the_block_commands_and_pushes_as_fed_by_th
 
 
 def test_a_stale_or_missing_field_gives_no_force_and_blinds():
-    renderer = _scan_field_block()
-    _, ranges, angles = SCENES[-3]  # the end wall ahead: the braking field pushes
-    renderer.feed("ranges", ranges)
-    renderer.feed("angles", angles)
-    renderer.step()
-    harness = _haptic("field")
-    harness.feed("scan_field", renderer.outputs.field.value)
-    harness.configure()
+    harness = _haptic_fed_from(_rendered(-3))  # the end wall ahead: the braking field pushes
     harness.feed("handle_position", [0.0, 0.0, -0.03])
     harness.step(150)  # within the field's 200 ms
     assert harness.outputs.environment_force.value[2] != 0.0 and not harness.flags["blind"]
@@ -172,14 +183,8 @@ def test_a_stale_or_missing_field_gives_no_force_and_blinds():
 
 
 def test_the_loops_step_and_the_scan_arrival_allocate_nothing():
-    renderer = _scan_field_block()
-    _, ranges, angles = SCENES[-1]
-    renderer.feed("ranges", ranges)
-    renderer.feed("angles", angles)
-    renderer.step()
-    harness = _haptic("field")
-    harness.feed("scan_field", renderer.outputs.field.value)
-    harness.configure()
+    renderer = _rendered(-1)
+    harness = _haptic_fed_from(renderer)
     harness.feed("handle_position", [0.01, 0.0, -0.03])
     harness.step(10)
     retained, peak = allocation_stats(harness.block.compute, 2000)
@@ -190,11 +195,8 @@ def test_the_loops_step_and_the_scan_arrival_allocate_nothing():
 
 
 def test_a_new_filter_renders_the_next_scan():
-    renderer = _scan_field_block()
+    renderer = _rendered(0)
     _, ranges, angles = SCENES[0]
-    renderer.feed("ranges", ranges)
-    renderer.feed("angles", angles)
-    renderer.step()
     assert np.isnan(renderer.outputs.field.value[RANGE, 809:]).all()  # 811 beams, 3-beam mean: 809
     renderer.retune({"scan_filter": {"kind": "moving_median", "window": 5}})
     renderer.feed("ranges", ranges)
