@@ -157,11 +157,29 @@ NOT_THE_CALL = tuple(tracemalloc.Filter(False, pattern) for pattern in (
     "*/execnet/*", "*/threading.py", "*/queue.py", "*/selectors.py", tracemalloc.__file__, "<frozen abc>", __file__))
 
 
-def allocation_stats(fn: Callable[[], object], calls: int = 1000, warmup: int = 10) -> tuple[int, int]:
+CLEAN = (256, 1024)  # bytes kept and at peak below which no test of the suite sees an allocation
+
+
+def allocation_stats(fn: Callable[[], object], calls: int = 1000, warmup: int = 10,
+                     attempts: int = 3) -> tuple[int, int]:
     """(bytes still allocated after `calls` calls, peak bytes during them), by tracemalloc; what other
-    threads' machinery and the measuring allocated is left out of the first."""
+    threads' machinery and the measuring allocated is left out of the first.
+
+    The peak cannot leave other threads out (tracemalloc keeps one for the process), so a measure
+    that is not clean is taken again, up to `attempts` times, and the least of each is returned: an
+    allocation of the call's own shows every time, another thread's now and then."""
     for _ in range(warmup):
         fn()
+    kept = peak = None
+    for _ in range(attempts):
+        k, p = _allocated(fn, calls)
+        kept, peak = (k, p) if kept is None else (min(kept, k), min(peak, p))
+        if kept < CLEAN[0] and peak < CLEAN[1]:
+            break
+    return kept, peak
+
+
+def _allocated(fn: Callable[[], object], calls: int) -> tuple[int, int]:
     tracemalloc.start()
     try:
         before = tracemalloc.take_snapshot().filter_traces(NOT_THE_CALL)
