@@ -19,6 +19,7 @@ import numpy as np
 
 from hapticop.devices.ropod.body import Footprint
 from hapticop.sim.engine import Engine
+from hapticop.sim.judge import STILL_MPS, STILL_S
 from hapticop.sim.scene import Scene
 
 
@@ -38,8 +39,8 @@ class Hallway:
     dist3_m: float = 0.10
     collision_hysteresis_m: float = 0.02
     t_max_s: float = 90.0
-    still_speed_mps: float = 0.02
-    still_time_s: float = 1.0
+    still_speed_mps: float = STILL_MPS  # the world's end-of-run rule, as the metrics evaluate it on the log
+    still_time_s: float = STILL_S
 
     @classmethod
     def of(cls, scene: Scene, xml: str) -> Hallway:

@@ -19,6 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 STILL_MPS = 0.02
 """Slower than this the robot is at rest (the hallway judge's still speed)."""
+STILL_S = 1.0
+"""At rest this long, with the operator done, the run has ended (docs/hallway-experiment.md §2)."""
 
 
 class _Strict(BaseModel):

@@ -26,11 +26,8 @@ from pydantic import Field, model_validator
 from hapticop.blocks.base import Block
 from hapticop.blocks.interface import Display, Interface, Params, Port
 from hapticop.composition.diagnostics import Diagnostic
-from hapticop.sim.judge import STILL_MPS, Target, Targets
+from hapticop.sim.judge import STILL_MPS, STILL_S, Target, Targets
 from hapticop.sim.scene import Scene
-
-STILL_S = 1.0
-"""The robot still this long, with the operator done, ends the run (docs/hallway-experiment.md §2)."""
 
 
 class SceneWorldParams(Params):
