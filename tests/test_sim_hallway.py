@@ -116,14 +116,20 @@ def test_the_scene_files_carry_the_notes_numbers():
         Hallway.named("H9")
 
 
-def test_clearance_of_the_footprint():
-    g = Hallway.named("H4")
+def _clearance_in(name: str):
+    """The hallway's task, and the robot's clearance at a pose (x, y, theta) in its scene."""
+    g = Hallway.named(name)
     engine = g.engine()
 
     def clear(pose):
         engine.place_robot(np.array(pose, float))
         return engine.clearance()
 
+    return g, clear
+
+
+def test_clearance_of_the_footprint():
+    g, clear = _clearance_in("H4")
     assert clear(g.start) == pytest.approx(0.7)  # 1 m to each wall minus 0.3 m
     assert clear((5.0, 0.6, math.pi / 2)) == pytest.approx(0.05)  # long side across
     reach = (0.35 + 0.30) * math.sqrt(0.5)  # a corner at 45 degrees
@@ -132,13 +138,7 @@ def test_clearance_of_the_footprint():
 
 
 def test_a_collision_when_the_footprint_touches_or_overlaps_a_wall():
-    g = Hallway.named("H4")
-    engine = g.engine()
-
-    def clear(pose):
-        engine.place_robot(np.array(pose, float))
-        return engine.clearance()
-
+    _, clear = _clearance_in("H4")
     assert clear((5.0, 0.7, 0.0)) == pytest.approx(0.0, abs=1e-9)  # touching
     assert clear((5.0, 0.7 + 1e-6, 0.0)) < 0.0  # just overlapping
     assert clear((5.0, 0.8, 0.0)) == pytest.approx(-0.1)  # 10 cm into the left wall
