@@ -13,15 +13,12 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hapticop.sim.recording import TrajectoryRecorder, as_channels
-
-if TYPE_CHECKING:  # the task's scene is MuJoCo's: computing metrics from a log does not load it
-    from hapticop.sim.hallway_task import Hallway
 
 F64 = NDArray[np.float64]
 
@@ -105,7 +102,7 @@ def autonomous_reference_s(travel_m: float, v_cruise_mps: float, braking_decel_m
 
 def compute_metrics(
     data: TrajectoryRecorder | Mapping[str, np.ndarray],
-    geometry: Hallway,
+    geometry: Any,  # a hapticop.sim.hallway_task.Hallway (not imported: it imports the judge, which imports this)
     *,
     v_cruise_mps: float | None = None,
     braking_decel_mps2: float = 0.5,
@@ -209,7 +206,7 @@ def _first(mask: NDArray[np.bool_]) -> int:
     return int(np.argmax(mask)) if mask.any() else len(mask)
 
 
-def _run_end(t: F64, x: F64, speed: F64, clearance: F64, g: Hallway) -> tuple[int, EndReason, int]:
+def _run_end(t: F64, x: F64, speed: F64, clearance: F64, g: Any) -> tuple[int, EndReason, int]:
     """(end index, why, first index of the final still period) by §2's rules, evaluated on the log."""
     n = len(t)
     idx = np.arange(n)
