@@ -357,7 +357,10 @@ class AgeProbeParams(Params):
 
 class AgeProbe(Block):
     """Reads a sample each cycle; keeps each new sample's age on arrival and every cycle's validity
-    (the stream's max_age), and writes them to the run directory on clean."""
+    (the stream's max_age) beside the age it was judged by, and writes them to the run directory on clean.
+
+    The port judges validity at the step's start; the clock read inside `compute` is later by however
+    long the thread waited for a core, so the deadman is checked against the port's own age."""
 
     Params = AgeProbeParams
     inputs = {"sample": Port("float64", (3,), "1")}
@@ -365,7 +368,7 @@ class AgeProbe(Block):
     def create(self):
         n = self.params.capacity
         self.arrived = np.zeros((n, 2), dtype=np.int64)  # [now, stamp] of each new sample
-        self.cycles = np.zeros((n, 3), dtype=np.int64)  # [now, valid, stamp] each cycle
+        self.cycles = np.zeros((n, 4), dtype=np.int64)  # [now, valid, stamp, age at the step's start] each cycle
         self.n_arrived = self.n_cycles = 0
 
     def compute(self):
@@ -374,7 +377,7 @@ class AgeProbe(Block):
             self.arrived[self.n_arrived] = (now, port.stamp_ns)
             self.n_arrived += 1
         if self.n_cycles < len(self.cycles):
-            self.cycles[self.n_cycles] = (now, port.valid, port.stamp_ns)
+            self.cycles[self.n_cycles] = (now, port.valid, port.stamp_ns, port.age_ns())
             self.n_cycles += 1
 
     def clean(self):
