@@ -215,8 +215,11 @@ class Watch:
             self.before = self.system.composition.model_dump()
             self.noise = self.system.runners["noise"].block
             self.params = self.noise.params
-            deadline = time.monotonic() + PATIENCE_S  # reconfigured blocks come back to running
-            while not self.running():
+            # A reconfiguration is asked by a request flag its activity takes at its next step: until then it
+            # still says running. Settled is no request left and every activity running, seen twice apart
+            # (the flag is taken and the state left in one step, which a poll may fall between).
+            deadline = time.monotonic() + PATIENCE_S
+            while not (self.settled() and time.sleep(0.05) is None and self.settled()):
                 assert time.monotonic() < deadline, "an activity did not come back to running after a patch"
                 time.sleep(0.005)
         assert self.system.composition.model_dump() == self.before
@@ -224,7 +227,16 @@ class Watch:
         assert self.running()
 
     def running(self) -> bool:
-        return all(self.system.state(name) is State.RUNNING for name in ("mediator", "noise", "recorder"))
+        return all(self.system.state(name) is State.RUNNING for name in ACTIVITIES)
+
+    def settled(self) -> bool:
+        """No re-configuration asked and not yet taken, and every activity running."""
+        asked = any(self.system.flag(f"{name}.lcsm.{request}") for name in ACTIVITIES
+                    for request in ("request_resource_configuration", "request_capability_configuration"))
+        return not asked and self.running()
+
+
+ACTIVITIES = ("mediator", "noise", "recorder")
 
 
 FRAGMENTS = st.sampled_from([
