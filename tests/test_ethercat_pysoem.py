@@ -267,6 +267,35 @@ def test_bring_up_maps_every_entry_when_pdo_assignment_replies_are_lost(box):
         m.close()
 
 
+def _exchange_and_check(master, check, seconds: float) -> bool:
+    """Exchange and check, as the fieldbus and watchdog threads do, for a while; True when every slave is in OP."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        master.exchange()
+        if check.needed():
+            check.check()
+        time.sleep(0.001)
+    return not check.pending
+
+
+def test_late_state_reads_are_not_a_lost_segment_but_a_silent_one_is(box, master):
+    """One datagram reads every slave's state: late frames leave them all reading NONE at once. That is
+    read again, not taken for every slave lost; a segment that stays silent (its coupler loses power) is."""
+    from hapticop.devices.ethercat.recovery import SlaveCheck
+
+    master.bring_up()
+    lines: list[str] = []
+    check = SlaveCheck(master, lines.append, silent_ms=500.0)
+    assert _exchange_and_check(master, check, 0.05) and check.check(), lines
+    box.fault("late", delay_us=80_000, frames=3)  # the emulator answers nothing for about a quarter second
+    _until(lambda: _exchange_and_check(master, check, 0.01), "every slave back in OP after the late frames")
+    assert not [line for line in lines if "-> NONE" in line or "lost" in line], lines
+    assert lines, "the late frames tripped the wheels' watchdogs, which the check acknowledged"
+    box.fault("lose", slave=0)  # the coupler, and every slave behind it
+    _until(lambda: _exchange_and_check(master, check, 0.01) or "wheel_4: lost" in lines, "the silent segment believed")
+    assert all(f"{name}: lost" in lines for name in NAMES), lines
+
+
 def test_config_dc_finds_the_wheels_clocks_and_dc_sync_starts_sync0(master):
     master.master.config_init()
     assert master.master.config_dc()

@@ -191,6 +191,9 @@ class EthercatWatchdogParams(Params):
                                  "counter is healthy (an AL error in SAFE-OP keeps it full)")
     retry_lost_ms: float = Field(100.0, gt=0, description="how often to try to recover a lost slave (each try "
                                  "holds pysoem's GIL through its timeouts)")
+    silent_segment_ms: float = Field(500.0, ge=0, description="a state read in which no slave answers is believed "
+                                     "(every slave gone) only once the reads stay silent this long: a lost or late "
+                                     "frame is not a segment gone (the fault is raised meanwhile all the same)")
     fault_hold_ms: float = Field(200.0, ge=0, description="a raised slave_fault stays raised at least this long "
                                  "after the segment is healthy again: every loop that must hold the robot sees it, "
                                  "and a flapping wheel does not jerk the robot back into motion")
@@ -241,7 +244,7 @@ class EthercatWatchdog(Block):
         if self.check is None or self.check.master is not master:
             from hapticop.devices.ethercat.recovery import SlaveCheck
 
-            self.check = SlaveCheck(master, self.log.warning, self.params.retry_lost_ms)
+            self.check = SlaveCheck(master, self.log.warning, self.params.retry_lost_ms, self.params.silent_segment_ms)
         now = self.clock.now_ns()
         if self.check.needed() or now - self.last_poll_ns >= self.params.state_poll_ms * 1e6:
             self.last_poll_ns = now

@@ -9,6 +9,13 @@ while any slave is below OP: a reconfigured slave in SAFE-OP returns a full work
 counter, so the counter alone would not show it. Every change of a slave's state is
 reported to `log(message)`.
 
+SOEM reads every slave's state in one datagram: when that frame is lost or comes back late
+(a busy link, a busy emulator), every slave reads NONE at once. Such a silent read is
+believed only once the reads have stayed silent for `silent_ms`; until then it changes
+nothing and logs nothing, but keeps the check pending (so the segment counts as faulty), and
+is read again at the next check. A slave really gone (power, a cut cable) leaves the slaves
+before it answering, so only a segment gone as a whole waits for that.
+
 pysoem holds the GIL through `recover`, `reconfig`, `state_check` and `read_state`, and a
 recovery attempt on a slave that is still gone waits out its timeouts: so a lost slave is
 retried every `retry_lost_ms`, not every cycle, or the exchange thread of the same process
@@ -27,7 +34,7 @@ AL_ACK = 0x10
 
 
 class SlaveCheck:
-    def __init__(self, master: SoemMaster, log, retry_lost_ms: float = 100.0):
+    def __init__(self, master: SoemMaster, log, retry_lost_ms: float = 100.0, silent_ms: float = 500.0):
         self.master = master
         self.log = log
         self.retry_lost_ns = int(retry_lost_ms * 1e6)
@@ -36,6 +43,8 @@ class SlaveCheck:
         self.previous = [AL_OP] * self.n
         self.lost = [False] * self.n
         self.pending = False  # some slave is below OP: keep checking every cycle
+        self.silent_ns = int(silent_ms * 1e6)
+        self.silent_since = 0  # when the state reads began to find no slave answering (0: they answer)
 
     def needed(self) -> bool:
         return self.pending or self.master.last_wkc < self.master.expected_wkc
@@ -48,6 +57,14 @@ class SlaveCheck:
             if not m.opened:
                 return False
             m.master.read_state()
+            if all(slave.state == AL_NONE for slave in m.slaves):
+                now = time.monotonic_ns()
+                self.silent_since = self.silent_since or now
+                if now - self.silent_since < self.silent_ns:  # most likely a lost frame: read again first
+                    self.pending = True
+                    return False
+            else:
+                self.silent_since = 0
             below = []
             for i, slave in enumerate(m.slaves):
                 state = slave.state
