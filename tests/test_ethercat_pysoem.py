@@ -557,6 +557,24 @@ def test_the_sandbox_command_runs_a_command_beside_the_emulator_and_passes_its_s
     assert not _interface_here("hapticop-ecat0")
 
 
+def test_two_sandboxes_side_by_side_share_no_file():
+    """Each sandbox's interface has the same name in its own namespace, so nothing it shares by file may be
+    named after it: the command in a second sandbox reads its own emulator's truth, and leaves the first's."""
+    import sys
+
+    with Sandbox() as first:
+        probe = ("import os, sys, numpy as np; "
+                 "from hapticop.devices.ethercat.emulator.truth import TruthReader, truth_path; "
+                 "path = truth_path('hapticop-ecat0'); "
+                 f"assert str(path) != {str(first.truth)!r}, path; "
+                 "assert str(path) == os.environ['HAPTICOP_ECAT_TRUTH'], path; "
+                 "reader = TruthReader(path); reader.read(np.zeros(3), np.zeros(3)); reader.close(); sys.exit(3)")
+        done = _hapticop("ethercat", "sandbox", "--", sys.executable, "-c", probe)
+        assert done.returncode == 3, done.stderr
+        assert first.truth.exists(), "the second sandbox took the first's truth file with it"
+        assert first.fault("status")["slaves"], "the first emulator runs on"
+
+
 def test_the_hallway_runs_with_the_real_master_in_the_sandbox(tmp_path):
     done = _hapticop("ethercat", "sandbox", "--", "hapticop-compose-placeholder")
     assert done.returncode == 127 and "no such command" in done.stderr

@@ -21,7 +21,8 @@ from hapticop.blocks.interface import Interface, Params, Port, RateRange
 
 class RopodTruthParams(Params):
     interface: str = Field("hapticop-ecat0", description="the master's interface: the emulator publishes under it")
-    path: str | None = Field(None, description="the emulator's --truth file, if not the default for `interface`")
+    path: str | None = Field(None, description="the emulator's --truth file, if not the default: the sandbox's "
+                             "($HAPTICOP_ECAT_TRUTH), else /dev/shm/hapticop-ecat-<interface>.truth")
 
 
 class RopodTruth(Block):

@@ -22,7 +22,8 @@ def sandbox(
     """Run COMMAND (after --) in a private network namespace with the emulated segment on a veth pair.
 
     The namespace, the pair and the emulator exist only while COMMAND runs; the emulator's
-    control socket is in $HAPTICOP_ECAT_CONTROL for `hapticop ethercat fault`.
+    control socket is in $HAPTICOP_ECAT_CONTROL for `hapticop ethercat fault`, and the file where it
+    publishes the robot's true pose in $HAPTICOP_ECAT_TRUTH for the `ropod_truth` block.
     """
     from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
 
@@ -39,7 +40,7 @@ def sandbox(
         with Sandbox(interface, peer, seed=seed) as box:
             typer.echo(f"emulated ropod segment on {peer}, master interface {interface}; "
                        f"control socket {box.control}", err=True)
-            env = dict(os.environ, HAPTICOP_ECAT_CONTROL=str(box.control))
+            env = dict(os.environ, HAPTICOP_ECAT_CONTROL=str(box.control), HAPTICOP_ECAT_TRUTH=str(box.truth))
             try:
                 code = subprocess.call(command, env=env)
             except FileNotFoundError:

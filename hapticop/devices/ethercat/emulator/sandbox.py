@@ -20,8 +20,6 @@ import threading
 import time
 from pathlib import Path
 
-from hapticop.devices.ethercat.emulator.truth import truth_path
-
 __all__ = ["Sandbox", "namespace_problem", "MASTER_INTERFACE", "EMULATOR_INTERFACE"]
 
 CLONE_NEWNET = 0x40000000
@@ -77,8 +75,11 @@ class Sandbox:
                  seed: int = 0, truth: Path | None = None, priority: int = 45):
         self.interface, self.peer, self.start_emulator, self.seed = interface, peer, emulator, seed
         self.priority = priority  # the emulator stands in for hardware: above the application's threads
-        self.truth = truth if truth is not None else truth_path(interface)
-        self._dir = tempfile.TemporaryDirectory(prefix="hapticop-ecat-")
+        # everything the emulator shares by file is the sandbox's own: sandboxes side by side (two test
+        # workers) each have an interface of the same name, so no path may be derived from it
+        self._dir = tempfile.TemporaryDirectory(prefix="hapticop-ecat-", dir="/dev/shm" if os.path.isdir("/dev/shm")
+                                                else None)
+        self.truth = truth if truth is not None else Path(self._dir.name) / "truth"
         self.control = Path(self._dir.name) / "control.sock"
         self.log = Path(self._dir.name) / "emulator.log"
         self.process: subprocess.Popen | None = None

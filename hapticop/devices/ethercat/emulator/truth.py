@@ -15,14 +15,18 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["TruthWriter", "TruthReader", "truth_path"]
+__all__ = ["TruthWriter", "TruthReader", "truth_path", "TRUTH_ENV"]
 
 _SIZE = 8 * 8
 
 
+TRUTH_ENV = "HAPTICOP_ECAT_TRUTH"  # set by `hapticop ethercat sandbox` for the command it runs
+
+
 def truth_path(interface: str) -> Path:
-    """The default place for the segment on `interface`."""
-    return Path("/dev/shm") / f"hapticop-ecat-{interface}.truth"
+    """Where the segment on `interface` publishes: the sandbox's own file when run inside one
+    (two sandboxes on one machine each have an interface of the same name), else /dev/shm."""
+    return Path(os.environ.get(TRUTH_ENV) or Path("/dev/shm") / f"hapticop-ecat-{interface}.truth")
 
 
 class TruthWriter:
