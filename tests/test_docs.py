@@ -53,18 +53,26 @@ def test_generated_pages_are_current(name):
     assert (ROOT / "docs" / name).read_text() == PAGES[name](typer.main.get_command(app)), "run `hapticop docs`"
 
 
+NAMED = re.compile(r"#\s*([\w.-]+\.ya?ml)\b")
+
+
 @pytest.fixture(scope="module")
 def workspaces(tmp_path_factory):
-    """One directory per page, shared by that page's examples in order (a later file may extend an earlier one)."""
+    """One directory per page, holding the page's named files from before `line` (a later file may extend an
+    earlier one). Each example writes its predecessors itself: test workers may split a page's examples."""
     made: dict[Path, Path] = {}
 
-    def workspace(page: Path) -> Path:
+    def workspace(page: Path, line: int) -> Path:
         if page not in made:
             directory = tmp_path_factory.mktemp(page.stem)
             for system in (ROOT / "systems").glob("*.yaml"):
                 shutil.copy(system, directory / system.name)
             new("my_app", directory=directory, block=False, force=False)
             made[page] = directory
+        for language, at, body in _fences(page):
+            named = NAMED.match(body.splitlines()[0]) if body.strip() else None
+            if at < line and language in ("yaml", "yml") and named:
+                (made[page] / named.group(1)).write_text(body)
         return made[page]
 
     return workspace
@@ -74,7 +82,7 @@ def workspaces(tmp_path_factory):
 def test_yaml_example_is_valid(page, line, body, workspaces):
     first = body.splitlines()[0] if body.strip() else ""
     where = f"{page.relative_to(ROOT)}:{line}"
-    named = re.match(r"#\s*([\w.-]+\.ya?ml)\b", first)
+    named = NAMED.match(first)
     if first.startswith("# excerpt"):
         root = composition_schema()
         partial = {**root, "required": []}
@@ -82,7 +90,7 @@ def test_yaml_example_is_valid(page, line, body, workspaces):
         errors = [error.message for error in jsonschema.Draft202012Validator(partial).iter_errors(document)]
         assert not errors, f"{where}: {errors}"
     elif named:
-        directory = workspaces(page)
+        directory = workspaces(page, line)
         file = directory / named.group(1)
         file.write_text(body)
         document = YAML(typ="safe").load(body)
@@ -96,7 +104,7 @@ def test_yaml_example_is_valid(page, line, body, workspaces):
             report = validate_path(file).report
             assert report.ok, f"{where}:\n" + "\n".join(d.to_text() for d in report.sorted())
     else:
-        file = workspaces(page) / f"example-{line}.yaml"
+        file = workspaces(page, line) / f"example-{line}.yaml"
         file.write_text(body)
         report = validate_path(file).report
         assert report.ok, f"{where}:\n" + "\n".join(d.to_text() for d in report.sorted())
