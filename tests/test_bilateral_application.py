@@ -18,6 +18,8 @@ PUSH = 3.0  # systems/bilateral.yaml's leader's hand's push
 
 
 def test_the_bilateral_set_up_runs_from_yaml_alone_and_ends_with_its_script(tmp_path):
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "scenes" / "bilateral.yaml").write_text((SYSTEMS / "scenes" / "bilateral.yaml").read_text())
     result = compose(tmp_path, (SYSTEMS / "bilateral.yaml").read_text(), duration="20s", name="bilateral")
     assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
     assert all(state is State.DONE for state in result.states.values())

@@ -107,6 +107,24 @@ def test_a_room_of_ones_own_validates(tmp_path):
     assert report.ok, [d.to_text() for d in report.diagnostics]
 
 
+def test_a_scene_beside_the_composition_is_the_one_run_whatever_the_working_folder_holds(tmp_path):
+    """Validation reads the scene beside the composition; so must the run, even when the folder it is started
+    from (first on Python's search path under `python -m`) has a file of the same name."""
+    import subprocess
+    import sys
+
+    app = tmp_path / "app"
+    app.mkdir()
+    composition = _write(app, ROOM)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "room.yaml").write_text("walls: [not a wall]\n")
+    done = subprocess.run([sys.executable, "-m", "hapticop.cli", "compose", composition, "--clock", "virtual",
+                           "--duration", "50ms", "--run-dir", str(tmp_path / "run")], cwd=elsewhere,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+
+
 @pytest.mark.parametrize("change, rule, line, field", [
     (("material: wall}", "material: marble}"), "scene-material", 2, "walls.0.material"),
     (("mass_kg: 10.0", "material: wood"), "scene-mass", 5, "bodies.0"),

@@ -131,13 +131,23 @@ class UnknownBlock(LookupError):
         self.name, self.reason, self.hint = name, reason, hint
 
 
+BESIDE_ENV = "HAPTICOP_BESIDE"  # the folders of the compositions loaded, newest first (children inherit it)
+
+
 def search_beside(composition_file: str | Path) -> None:
     """Let `module:Class` blocks be found in the composition's own folder, as an author expects of
     a file kept beside the YAML that names it. Searched last, so it never hides an installed module;
-    child processes inherit the search path."""
+    child processes inherit the search path. The folder is also the first of `beside_folders()`,
+    where the files a composition names (a scene) are looked for at run time, as validation did."""
     folder = str(Path(composition_file).resolve().parent)
     if folder not in sys.path:
         sys.path.append(folder)
+    os.environ[BESIDE_ENV] = os.pathsep.join([folder, *(f for f in beside_folders() if f != folder)])
+
+
+def beside_folders() -> list[str]:
+    """The folders of the compositions this process (or its parent) loaded, the newest first."""
+    return [f for f in os.environ.get(BESIDE_ENV, "").split(os.pathsep) if f]
 
 
 @functools.cache

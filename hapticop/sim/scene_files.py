@@ -9,12 +9,12 @@ overlaps, a robot that starts inside something, and a scene MuJoCo cannot load (
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from hapticop.blocks.registry import beside_folders
 from hapticop.composition.diagnostics import Diagnostic
 from hapticop.composition.model_errors import diagnostics_from
 from hapticop.composition.yamlsource import SourceError, parse_text, read_text
@@ -59,14 +59,15 @@ def _places(scene: Scene, line) -> dict[str, tuple[tuple, int]]:
 
 
 def find(name: str, folder: Path | None = None) -> Path | None:
-    """The file a scene reference names: absolute; a shipped name; beside the composition (`folder`, or
-    the folders on the search path, where `hapticop.blocks.registry.search_beside` puts it)."""
+    """The file a scene reference names: absolute; a shipped name; beside the composition (`folder`, or,
+    at run time, the folder of the composition loaded: `hapticop.blocks.registry.beside_folders`). Never
+    elsewhere on Python's search path: the run must read the file validation read."""
     path = Path(name)
     if path.is_absolute():
         return path if path.exists() else None
     if path.suffix == "" and (SHIPPED / f"{name}.yaml").is_file():
         return SHIPPED / f"{name}.yaml"
-    folders = ([folder] if folder is not None else []) + [Path(p) for p in sys.path if p]
+    folders = [folder] if folder is not None else [Path(p) for p in beside_folders()]
     for place in folders:
         candidate = place / path
         if candidate.is_file():

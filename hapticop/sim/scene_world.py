@@ -37,7 +37,8 @@ class SceneWorldParams(Params):
     operator: str | None = Field(None, description="the activity whose run this world judges (block "
                                  "blind_operator): its variant sets the targets")
     scene: str | Scene = Field("H1", description="the scene: written here, or a scene file (a shipped name such as "
-                               "'H1', or a path beside the composition; .yaml, or .xml for MJCF): docs/scenes.md")
+                               "'H1', or a path relative to the composition's folder; .yaml, or .xml for MJCF): "
+                               "docs/scenes.md")
     targets: Targets = ()
     time_limit_s: float = Field(90.0, gt=0, description="the run ends here at the latest")
     plot: bool = Field(True, description="draw the run to run.png (needs matplotlib)")
