@@ -19,8 +19,7 @@ def push(tmp_path, mass_kg: float) -> tuple[np.ndarray, np.ndarray]:
     (tmp_path / "hallway.yaml").write_text((SYSTEMS / "hallway.yaml").read_text())  # what push_box.yaml extends
     scene = (SYSTEMS / "scenes" / "push_box.yaml").read_text()
     assert BOX in scene
-    # a scene file of its own name: a run's folder stays on the search path, where the next run would find its scene
-    named = f"box_{mass_kg:g}kg.scene.yaml"
+    named = f"box_{mass_kg:g}kg.scene.yaml"  # beside the composition: each run reads its own
     (tmp_path / named).write_text(scene.replace(BOX, f"mass_kg: {mass_kg}, material: wood, friction: 0.5}}"))
     text = (SYSTEMS / "push_box.yaml").read_text().replace("scene: scenes/push_box.yaml", f"scene: {named}")
     result = compose(tmp_path, text, duration="40s", name="push_box",
@@ -63,3 +62,24 @@ def test_a_heavier_box_is_felt_heavier_and_goes_less_far(light, heavy):
     assert box_heavy[-1, 0] - box_heavy[0, 0] > 0.2  # it still moves
     assert felt_while_touching(felt_heavy) > 2.0 * felt_while_touching(felt_light)  # three times the friction
     assert box_heavy[-1, 0] < box_light[-1, 0]  # the same hand pushes it less far
+
+
+def test_a_box_that_explodes_stops_the_run_at_once_with_one_message(tmp_path):
+    """push_box.yaml ends its run on the script's end and on the world's: a scene that explodes (its box thrown
+    out by a gravity of 1e9, as an MJCF scene may say) stops the run, not the script 8 s later."""
+    from hapticop.sim import scene_files
+
+    (tmp_path / "hallway.yaml").write_text((SYSTEMS / "hallway.yaml").read_text())
+    loaded, found = scene_files.load(SYSTEMS / "scenes" / "push_box.yaml")
+    assert loaded is not None, found
+    (tmp_path / "thrown.xml").write_text(loaded.xml.replace('integrator="implicitfast"/>',
+                                                            'integrator="implicitfast" gravity="0 0 1e9"/>'))
+    text = (SYSTEMS / "push_box.yaml").read_text().replace("scene: scenes/push_box.yaml", "scene: thrown.xml")
+    result = compose(tmp_path, text, duration="40s", name="thrown")
+    assert result.outcome.status is ExitStatus.FAILURE
+    assert result.outcome.reasons[0] == "'world' failed (running failed)", result.outcome.reasons
+    assert result.timing["activities"]["mediator"]["steps"] < 4000  # the script alone would run 8 s
+    logs = "\n".join(path.read_text() for path in sorted((tmp_path / "run-thrown").glob("*.log")))
+    assert "Traceback" not in logs
+    [said] = [line for line in logs.splitlines() if "exploded" in line]
+    assert "thrown.xml: bodies[0]" in said and "left the scene" in said

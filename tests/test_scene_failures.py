@@ -94,9 +94,7 @@ coordination:
 @pytest.mark.parametrize("gravity, said", [("0 0 1e9", "left the scene"),  # a body flies off
                                            ("0 0 1e300", "not a number, infinite or huge")])  # MuJoCo resets
 def test_an_mjcf_scene_that_explodes_stops_the_run_with_one_message_naming_file_and_body(tmp_path, gravity, said):
-    # a file name of its own: a scene named by a relative path is also looked for in the folders of the compositions
-    # this process validated before (the search path), where another test's crate.xml lies
-    crate = f"crate_{len(gravity)}.xml"
+    crate = "crate.xml"  # each case's own folder: a relative path is read beside the composition run
     (tmp_path / crate).write_text(_unstable_mjcf(gravity))
     result = compose(tmp_path, ALONE.replace("CRATE", crate), duration="30s", name="alone")
     assert result.outcome.status is ExitStatus.FAILURE
