@@ -1,6 +1,7 @@
 """Hand micro-benchmark of the haptic control laws and the simulated world: µs per call, and allocations.
 
-Run ``python bench/micro_haptics.py [--calls N] [--blocks SECONDS]``. Not a test: timings depend on the machine.
+Run ``python bench/micro_haptics.py [--calls N] [--blocks SECONDS] [--beams-factor K]``.
+Not a test: timings depend on the machine.
 The scene is the H2 hallway start (docs/hallway-experiment.md §2): 2 m wide, robot 0.3 m off-centre, end wall 9.5 m
 ahead (within the 10 m range), moving at 0.5 m/s with the handle pushed forward and sideways.
 With ``--blocks``, systems/hallway.yaml also runs that long on the virtual clock and every
@@ -23,17 +24,26 @@ from hapticop.haptics.force_models import FORCE_MODELS, make_force_model
 from hapticop.haptics.geometry import BeamGeometry
 from hapticop.haptics.governor import govern_cycle, govern_scan, govern_twist
 from hapticop.haptics.handle import CentringPD, handle_to_twist
-from hapticop.haptics.scan_filter import MovingAverage, MovingMedian
+from hapticop.haptics.scan_field import ScanField
+from hapticop.haptics.scan_filter import MovingAverage, MovingAverageParams, MovingMedian
 from hapticop.sim.hallway_task import Hallway
 from hapticop.sim.operator import BlindOperator
 from hapticop.sim.recording import TrajectoryRecorder
 from hapticop.testing import allocation_stats, time_per_call
 
 
-def cases() -> dict[str, Callable[[], object]]:
-    """The per-cycle calls to measure, each with its inputs already prepared."""
+def beam_angles(factor: int = 1) -> np.ndarray:
+    """The TiM561's beam angles, or `factor` times as many over the same field of view (a denser scanner)."""
+    angles = np.asarray(ANGLES_RAD, dtype=float)
+    if factor == 1:
+        return angles
+    return np.linspace(angles[0], angles[-1], factor * (len(angles) - 1) + 1)
+
+
+def cases(factor: int = 1) -> dict[str, Callable[[], object]]:
+    """The per-cycle calls to measure, each with its inputs already prepared (`factor` times the beams)."""
     h2 = Hallway.named("H2")
-    raw_angles = np.asarray(ANGLES_RAD, dtype=float)
+    raw_angles = beam_angles(factor)
     engine = h2.engine()
     engine.place_robot(np.array(h2.start))
     raw = engine.scan(raw_angles, np.empty(len(raw_angles), np.float32), 0.05, 10.0)
@@ -45,9 +55,12 @@ def cases() -> dict[str, Callable[[], object]]:
     handle = np.array([0.01, 0.0, -0.02])
     twist = np.array([0.5, 0.0, 0.1])
     force = np.zeros(3)
+    n = len(raw_angles)
+    field = ScanField(MovingAverageParams(), raw_angles)
     run: dict[str, Callable[[], object]] = {
-        "scan filter: moving average 811→809": lambda: average.apply(raw),
-        "scan filter: median of 5, 811": lambda: median.apply(raw),
+        f"scan filter: moving average {n}→{len(angles)}": lambda: average.apply(raw),
+        f"scan filter: median of 5, {n}": lambda: median.apply(raw),
+        "scan field: filter and place (per scan)": lambda: field.apply(raw),
     }
     for name in FORCE_MODELS:
         model = make_force_model(name, angles)
@@ -66,7 +79,8 @@ def cases() -> dict[str, Callable[[], object]]:
     pd = CentringPD()
     run["centring PD + driving map"] = lambda: (pd.compute(handle, force, env_force=force),
                                                  handle_to_twist(handle, executed))
-    run.update(world_cases())
+    if factor == 1:
+        run.update(world_cases())
     return run
 
 
@@ -144,10 +158,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--calls", type=int, default=5000)
     parser.add_argument("--blocks", type=float, default=0.0, metavar="SECONDS",
                         help="also time the haptic and world blocks in a virtual-clock hallway run this long")
+    parser.add_argument("--beams-factor", type=int, default=1, metavar="K",
+                        help="K times the TiM561's 811 beams over its field of view (the scan's laws only)")
     args = parser.parse_args(argv)
-    print("809 beams after the moving average; 811 raw beams for the filters.")
+    n = len(beam_angles(args.beams_factor))
+    print(f"{n - 2} beams after the moving average; {n} raw beams for the filters.")
     print(f"{'call':44s} {'median µs':>10s} {'p99 µs':>8s} {'grown B':>8s} {'peak B':>7s}")
-    for label, fn in cases().items():
+    for label, fn in cases(args.beams_factor).items():
         median, p99 = time_per_call(fn, args.calls)
         grown, peak = allocation_stats(fn)
         print(f"{label:44s} {median:10.1f} {p99:8.1f} {grown:8d} {peak:7d}")
