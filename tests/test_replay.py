@@ -289,14 +289,37 @@ def test_a_wall_clock_run_that_misses_cycles_replays_to_the_bit(tmp_path):
     assert not replayed.diverged
 
 
+RECORDED_MODES = (MODES.replace("grip, gain]", "grip, gain, echo]")
+                  .replace("activities:\n", "activities:\n  echo: {block: echo, params: {dtype: float64}}\n")
+                  + "streams:\n  gains: {from: gain.gain, to: [echo.input]}\nrecord: {}\n")
+
+
+def test_parameter_events_still_in_the_log_writers_queue_at_the_end_are_recorded(tmp_path, monkeypatch):
+    """The recorder takes parameter events from the system's log, which a writer thread fills off the real-time
+    path. A writer behind at the end of the run (a busy machine; here one that takes 50 ms a line) must still
+    have every event in the file before the recorder takes its last look."""
+    import time
+
+    from hapticop.runtime.logs import LogWriter
+
+    write = LogWriter._write
+
+    def slow(self, item):
+        time.sleep(0.05)
+        write(self, item)
+
+    monkeypatch.setattr(LogWriter, "_write", slow)
+    compose(tmp_path, RECORDED_MODES, duration="300ms", name="modes")
+    path = tmp_path / "run-modes" / "modes.mcap"
+    gains = [(e.revision, e.changed, e.parameters["gain"]) for e in events(path) if e.activity == "gain"]
+    assert gains == [(1, ("gain",), 5.0), (2, ("gain",), 1.0)]
+
+
 @pytest.mark.parametrize("clock", ["virtual", "realtime"])
 def test_a_recording_with_live_retunes_replays_through_them(tmp_path, clock):
     """A mode retunes the gain while the grip is held: the recording has each parameter event with its
     diff, and the gain's replay hands its block the same parameters in the same cycles."""
-    text = (MODES.replace("grip, gain]", "grip, gain, echo]")
-            .replace("activities:\n", "activities:\n  echo: {block: echo, params: {dtype: float64}}\n")
-            + "streams:\n  gains: {from: gain.gain, to: [echo.input]}\nrecord: {}\n")
-    compose(tmp_path, text, clock=clock, duration="400ms", name="modes")
+    compose(tmp_path, RECORDED_MODES, clock=clock, duration="400ms", name="modes")
     path = tmp_path / "run-modes" / "modes.mcap"
     gains = [(e.revision, e.changed, e.parameters["gain"]) for e in events(path) if e.activity == "gain"]
     assert gains == [(1, ("gain",), 5.0), (2, ("gain",), 1.0)]

@@ -85,10 +85,26 @@ class LogWriter:
             item = self.queue.get()
             if item is None:
                 break
+            if isinstance(item, threading.Event):  # `flush`'s marker: everything before it is written
+                self._flush_files()
+                item.set()
+                continue
             self._write(item)
             if self.queue.empty():
-                for handle in self._files.values():
-                    handle.flush()
+                self._flush_files()
+
+    def _flush_files(self) -> None:
+        for handle in self._files.values():
+            handle.flush()
+
+    def flush(self, timeout_s: float = 10.0) -> bool:
+        """Wait until every line queued before this call is in its file (what follows the files, the
+        recorder's last look, must not miss a line still in the queue); False if that took over `timeout_s`."""
+        if self._stopped or not self._thread.is_alive():
+            return True
+        written = threading.Event()
+        self.queue.put(written)
+        return written.wait(timeout_s)
 
     def stop(self) -> None:
         if self._stopped:

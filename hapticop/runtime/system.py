@@ -263,7 +263,10 @@ class System:
         return None if limit is None else self.options.clock_start_ns + limit
 
     def _stop_observer(self) -> None:
-        """The loops are done: the observer takes the last samples and finishes the file."""
+        """The loops are done: the observer takes the last samples and finishes the file, after the log
+        writer has written every line it was given (the recorder takes parameter events from the log)."""
+        if not self.writer.flush():
+            self.log.error("the log writer did not catch up within 10 s: the recording may lack its last log lines")
         recording, lost = self.observer.stop()
         self.recording = recording or self.recording
         if lost:
