@@ -41,7 +41,13 @@ def test_the_falcon_drives_a_ros2_robot_down_the_corridor_to_a_stop(tmp_path, mo
             # 50 odometry lines (1 s) without motion, after 4 m of corridor
             return travelled["x"] > 4.0 and travelled["stopped_for"] >= 50
 
-        text = SYSTEM.read_text().replace("tcp/127.0.0.1:7447", f"tcp/127.0.0.1:{port}")
+        # the hand pushes until 30 s, not 14 s: on a busy machine the robot (its own process, which stops on a
+        # command older than 0.5 s) covers less of the corridor in 13 s; the governor stops it before the end
+        # however long the hand pushes, which this run checks too
+        text = (SYSTEM.read_text().replace("tcp/127.0.0.1:7447", f"tcp/127.0.0.1:{port}")
+                .replace("{t_s: 14.0, force_n: [0.0, 0.0, -1.5]", "{t_s: 30.0, force_n: [0.0, 0.0, -1.5]")
+                .replace("{t_s: 14.5, force_n: [0.0, 0.0, 0.0]}", "{t_s: 30.5, force_n: [0.0, 0.0, 0.0]}"))
+        assert "t_s: 30.0" in text and "t_s: 30.5" in text
         recording = tmp_path / "teleop.mcap"
         result = run_until(tmp_path, text, stopped_near_the_end,
                            f"the robot stopped near the corridor's end (last x {travelled['x']:.2f} m)", name="teleop",
