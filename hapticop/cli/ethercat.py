@@ -26,6 +26,7 @@ def sandbox(
     publishes the robot's true pose in $HAPTICOP_ECAT_TRUTH for the `ropod_truth` block.
     """
     from hapticop.devices.ethercat.emulator.sandbox import Sandbox, namespace_problem
+    from hapticop.devices.ethercat.emulator.truth import TRUTH_ENV
 
     command = list(context.args)
     if not command:
@@ -40,7 +41,8 @@ def sandbox(
         with Sandbox(interface, peer, seed=seed) as box:
             typer.echo(f"emulated ropod segment on {peer}, master interface {interface}; "
                        f"control socket {box.control}", err=True)
-            env = dict(os.environ, HAPTICOP_ECAT_CONTROL=str(box.control), HAPTICOP_ECAT_TRUTH=str(box.truth))
+            env = dict(os.environ, HAPTICOP_ECAT_CONTROL=str(box.control))
+            env[TRUTH_ENV] = str(box.truth)
             try:
                 code = subprocess.call(command, env=env)
             except FileNotFoundError:
