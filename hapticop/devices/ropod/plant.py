@@ -20,7 +20,8 @@ Deterministic: noise, if enabled, comes from the generator passed in.
 
 The state is a few dozen numbers, so one step works on Python floats (numpy's per-call overhead
 would cost more than the arithmetic) and publishes `state` once at its end; the images are
-read and written with precompiled structs (`record_struct`).
+read and written with precompiled structs (`record_struct`). The equations of motion and their
+RK4 step are `platform_dynamics`, compiled when the package is built with Cython.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, inverse_sym3
+from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics
 from hapticop.devices.ropod.pdo import (
     RXPDO_DTYPE,
     TXPDO_BYTES,
@@ -42,6 +43,7 @@ from hapticop.devices.ropod.pdo import (
     rxpdo_view,
     txpdo_view,
 )
+from hapticop.devices.ropod.platform_dynamics import PlatformDynamics
 
 __all__ = ["PlantParams", "RopodPlant"]
 
@@ -117,9 +119,10 @@ class RopodPlant:
         self._inv_r, self._k = 1.0 / g.wheel_radius_m, g.k
         self._k_inv_r = g.k * self._inv_r
         self._inv_s = 1.0 / g.caster_offset_m
-        self._ic_s2 = p.unit_yaw_inertia_kgm2 / g.caster_offset_m**2
-        self._diag = (float(p.mass_kg), float(p.mass_kg), float(p.yaw_inertia_kgm2))
-        self._inv_diag = tuple(1.0 / d for d in self._diag)
+        self._body = PlatformDynamics(units, self._rows, self._inv_r, self._k, self._inv_s,
+                                      p.unit_yaw_inertia_kgm2 / g.caster_offset_m**2, p.mass_kg,
+                                      p.yaw_inertia_kgm2, p.pivot_damping_nms, p.linear_damping_ns_per_m,
+                                      p.yaw_damping_nms)
         self._ilim = float(p.drive_current_limit_a)
         # State: pose (3), twist (3), pivot angles (units), wheel angles (wheels), model convention.
         # `_y` is the working copy, `state` the published one.
@@ -132,14 +135,12 @@ class RopodPlant:
         self._y = [0.0] * size
         self.time_ns = 0
         self._setpoint_ns = 0
-        # RK4 stages and the stage state.
-        self._k1, self._k2, self._k3, self._k4, self._yt = ([0.0] * size for _ in range(5))
         # Drive model outputs (hardware convention for currents, model convention for torques) and
         # the measurement (model convention), per wheel / per unit.
         self._currents_hw = [0.0] * wheels
         self._torques = [0.0] * wheels
-        self._torque_sum = [0.0] * units  # (t1 + t2) / r per unit: the wrench is sum A U_i + B Q_i
-        self._torque_diff = [0.0] * units  # k (t2 - t1) / r
+        self._torque_sum = self._body.torque_sum  # (t1 + t2) / r per unit: the wrench is sum A U_i + B Q_i
+        self._torque_diff = self._body.torque_diff  # k (t2 - t1) / r
         self._speeds = [0.0] * wheels
         self._rates = [0.0] * units
         self._status = [_ENCODERS_OK] * units  # healthy, drives not yet enabled
@@ -148,8 +149,8 @@ class RopodPlant:
         self._rx_src: np.ndarray | None = None
         self._tx_src: np.ndarray | None = None
         # An external force and torque on the platform (N, N, N m in its frame), held over a step: what
-        # the world's contacts push back with (a box being pushed, a wall).
-        self.external = [0.0, 0.0, 0.0]
+        # the world's contacts push back with (a box being pushed, a wall). Set its items in place.
+        self.external = self._body.external
         self.reset_state(p.initial_pose, p.initial_twist, p.initial_pivot_angles_rad)
 
     def reset_state(self, pose=(0.0, 0.0, 0.0), twist=(0.0, 0.0, 0.0), pivot_angles=None) -> None:
@@ -183,7 +184,7 @@ class RopodPlant:
         substeps = self.params.substeps
         h = dt / substeps
         for _ in range(substeps):
-            self._rk4(h)
+            self._body.rk4(self._y, h)
         self.state[:] = self._y
         self.time_ns += int(round(dt * 1e9))
         self._measure()
@@ -195,87 +196,6 @@ class RopodPlant:
         if tx_image_out is not self._tx_src:
             self._bind_tx(tx_image_out)
         self._write_sensors()
-
-    # --- dynamics -----------------------------------------------------------------------
-    def _derivative(self, y: list[float], dy: list[float]) -> None:
-        """dy = f(y) for the held wheel torques (Level 1 equations, docs/devices/ropod.md §8).
-
-        Per unit, with U_i and Q_i of its pivot angle: the yaw rate Omega_i = Q_i v / s, the pivot
-        rate Omega_i - wz, the wheel speeds (U_i v -+ k Q_i v) / r, and its share of the wrench
-        G^T tau = sum (t1 + t2)/r U_i + k (t2 - t1)/r Q_i. The casters' steering inertia and their
-        bearings' friction both act through Q_i: rhs += sum Q_i delta_dot_i (I_c/s^2 U_i v - b_p/s),
-        plus b_p sum delta_dot_i on the yaw; the mass matrix is M + I_c/s^2 sum Q_i^T Q_i.
-        """
-        p, units = self.params, self.units
-        theta, vx, vy, wz = y[2], y[3], y[4], y[5]
-        c, s = math.cos(theta), math.sin(theta)
-        dy[0] = c * vx - s * vy
-        dy[1] = s * vx + c * vy
-        dy[2] = wz
-        inv_s, inv_r, k, ic = self._inv_s, self._inv_r, self._k, self._ic_s2
-        friction = p.pivot_damping_nms * inv_s
-        fx = fy = mz = 0.0  # wrench
-        sdd = w0 = w1 = w2 = 0.0  # sum of pivot rates, sum Q_i delta_dot_i (I_c/s^2 u_i - b_p/s)
-        m00 = m01 = m02 = m11 = m12 = m22 = 0.0  # sum Q_i^T Q_i
-        for i, ((ua, ub, qa, qb), a, b) in enumerate(zip(self._rows, self._torque_sum, self._torque_diff)):
-            ci, si = math.cos(y[6 + i]), math.sin(y[6 + i])
-            u3, q3 = ci * ua + si * ub, ci * qa + si * qb
-            q = ci * vy - si * vx + q3 * wz
-            u = ci * vx + si * vy + u3 * wz
-            dd = q * inv_s - wz
-            dy[6 + i] = dd
-            j = 6 + units + 2 * i
-            dy[j] = (u - k * q) * inv_r
-            dy[j + 1] = (u + k * q) * inv_r
-            fx += a * ci - b * si
-            fy += a * si + b * ci
-            mz += a * u3 + b * q3
-            sdd += dd
-            w = dd * (ic * u - friction)
-            w0 -= si * w
-            w1 += ci * w
-            w2 += q3 * w
-            m00 += si * si
-            m01 -= si * ci
-            m02 -= si * q3
-            m11 += ci * ci
-            m12 += ci * q3
-            m22 += q3 * q3
-        m = p.mass_kg
-        ex, ey, ez = self.external
-        r0 = fx + (m * wz * vy - p.linear_damping_ns_per_m * vx) + w0 + ex
-        r1 = fy + (-m * wz * vx - p.linear_damping_ns_per_m * vy) + w1 + ey
-        r2 = mz - p.yaw_damping_nms * wz + p.pivot_damping_nms * sdd + w2 + ez
-        if ic:
-            d0, d1, d2 = self._diag
-            _, i00, i01, i02, i11, i12, i22 = inverse_sym3(m00 * ic + d0, m01 * ic, m02 * ic, m11 * ic + d1, m12 * ic,
-                                                          m22 * ic + d2)
-            dy[3] = i00 * r0 + i01 * r1 + i02 * r2
-            dy[4] = i01 * r0 + i11 * r1 + i12 * r2
-            dy[5] = i02 * r0 + i12 * r1 + i22 * r2
-        else:
-            e0, e1, e2 = self._inv_diag
-            dy[3], dy[4], dy[5] = r0 * e0, r1 * e1, r2 * e2
-
-    def _rk4(self, h: float) -> None:
-        """One classical Runge-Kutta step of the state; pose and wheel angles feed nothing back,
-        so the stage states only carry heading, twist and pivot angles."""
-        y, yt, k1, k2, k3, k4 = self._y, self._yt, self._k1, self._k2, self._k3, self._k4
-        coupled = range(2, 6 + self.units)
-        hh = 0.5 * h
-        self._derivative(y, k1)
-        for j in coupled:
-            yt[j] = k1[j] * hh + y[j]
-        self._derivative(yt, k2)
-        for j in coupled:
-            yt[j] = k2[j] * hh + y[j]
-        self._derivative(yt, k3)
-        for j in coupled:
-            yt[j] = k3[j] * h + y[j]
-        self._derivative(yt, k4)
-        h6 = h / 6.0
-        for j, (a, b, c, d) in enumerate(zip(k1, k2, k3, k4)):
-            y[j] += (a + (b + c) * 2.0 + d) * h6
 
     def _measure(self) -> None:
         """Wheel speeds and pivot rates of the current state (what the sensors will report)."""

@@ -1,0 +1,106 @@
+"""The numeric kernels (modules with a `.pxd` beside them, compiled by setup.py): compiled, and
+bit for bit what their Python source computes.
+
+Under CI the kernels must have been compiled (a green CI means the compiled code is what ran);
+elsewhere an uncompiled install skips the comparison, since there is only one version to compare.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.machinery
+import importlib.util
+import math
+import os
+import random
+import struct
+from pathlib import Path
+
+import pytest
+
+import hapticop
+from hapticop.devices.ropod.plant import PlantParams, RopodPlant
+
+PACKAGE = Path(hapticop.__file__).parent
+KERNELS = sorted(".".join(p.relative_to(PACKAGE.parent).with_suffix("").parts) for p in PACKAGE.rglob("*.pxd"))
+
+
+def _compiled(name: str):
+    module = importlib.import_module(name)
+    if not module.__file__.endswith(tuple(importlib.machinery.EXTENSION_SUFFIXES)):
+        if os.environ.get("CI"):
+            pytest.fail(f"{name} runs uncompiled under CI: setup.py did not build it (is a C compiler there?)")
+        pytest.skip(f"{name} is not compiled in this install: nothing to compare its source with")
+    return module
+
+
+def _interpreted(name: str):
+    """The kernel's `.py` source as a module of its own, run by the interpreter."""
+    path = PACKAGE.parent.joinpath(*name.split(".")).with_suffix(".py")
+    spec = importlib.util.spec_from_loader(f"{name}_interpreted",
+                                           importlib.machinery.SourceFileLoader(f"{name}_interpreted", str(path)))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _bits(values) -> bytes:
+    """The exact doubles, every NaN as one (C and Python may set a NaN's sign bit differently)."""
+    return struct.pack(f"{len(values)}d", *(math.nan if math.isnan(v) else v for v in values))
+
+
+def test_the_kernels_are_found_and_each_is_compiled_from_its_current_source():
+    assert "hapticop.devices.ropod.platform_dynamics" in KERNELS
+    for name in KERNELS:
+        built = Path(_compiled(name).__file__)
+        source = built.parent / name.rsplit(".", 1)[1]
+        for typed in (source.with_suffix(".py"), source.with_suffix(".pxd")):
+            assert built.stat().st_mtime >= typed.stat().st_mtime, (
+                f"{built.name} is older than {typed.name}: the run would use the old code; pip install -e . again")
+
+
+@pytest.mark.parametrize("level", ["level 1 (caster inertia, pivot friction)", "level 0"])
+def test_the_platform_dynamics_compiled_computes_the_same_bits_as_its_source(level):
+    name = "hapticop.devices.ropod.platform_dynamics"
+    compiled, source = _compiled(name), _interpreted(name)
+    assert compiled.PlatformDynamics is not source.PlatformDynamics
+    params = PlantParams(pivot_damping_nms=0.03) if level.startswith("level 1") else PlantParams(
+        unit_yaw_inertia_kgm2=0.0)
+    body = RopodPlant(params)._body  # built by the plant, as a run builds it
+    assert type(body) is compiled.PlatformDynamics
+    rows = [tuple(body.rows[4 * i:4 * i + 4]) for i in range(body.units)]
+    twin = source.PlatformDynamics(body.units, rows, body.inv_r, body.k, body.inv_s, body.ic, body.mass,
+                                   params.yaw_inertia_kgm2, body.pivot_damping, body.linear_damping,
+                                   body.yaw_damping)
+    rng = random.Random(7)
+    size = 6 + 3 * body.units
+    failures = 0
+    for trial in range(300):
+        y = [rng.uniform(-4.0, 4.0) for _ in range(size)]
+        if trial % 50 == 0:  # extremes: huge, tiny, zero, infinite, NaN
+            y = [rng.choice([0.0, 1e-300, -1e300, 1e12, math.pi, math.inf, math.nan]) for _ in range(size)]
+        torque_sum = [rng.uniform(-60, 60) if trial % 7 else 0.0 for _ in range(body.units)]
+        torque_diff = [rng.uniform(-5, 5) for _ in range(body.units)]
+        external = [rng.uniform(-200, 200), rng.uniform(-200, 200), rng.uniform(-30, 30)]
+        for side in (body, twin):
+            side.torque_sum[:], side.torque_diff[:], side.external[:] = torque_sum, torque_diff, external
+        dy_c, dy_s = [0.0] * size, [0.0] * size
+        assert _outcome(body.derivative, list(y), dy_c) == _outcome(twin.derivative, list(y), dy_s)
+        assert _bits(dy_c) == _bits(dy_s), f"derivative differs at trial {trial}"
+        y_c, y_s = list(y), list(y)
+        h = rng.choice([1e-3, 2.5e-4, 0.02])
+        assert _outcome(body.rk4, y_c, h) == _outcome(twin.rk4, y_s, h), f"trial {trial}"
+        assert _bits(y_c) == _bits(y_s), f"RK4 step differs at trial {trial}"
+        failures += _outcome(twin.rk4, list(y), h) is not None
+    assert failures, "the extremes never reached an infinite angle: the raising path went untested"
+
+
+def _outcome(step, *args) -> tuple[type, str] | None:
+    """None, or the error a step raised (an infinite angle: math's ValueError in both)."""
+    try:
+        step(*args)
+    except ArithmeticError as error:  # what C arithmetic might do instead: never expected
+        raise AssertionError(f"{step} raised {error!r}") from error
+    except ValueError as error:
+        return type(error), str(error)
+    return None
