@@ -14,6 +14,7 @@ import math
 import os
 import random
 import struct
+import sys
 from pathlib import Path
 
 import pytest
@@ -41,6 +42,7 @@ def _interpreted(name: str):
     spec = importlib.util.spec_from_loader(f"{name}_interpreted",
                                            importlib.machinery.SourceFileLoader(f"{name}_interpreted", str(path)))
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up by name
     spec.loader.exec_module(module)
     return module
 
@@ -130,3 +132,31 @@ def test_a_falcon_leg_compiled_computes_the_same_bits_as_its_source():
             row, row_twin = leg.row(pose), twin.row(pose)
             assert (row is None) == (row_twin is None) and (row is None or _bits(row) == _bits(row_twin))
     assert reached > 1000 and unreachable > 100  # both branches were compared
+
+
+def test_the_ropod_controller_bank_compiled_computes_the_same_bits_as_its_source():
+    name = "hapticop.devices.ropod.linear_bank"
+    compiled, source = _compiled(name), _interpreted(name)
+    channels = [compiled.THESIS_PLATFORM_XY, compiled.THESIS_PLATFORM_XY, compiled.THESIS_PLATFORM_THETA,
+                *[compiled.THESIS_WHEEL] * 8]
+    bank = compiled.ControllerBank(channels, 1e-3)
+    twin = source.ControllerBank([source.LinearControllerParams(**vars(c)) for c in channels], 1e-3)
+    assert type(bank) is not type(twin)
+    rng = random.Random(5)
+    out, out_twin = [0.0] * 11, [0.0] * 11
+    clamped = 0
+    for step in range(5000):
+        scale = rng.choice([0.01, 1.0, 100.0])  # small errors, and ones that saturate the integrators
+        error = [rng.gauss(0.0, scale) for _ in range(11)]
+        if step % 997 == 0:
+            error[rng.randrange(11)] = rng.choice([math.nan, math.inf, -math.inf])
+        reset = None if step % 5 else [rng.random() < 0.2 for _ in range(11)]
+        bank.step_values(error, out, reset)
+        twin.step_values(error, out_twin, reset)
+        assert _bits(out) == _bits(out_twin), f"step {step}"
+        assert bank.clamped.tolist() == twin.clamped.tolist()
+        clamped += bool(bank.clamped.any())
+        if step % 1000 == 999:
+            bank.reset()
+            twin.reset()
+    assert clamped > 100  # the anti-windup path was compared too

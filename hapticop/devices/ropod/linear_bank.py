@@ -5,7 +5,8 @@ anti-windup -> lead-lag -> first-order low-pass, each the Tustin (bilinear, no p
 discretisation at Ts. The order and the integrator update follow the Simulink-generated
 code (docs/devices/ropod.md §6.2), so the saturated and reset behaviour match the ropod,
 not just the linear transfer function. The ropod runs eleven of these (x, y, theta and
-eight wheels); a bank steps them all on Python floats with no allocation.
+eight wheels); a bank steps them all on Python floats with no allocation. `linear_bank.pxd`
+types the bank's step for Cython (setup.py; the same bits: tests/test_compiled_kernels.py).
 """
 
 from __future__ import annotations
@@ -150,7 +151,7 @@ class ControllerBank:
         out[:] = result
         return out
 
-    def step_values(self, error: Sequence[float], out: list[float], reset: Sequence[bool] | None = None) -> None:
+    def step_values(self, error: Sequence[float], out: list, reset: Sequence[bool] | None = None) -> None:
         """`step` on Python floats: `out[j] = C_j(error[j])`."""
         xi_, xd_, xl_, prev = self._xi, self._xd, self._xl, self._prev_reset
         y_pi, y_ll, clamped_ = self._y_pi, self._y_leadlag, self._clamped
