@@ -160,3 +160,44 @@ def test_the_ropod_controller_bank_compiled_computes_the_same_bits_as_its_source
             bank.reset()
             twin.reset()
     assert clamped > 100  # the anti-windup path was compared too
+
+
+def test_the_smart_wheel_kinematics_compiled_computes_the_same_bits_as_its_source():
+    name = "hapticop.devices.ropod.kinematics"
+    compiled, source = _compiled(name), _interpreted(name)
+    kin = compiled.SmartWheelKinematics()
+    twin = source.SmartWheelKinematics(source.Geometry(**vars(kin.geometry)))
+    assert type(kin) is not type(twin)
+    rng = random.Random(3)
+    singular = 0
+    for trial in range(3000):
+        delta = [rng.uniform(-7.0, 7.0) for _ in range(4)]
+        enable = None if trial % 3 else [float(rng.random() < 0.7) for _ in range(4)]
+        outcome = []
+        for side in (kin, twin):
+            try:
+                side.evaluate(delta, enable)
+                outcome.append(None)
+            except Exception as error:  # fewer than two units: both must refuse alike
+                outcome.append((type(error), str(error)))
+        assert outcome[0] == outcome[1], f"trial {trial}"
+        if outcome[0] is not None:
+            singular += 1
+            continue
+        assert _bits(kin._n + kin._n_inv) == _bits(twin._n + twin._n_inv)
+        speeds = [rng.gauss(0.0, 20.0) for _ in range(8)]
+        assert _bits(kin.twist_of(speeds)) == _bits(twin.twist_of(speeds))
+        vx, vy, wz = rng.gauss(0, 1), rng.gauss(0, 1), rng.gauss(0, 2)
+        for method, size in (("wheel_speeds_into", 8), ("pivot_rates_into", 4)):
+            out, out_twin = [0.0] * size, [0.0] * size
+            getattr(kin, method)(vx, vy, wz, out)
+            getattr(twin, method)(vx, vy, wz, out_twin)
+            assert _bits(out) == _bits(out_twin), method
+        torques = [rng.gauss(0.0, 5.0) for _ in range(8)]
+        assert _bits(kin.wrench_of(torques)) == _bits(twin.wrench_of(torques))
+        wrench, tau_max = (rng.gauss(0, 200), rng.gauss(0, 200), rng.gauss(0, 50)), rng.choice([2.0, 1e6])
+        out, out_twin = [0.0] * 8, [0.0] * 8
+        assert _bits([kin.distribute_into(*wrench, tau_max, out)]) == _bits(
+            [twin.distribute_into(*wrench, tau_max, out_twin)])
+        assert _bits(out) == _bits(out_twin)
+    assert singular > 10  # the refusal was compared too

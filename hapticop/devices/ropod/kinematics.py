@@ -7,7 +7,8 @@ pivot angle delta_i) the wheel speeds are `(U_i -+ k Q_i) v / r` with k = d/(2s)
 so one masked normal matrix N = G^T M G serves both directions: the least-squares twist
 from the wheel speeds (forward kinematics) and the minimum-norm torques for a wrench
 (the pseudo-inverse distribution, the ropod's June-2019 default). Everything is evaluated
-on Python floats, once per cycle after `update(delta, enable)` (or `evaluate`).
+on Python floats, once per cycle after `update(delta, enable)` (or `evaluate`); `kinematics.pxd`
+types the per-cycle methods for Cython (setup.py; the same bits: tests/test_compiled_kernels.py).
 
 Wheel order: [SW1w1, SW1w2, SW2w1, ..., SW4w2]; w1 is on the unit's +y side. Positive
 speed/torque rolls/pushes along the unit's +x (the model convention; the hardware's w2
@@ -150,7 +151,7 @@ class SmartWheelKinematics:
         i00, i01, i02, i11, i12, i22 = self._n_inv
         return i00 * a0 + i01 * a1 + i02 * a2, i01 * a0 + i11 * a1 + i12 * a2, i02 * a0 + i12 * a1 + i22 * a2
 
-    def wheel_speeds_into(self, vx: float, vy: float, wz: float, out: list[float]) -> None:
+    def wheel_speeds_into(self, vx: float, vy: float, wz: float, out: list) -> None:
         """Inverse kinematics: the no-slip wheel speeds [rad/s] for a platform twist (unmasked)."""
         k, inv_r = self._k, self._inv_r
         for i, (c, s, u3, q3, _) in enumerate(self._units):
@@ -158,7 +159,7 @@ class SmartWheelKinematics:
             out[2 * i] = (u - k * q) * inv_r
             out[2 * i + 1] = (u + k * q) * inv_r
 
-    def pivot_rates_into(self, vx: float, vy: float, wz: float, out: list[float]) -> None:
+    def pivot_rates_into(self, vx: float, vy: float, wz: float, out: list) -> None:
         """The pivot rates delta_dot = q_i/s - wz the twist forces on the trailing casters."""
         inv_s = self._inv_s
         for i, (c, s, _, q3, _) in enumerate(self._units):
@@ -176,7 +177,7 @@ class SmartWheelKinematics:
             mz += a * u3 + b * q3
         return fx * inv_r, fy * inv_r, mz * inv_r
 
-    def distribute_into(self, fx: float, fy: float, mz: float, tau_max: float, out: list[float]) -> float:
+    def distribute_into(self, fx: float, fy: float, mz: float, tau_max: float, out: list) -> float:
         """Variant A (§5.2): minimum-norm torques pinv(G^T M) w, scaled as a whole to |tau| <= tau_max.
 
         Returns the scale (1 when the wrench is feasible). Disabled units get zero torque.
