@@ -3,8 +3,7 @@
 Per leg (docs/devices/falcon-kinematics.md §2-§5): an actuated thigh angle theta1, the
 parallelogram direction theta2 and the parallelogram tilt theta3. `FalconKinematics`
 (`kinematics`) runs three of these per call; the maths is scalar `math` on Python floats,
-since at this size numpy's per-call overhead, not arithmetic, would be the cost. `legs.pxd`
-types it for Cython (setup.py compiles it, with the same bits: tests/test_compiled_kernels.py).
+since at this size numpy's per-call overhead, not arithmetic, would be the cost.
 """
 
 from __future__ import annotations
