@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import hapticop
+from hapticop.devices.ropod.controller_params import THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
 
 PACKAGE = Path(hapticop.__file__).parent
@@ -112,10 +113,9 @@ def _outcome(step, *args) -> tuple[type, str] | None:
 def test_the_ropod_controller_bank_compiled_computes_the_same_bits_as_its_source():
     name = "hapticop.devices.ropod.linear_bank"
     compiled, source = _compiled(name), _interpreted(name)
-    channels = [compiled.THESIS_PLATFORM_XY, compiled.THESIS_PLATFORM_XY, compiled.THESIS_PLATFORM_THETA,
-                *[compiled.THESIS_WHEEL] * 8]
+    channels = [THESIS_PLATFORM_XY, THESIS_PLATFORM_XY, THESIS_PLATFORM_THETA, *[THESIS_WHEEL] * 8]
     bank = compiled.ControllerBank(channels, 1e-3)
-    twin = source.ControllerBank([source.LinearControllerParams(**vars(c)) for c in channels], 1e-3)
+    twin = source.ControllerBank(channels, 1e-3)
     assert type(bank) is not type(twin)
     rng = random.Random(5)
     out, out_twin = [0.0] * 11, [0.0] * 11
@@ -141,7 +141,7 @@ def test_the_smart_wheel_kinematics_compiled_computes_the_same_bits_as_its_sourc
     name = "hapticop.devices.ropod.kinematics"
     compiled, source = _compiled(name), _interpreted(name)
     kin = compiled.SmartWheelKinematics()
-    twin = source.SmartWheelKinematics(source.Geometry(**vars(kin.geometry)))
+    twin = source.SmartWheelKinematics(kin.geometry)
     assert type(kin) is not type(twin)
     rng = random.Random(3)
     singular = 0

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from hapticop.blocks.haptic import HapticController
-from hapticop.devices.ropod.linear_bank import ControllerBank, LinearControllerParams
+from hapticop.devices.ropod.controller_params import LinearControllerParams
+from hapticop.devices.ropod.linear_bank import ControllerBank
 from hapticop.runtime.system import ExitStatus
 from hapticop.testing import BlockHarness
 

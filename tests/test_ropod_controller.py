@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.linear_bank import LinearControllerParams
+from hapticop.devices.ropod.controller_params import LinearControllerParams
 from hapticop.devices.ropod.pdo import (
     Com1,
     Stat1,

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.linear_bank import (
+from hapticop.devices.ropod.controller_params import (
     ROPOD2019_PLATFORM_THETA,
     ROPOD2019_PLATFORM_XY,
     THESIS_PLATFORM_THETA,
     THESIS_PLATFORM_XY,
     THESIS_WHEEL,
-    ControllerBank,
     LinearControllerParams,
 )
+from hapticop.devices.ropod.linear_bank import ControllerBank
 from hapticop.testing import allocation_stats
 
 from .test_ropod_data import load

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp, jacobian
+from hapticop.devices.ropod.geometry import Geometry
+from hapticop.devices.ropod.kinematics import SmartWheelKinematics, distribute_qp, jacobian
 
 from .test_ropod_data import load
 

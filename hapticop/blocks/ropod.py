@@ -15,8 +15,8 @@ from pydantic import Field, field_validator
 from hapticop.blocks.base import Block
 from hapticop.blocks.bounds import Bounds
 from hapticop.blocks.interface import Interface, Params, Port, RateRange
-from hapticop.devices.ropod.kinematics import Geometry
-from hapticop.devices.ropod.linear_bank import LinearControllerParams
+from hapticop.devices.ropod.controller_params import LinearControllerParams
+from hapticop.devices.ropod.geometry import Geometry
 from hapticop.devices.ropod.pdo import RXPDO_BYTES, TXPDO_BYTES
 from hapticop.devices.ropod.velocity_controller import PlatformControllerParams, PlatformVelocityController
 

@@ -19,15 +19,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from math import cos, hypot, sin
-from typing import Annotated
 
 import numpy as np
-from annotated_types import Gt
 from numpy.typing import ArrayLike, NDArray
 
-from hapticop.parameters import parameters
+from hapticop.devices.ropod.geometry import Geometry
 
-__all__ = ["Geometry", "SmartWheelKinematics", "jacobian", "distribute_qp", "inverse_sym3"]
+__all__ = ["SmartWheelKinematics", "jacobian", "distribute_qp", "inverse_sym3"]
 
 F64 = NDArray[np.float64]
 
@@ -44,36 +42,6 @@ def inverse_sym3(n00: float, n01: float, n02: float, n11: float, n12: float, n22
     inv = 1.0 / det if det else 0.0
     return (det, c00 * inv, c01 * inv, c02 * inv, (n22 * n00 - n02 * n02) * inv, (n02 * n01 - n12 * n00) * inv,
             (n00 * n11 - n01 * n01) * inv)
-
-
-@parameters
-class Geometry:
-    """Ropod geometry as compiled in the June-2019 controller (docs/devices/ropod.md §2.2), in metres.
-
-    Pivots SW1..SW4 counter-clockwise from front-left; the order is a known open question (§10 Q1).
-    """
-
-    wheel_radius_m: Annotated[float, Gt(0)] = 0.0525
-    """r, the radius of each wheel."""
-    caster_offset_m: Annotated[float, Gt(0)] = 0.01
-    """s, how far each unit's axle trails its pivot."""
-    wheel_distance_m: Annotated[float, Gt(0)] = 0.08
-    """d, the distance between a unit's two wheels."""
-    pivots_m: tuple[tuple[float, float], ...] = ((0.21, 0.21), (-0.21, 0.21), (-0.21, -0.21), (0.21, -0.21))
-    """(x, y) of each unit's pivot in the robot frame, SW1 first."""
-
-    @property
-    def units(self) -> int:
-        return len(self.pivots_m)
-
-    @property
-    def wheels(self) -> int:
-        return 2 * len(self.pivots_m)
-
-    @property
-    def k(self) -> float:
-        """Lateral-to-differential lever d/(2s): moving across a unit costs k times the wheel speed."""
-        return self.wheel_distance_m / (2.0 * self.caster_offset_m)
 
 
 class SmartWheelKinematics:

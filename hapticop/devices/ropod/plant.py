@@ -32,7 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics
+from hapticop.devices.ropod.geometry import Geometry
+from hapticop.devices.ropod.kinematics import SmartWheelKinematics
 from hapticop.devices.ropod.pdo import (
     RXPDO_DTYPE,
     TXPDO_BYTES,

@@ -23,14 +23,15 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from hapticop.devices.ropod.kinematics import Geometry, SmartWheelKinematics, distribute_qp
-from hapticop.devices.ropod.linear_bank import (
+from hapticop.devices.ropod.controller_params import (
     THESIS_PLATFORM_THETA,
     THESIS_PLATFORM_XY,
     THESIS_WHEEL,
-    ControllerBank,
     LinearControllerParams,
 )
+from hapticop.devices.ropod.geometry import Geometry
+from hapticop.devices.ropod.kinematics import SmartWheelKinematics, distribute_qp
+from hapticop.devices.ropod.linear_bank import ControllerBank
 from hapticop.devices.ropod.pdo import (
     RXPDO_BYTES,
     RXPDO_DTYPE,
