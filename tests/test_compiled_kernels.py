@@ -63,6 +63,17 @@ def test_the_kernels_are_found_and_each_is_compiled_from_its_current_source():
                 f"{built.name} is older than {typed.name}: the run would use the old code; pip install -e . again")
 
 
+def test_no_kernel_defines_a_parameter_set_or_model():
+    """A compiled class has no source: pydantic would find no field docstrings, and the reference and the
+    schema would lose their descriptions. Parameter sets live in plain modules."""
+    for name in KERNELS:
+        module = importlib.import_module(name)
+        for value in vars(module).values():
+            if isinstance(value, type) and value.__module__ == name:
+                assert not hasattr(value, "__pydantic_config__") and not hasattr(value, "model_fields"), (
+                    f"{name}.{value.__name__} is a parameter set or model in a compiled kernel")
+
+
 @pytest.mark.parametrize("level", ["level 1 (caster inertia, pivot friction)", "level 0"])
 def test_the_platform_dynamics_compiled_computes_the_same_bits_as_its_source(level):
     name = "hapticop.devices.ropod.platform_dynamics"
