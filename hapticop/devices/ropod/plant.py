@@ -149,9 +149,6 @@ class RopodPlant:
         self._noise_p = np.zeros(units)
         self._rx_src: np.ndarray | None = None
         self._tx_src: np.ndarray | None = None
-        # An external force and torque on the platform (N, N, N m in its frame), held over a step: what
-        # the world's contacts push back with (a box being pushed, a wall). Set its items in place.
-        self.external = self._body.external
         self.reset_state(p.initial_pose, p.initial_twist, p.initial_pivot_angles_rad)
 
     def reset_state(self, pose=(0.0, 0.0, 0.0), twist=(0.0, 0.0, 0.0), pivot_angles=None) -> None:
@@ -163,6 +160,12 @@ class RopodPlant:
             self.pivot_angles[:] = pivot_angles
         self._y[:] = self.state.tolist()
         self._measure()
+
+    @property
+    def external(self) -> list[float]:
+        """The external force and torque on the platform (N, N, N m in its frame), held over a step: what
+        the world's contacts push back with (a box being pushed, a wall). Set its three items in place."""
+        return self._body.external
 
     # --- read-outs of the last step -------------------------------------------------------
     wheel_speeds = property(lambda self: np.array(self._speeds), doc="wheel speeds [rad/s]")
