@@ -92,3 +92,14 @@ def test_a_command_started_with_ctrl_c_ignored_takes_it_from_the_start():
     done = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120,
                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     assert done.stdout.strip() == "True", done.stderr
+
+
+def test_importing_the_simulation_starts_no_process():
+    """MuJoCo's GL backend would import GLFW, which starts a Python process to probe its library: a child
+    that Ctrl+C at start-up interrupts mid-reply (the traceback the test above looks for, 1 run in 10-25
+    on a busy machine). The simulation imports MuJoCo without a GL backend, and its children inherit that."""
+    probe = ("import os, sys; import hapticop.sim.engine, hapticop.sim.scene_files; "
+             "print('glfw' in sys.modules, os.environ.get('MUJOCO_GL'))")
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    done = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert done.stdout.split() == ["False", "disable"], done.stderr
