@@ -45,7 +45,6 @@ class LinearControllerParams:
         return cls(**data)
 
 
-
 # Parameter sets of docs/devices/ropod.md §6.3 (platform K in N/(m/s) or Nm/(rad/s), wheel K in Nm/(rad/s)).
 THESIS_PLATFORM_XY = LinearControllerParams(100.0, 0.25, 20.0, 20.0, 100.0, 100.0)
 THESIS_PLATFORM_THETA = LinearControllerParams(755.0, 0.3, 20.0, 20.0, 100.0, 100.0)

@@ -1,5 +1,6 @@
 # C types for platform_dynamics.py when Cython compiles it (setup.py); the .py is the source.
 cimport cython
+from hapticop.devices.ropod.kinematics cimport inverse_sym3
 
 
 cdef class PlatformDynamics:
@@ -20,9 +21,7 @@ cdef class PlatformDynamics:
                    si=cython.double, u3=cython.double, q3=cython.double, q=cython.double, u=cython.double,
                    dd=cython.double, w=cython.double, m=cython.double, ex=cython.double, ey=cython.double,
                    ez=cython.double, r0=cython.double, r1=cython.double, r2=cython.double,
-                   n00=cython.double, n01=cython.double, n02=cython.double, n11=cython.double,
-                   n12=cython.double, n22=cython.double, c00=cython.double, c01=cython.double,
-                   c02=cython.double, det=cython.double, inv=cython.double, i00=cython.double,
+                   i00=cython.double,
                    i01=cython.double, i02=cython.double, i11=cython.double, i12=cython.double,
                    i22=cython.double)
     cpdef derivative(self, list y, list dy)

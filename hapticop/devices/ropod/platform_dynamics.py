@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 
+from hapticop.devices.ropod.kinematics import inverse_sym3
+
 __all__ = ["PlatformDynamics"]
 
 
@@ -48,8 +50,7 @@ class PlatformDynamics:
         rate Omega_i - wz, the wheel speeds (U_i v -+ k Q_i v) / r, and its share of the wrench
         G^T tau = sum (t1 + t2)/r U_i + k (t2 - t1)/r Q_i. The casters' steering inertia and their
         bearings' friction both act through Q_i: rhs += sum Q_i delta_dot_i (I_c/s^2 U_i v - b_p/s),
-        plus b_p sum delta_dot_i on the yaw; the mass matrix is M + I_c/s^2 sum Q_i^T Q_i, solved
-        by cofactors (kinematics.inverse_sym3's arithmetic).
+        plus b_p sum delta_dot_i on the yaw; the mass matrix is M + I_c/s^2 sum Q_i^T Q_i.
         """
         units, rows, torque_sum, torque_diff = self.units, self.rows, self.torque_sum, self.torque_diff
         theta, vx, vy, wz = y[2], y[3], y[4], y[5]
@@ -94,16 +95,8 @@ class PlatformDynamics:
         r1 = fy + (-m * wz * vx - self.linear_damping * vy) + w1 + ey
         r2 = mz - self.yaw_damping * wz + self.pivot_damping * sdd + w2 + ez
         if ic:
-            n00, n01, n02 = m00 * ic + self.d0, m01 * ic, m02 * ic
-            n11, n12, n22 = m11 * ic + self.d1, m12 * ic, m22 * ic + self.d2
-            c00 = n11 * n22 - n12 * n12
-            c01 = n12 * n02 - n01 * n22
-            c02 = n01 * n12 - n11 * n02
-            det = n00 * c00 + n01 * c01 + n02 * c02
-            inv = 1.0 / det if det else 0.0
-            i00, i01, i02 = c00 * inv, c01 * inv, c02 * inv
-            i11, i12 = (n22 * n00 - n02 * n02) * inv, (n02 * n01 - n12 * n00) * inv
-            i22 = (n00 * n11 - n01 * n01) * inv
+            _, i00, i01, i02, i11, i12, i22 = inverse_sym3(m00 * ic + self.d0, m01 * ic, m02 * ic,
+                                                          m11 * ic + self.d1, m12 * ic, m22 * ic + self.d2)
             dy[3] = i00 * r0 + i01 * r1 + i02 * r2
             dy[4] = i01 * r0 + i11 * r1 + i12 * r2
             dy[5] = i02 * r0 + i12 * r1 + i22 * r2
