@@ -187,3 +187,97 @@ def test_the_smart_wheel_kinematics_compiled_computes_the_same_bits_as_its_sourc
             [twin.distribute_into(*wrench, tau_max, out_twin)])
         assert _bits(out) == _bits(out_twin)
     assert singular > 10  # the refusal was compared too
+
+
+def _scan(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Ranges as a scanner gives them and worse: walls near and far, NaN and inf beams, zeros, ties."""
+    ranges = rng.choice([rng.uniform(0.0, 3.0), 0.5, 1.25], size=n) if rng.random() < 0.2 else rng.uniform(0.0, 8.0, n)
+    bad = rng.random(n)
+    ranges[bad < 0.05] = np.nan
+    ranges[(bad >= 0.05) & (bad < 0.07)] = np.inf
+    ranges[(bad >= 0.07) & (bad < 0.08)] = 0.0
+    return ranges.astype(rng.choice([np.float32, np.float64]))
+
+
+@pytest.mark.parametrize("lidar_y", [0.0, 0.1, 0.45])  # 0.45: outside the body, every beam searched for both sides
+def test_the_beam_loops_compiled_give_numpys_bits(lidar_y):
+    """`BeamGeometry` with the compiled loops against its numpy passes (the interpreted path), over
+    random scans, points given as a field (NaN ones too), shifts, margins and robust k."""
+    from hapticop.devices.ropod.body import Body
+    from hapticop.devices.sick.scan import SensorMount
+    from hapticop.haptics.geometry import BeamGeometry
+
+    _compiled("hapticop.haptics.beam_loops")
+    rng = np.random.default_rng(7)
+    body = Body(lidar=SensorMount(x_m=0.25, y_m=lidar_y))
+    n = 811
+    angles = np.linspace(-2.356, 2.356, n)
+    loops, numpy_passes = BeamGeometry(angles, body), BeamGeometry(angles, body)
+    numpy_passes._loops = None
+    assert loops._loops is not None
+    reached = set()
+    shifts = [0.0, -0.0, 0.3, -2.0, 1e-300, math.nan, math.inf, -math.inf]
+    hl, hw = body.footprint.length_m / 2, body.footprint.width_m / 2
+    for trial in range(400):
+        margin, k = float(rng.choice([0.0, 0.1, 0.35])), int(rng.integers(1, 6))
+        rear, ahead = float(rng.uniform(0, 1)), float(rng.uniform(0, 3))
+        if trial % 4 == 3:  # points given, as a scan field carries them (a bad sample may hold NaN)
+            field = np.vstack([_scan(rng, n).astype(np.float64), angles,
+                               rng.uniform(-3, 9, n), rng.uniform(-4, 4, n)])
+            field[2:, rng.random(n) < 0.03] = np.nan
+            edge = rng.random(n) < 0.2  # points exactly on the corridor's and the side window's edges
+            field[2, edge] = rng.choice([hl, -hl - rear, hl + ahead], size=int(edge.sum()))
+            field[3, edge] = rng.choice([hw + margin, -hw - margin, hw, -hw], size=int(edge.sum()))
+            for side in (loops, numpy_passes):
+                side.load_points(field)
+        else:
+            ranges = _scan(rng, n)
+            for side in (loops, numpy_passes):
+                side.load(ranges)
+        gaps = [side.corridor_gap(margin, k) for side in (loops, numpy_passes)]
+        assert _bits(gaps[:1]) == _bits(gaps[1:]), f"trial {trial}: corridor gap"
+        for side in (loops, numpy_passes):
+            side.select_sides(rear, ahead)
+        assert np.array_equal(loops._left_penalty, numpy_passes._left_penalty)
+        assert np.array_equal(loops._right_penalty, numpy_passes._right_penalty)
+        for _ in range(6):
+            sx = float(rng.choice(shifts)) if rng.random() < 0.3 else float(rng.uniform(-1, 3))
+            sy = float(rng.choice(shifts)) if rng.random() < 0.3 else float(rng.uniform(-1, 1))
+            k = int(rng.integers(1, 6))
+            c = loops.side_clearances(sx, sy, k)
+            c_numpy = numpy_passes.side_clearances(sx, sy, k)
+            assert _bits(c) == _bits(c_numpy), f"trial {trial}: shift ({sx}, {sy}), k {k}"
+            reached.update("nan" if math.isnan(v) else "inf" if math.isinf(v) else "finite" for v in c)
+    assert reached == {"nan", "inf", "finite"}  # every kind of answer was compared
+
+
+def test_the_beam_loops_compiled_and_as_written_agree_and_refuse_a_span_beyond_the_beams():
+    name = "hapticop.haptics.beam_loops"
+    compiled, source = _compiled(name), _interpreted(name)
+    assert compiled.COMPILED and not source.COMPILED
+    rng = np.random.default_rng(11)
+    for trial in range(60):
+        n = int(rng.integers(1, 60))
+        px, py = rng.uniform(-2, 4, n), rng.uniform(-2, 2, n)
+        px[rng.random(n) < 0.1] = np.nan
+        valid = (rng.random(n) < 0.9).astype(np.uint8)
+        lo, hi = sorted(int(v) for v in rng.integers(0, n + 1, 2))
+        results = []
+        for module in (compiled, source):
+            buffers = module.BeamBuffers(px, py, valid, np.empty(n), np.empty(n), np.empty(n))
+            gap = buffers.corridor_kth(0.4, 0.35, 2)
+            buffers.select_sides(-0.8, 1.2, 0.3)
+            squared = [buffers.side_kth_squared(side, lo, hi, 0.2, -0.1, 0.35, 0.3, 3) for side in (True, False)]
+            results.append(([gap, *squared], np.asarray(buffers.left).tobytes(), np.asarray(buffers.right).tobytes()))
+        assert _bits(results[0][0]) == _bits(results[1][0]) and results[0][1:] == results[1][1:], f"trial {trial}"
+    for module in (compiled, source):  # unchecked C indexing must never be reached with a wrong span or buffer
+        buffers = module.BeamBuffers(*(np.zeros(4) for _ in range(2)), np.zeros(4, np.uint8),
+                                     *(np.zeros(4) for _ in range(3)))
+        with pytest.raises(IndexError):
+            buffers.side_kth_squared(True, 0, 5, 1.0, 0.0, 0.3, 0.3, 1)
+        assert not np.asarray(buffers.work).any()  # refused before its loop wrote a beam
+        with pytest.raises(IndexError):
+            buffers.kth_smallest(-1, 2, 1)
+        with pytest.raises(ValueError, match="every beam buffer"):
+            module.BeamBuffers(*(np.zeros(4) for _ in range(2)), np.zeros(4, np.uint8), np.zeros(3),
+                               *(np.zeros(4) for _ in range(2)))

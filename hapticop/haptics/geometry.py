@@ -5,7 +5,8 @@ The thesis models the robot as a point at the LIDAR; docs/hallway-experiment.md 
 0.3 m beside the scanner is touching. The body (footprint and LIDAR mount) is the robot's one
 description in ``hapticop.devices.ropod.body``. Beam directions depend only on the scan angles,
 so their cosines and sines are computed once; a scan then costs a few numpy passes into
-preallocated arrays. Robot frame: x forward, y left (REP 103), origin at the footprint centre.
+preallocated arrays, or one C loop each where ``beam_loops`` is compiled. Robot frame: x forward,
+y left (REP 103), origin at the footprint centre.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hapticop.devices.ropod.body import Body
+from hapticop.haptics import beam_loops
 
 
 def kth_smallest(work: NDArray[np.float64], k: int) -> float:
@@ -78,6 +80,12 @@ class BeamGeometry:
             left = right = slice(0, n)
         self._side_views = tuple((self._dx[span], penalty[span], self._work[span])
                                  for span, penalty in ((left, self._left_penalty), (right, self._right_penalty)))
+        self._side_spans = ((left.start, left.stop), (right.start, right.stop))
+        self._loops = (beam_loops.BeamBuffers(self.px, self.py, self._valid.view(np.uint8), self._work,
+                                              self._left_penalty, self._right_penalty)
+                       if beam_loops.COMPILED else None)
+        """The compiled passes over these arrays, or None for numpy's: the same bits either way
+        (tests/test_compiled_kernels.py)."""
 
     @staticmethod
     def _span(beams: NDArray[np.bool_]) -> slice:
@@ -123,6 +131,10 @@ class BeamGeometry:
         last_margin, last_k, last_gap = self._corridor
         if margin_m == last_margin and k == last_k:
             return last_gap
+        if self._loops is not None:
+            gap = self._loops.corridor_kth(self.half_width + margin_m, self.half_length, k)
+            self._corridor = (margin_m, k, gap)
+            return gap
         inside, ahead, work = self._m1, self._m2, self._work
         np.abs(self.py, out=self._dx)
         np.less_equal(self._dx, self.half_width + margin_m, out=inside)
@@ -143,6 +155,9 @@ class BeamGeometry:
         ``−L/2 − rear ≤ p_x ≤ L/2 + ahead`` (docs/hallway-experiment.md §9.1). Stored as additive penalties
         (0 selected, inf not), so the per-cycle selection is one addition.
         """
+        if self._loops is not None:
+            self._loops.select_sides(-self.half_length - rear_m, self.half_length + ahead_m, self.half_width)
+            return
         win, side, px, py = self._m1, self._m2, self.px, self.py
         np.greater_equal(px, -self.half_length - rear_m, out=win)
         np.less_equal(px, self.half_length + ahead_m, out=side)
@@ -167,6 +182,12 @@ class BeamGeometry:
         ``(c_left, c_right)``, ``inf`` where fewer than k points are selected.
         """
         dx, dy, hl, hw = self._dx, self._dy, self.half_length, self.half_width
+        loops = self._loops
+        if loops is not None:
+            (left_lo, left_hi), (right_lo, right_hi) = self._side_spans
+            left = loops.side_kth_squared(True, left_lo, left_hi, shift_x_m, shift_y_m, hl, hw, k)
+            right = loops.side_kth_squared(False, right_lo, right_hi, shift_x_m, shift_y_m, hl, hw, k)
+            return math.sqrt(left), math.sqrt(right)
         # How far each point lies beyond the moved body along x: p − clip(p, s − h, s + h), which is
         # max(|p − s| − h, 0) with its sign, in three passes instead of four.
         np.maximum(self.px, shift_x_m - hl, out=dx)
