@@ -376,3 +376,22 @@ def test_a_stream_without_a_range_is_taken_as_it_is_infinities_included():
     assert not scan.checks and scan.admits(np.array([np.inf, 1.0, np.inf, 0.5], np.float32))
     command = Bounds(Port("float64", (3,), range=(-10.0, 10.0)), "stream 'velocity_setpoint'")
     assert command.checks and not command.admits(np.array([np.inf, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("length", [3, 16, 17, 811])  # checked as floats up to bounds.SHORT, by ufuncs beyond
+def test_a_range_check_refuses_a_sample_with_any_element_bad_and_admits_its_edges(length):
+    from hapticop.blocks.bounds import SHORT, Bounds
+    from hapticop.blocks.interface import Port
+
+    assert (length <= SHORT) == (length in (3, 16))
+    bounds = Bounds(Port("float64", (length,), range=(-2.0, 5.0)), "stream 'command'")
+    edges = np.linspace(-2.0, 5.0, length)
+    assert bounds.admits(edges) and bounds.admits(np.full(length, -2.0)) and bounds.admits(np.full(length, 5.0))
+    refused = 0
+    for where in sorted({0, length // 2, length - 1}):
+        for bad in (np.nan, np.inf, -np.inf, -2.0000000000000004, 5.000000000000001, 1e300):
+            sample = edges.copy()
+            sample[where] = bad
+            assert not bounds.admits(sample), (where, bad)
+            refused += 1
+    assert bounds.refused == bounds.burst == refused

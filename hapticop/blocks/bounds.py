@@ -1,4 +1,4 @@
-"""A port's declared range checked on a sample, without allocating: where a command is read or arrives.
+"""A port's declared range checked on a sample, leaving nothing allocated: where a command is read or arrives.
 
 A command port declares `range` (`hapticop.blocks.interface.Port`): every element must be finite
 and inside it. A port without a range is taken as it is: a scan's ranges say "no return" with an
@@ -17,6 +17,10 @@ import numpy as np
 
 from hapticop.blocks.interface import Port
 
+SHORT = 16
+"""A vector up to this long is checked element by element as Python floats: for a twist or a force that
+is several times faster than three ufunc calls and a reduction, whose fixed cost is per call."""
+
 
 class Bounds:
     """The check of one port's samples (finite and inside its declared range), with its counts."""
@@ -24,6 +28,7 @@ class Bounds:
     def __init__(self, port: Port, what: str) -> None:
         self.what = what  # for the log: the port or stream it guards
         self.range = port.range
+        self._short = len(port.shape) == 1 and port.shape[0] <= SHORT
         self._ok = np.zeros(port.shape, dtype=bool)
         self._also = np.zeros(port.shape, dtype=bool)
         self.refused = 0  # every sample refused so far
@@ -36,15 +41,22 @@ class Bounds:
 
     def admits(self, value: np.ndarray) -> bool:
         """True for a sample to follow; False (counted) for one to refuse. NaN fails every comparison."""
-        ok = self._ok
-        if self.range is not None:
-            np.greater_equal(value, self.range[0], out=ok)
-            np.less_equal(value, self.range[1], out=self._also)
-            np.logical_and(ok, self._also, out=ok)
+        if self.range is None:
+            return True
+        low, high = self.range
+        if self._short:
+            for element in value.tolist():
+                if not low <= element <= high:
+                    break
+            else:
+                return True
         else:
-            return True
-        if ok.all():
-            return True
+            ok = self._ok
+            np.greater_equal(value, low, out=ok)
+            np.less_equal(value, high, out=self._also)
+            np.logical_and(ok, self._also, out=ok)
+            if ok.all():
+                return True
         self.refused += 1
         self.burst += 1
         return False
