@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import hapticop
-from hapticop.devices.falcon.mechanism import WORKSPACE_BOX_M, Geometry
+from hapticop.devices.falcon.mechanism import WORKSPACE_BOX_M, Drive, Geometry
 from hapticop.devices.ropod.controller_params import THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
 
@@ -191,13 +191,13 @@ def test_the_smart_wheel_kinematics_compiled_computes_the_same_bits_as_its_sourc
 
 
 # ---------------------------------------------------------------- the Falcon's kinematics and its legs
-def _falcon_pair():
+def _falcon_pair(drive: Drive):
     """The compiled FalconKinematics on compiled legs, and its source on the legs' source."""
     legs, kinematics = "hapticop.devices.falcon.legs", "hapticop.devices.falcon.kinematics"
     compiled_legs, compiled = _compiled(legs), _compiled(kinematics)
     source_legs, source = _interpreted(legs), _interpreted(kinematics)
     source.LegMaths = source_legs.LegMaths  # the source's own legs, not the compiled ones it imported
-    kin, twin = compiled.FalconKinematics(), source.FalconKinematics()
+    kin, twin = compiled.FalconKinematics(drive=drive), source.FalconKinematics(drive=drive)
     assert type(kin) is not type(twin)
     assert type(kin._leg1) is compiled_legs.LegMaths and type(twin._leg1) is source_legs.LegMaths
     return kin, twin
@@ -258,8 +258,12 @@ def test_the_falcon_legs_compiled_compute_the_same_bits_as_their_source():
     assert unreachable > 100 and singular > 10  # the refusals were compared too
 
 
-def test_the_falcon_kinematics_compiled_computes_the_same_bits_as_its_source():
-    kin, twin = _falcon_pair()
+@pytest.mark.parametrize("drive", [Drive(), Drive(motor_per_nm=-9876.54321, torque_limit_nm=0.1234567)],
+                         ids=["libnifalcon's drive", "a motor cap and scale no float holds exactly"])
+def test_the_falcon_kinematics_compiled_computes_the_same_bits_as_its_source(drive):
+    kin, twin = _falcon_pair(drive)
+    constants = ("_rad_per_count", "_zero_rad", "_motor_per_nm", "_motor_cap", "tol_rad", "tol_m", "max_condition")
+    assert _bits([getattr(kin, a) for a in constants]) == _bits([getattr(twin, a) for a in constants])
     rng = random.Random(13)
     outcomes = {"forward failed": 0, "inverse failed": 0, "saturated": 0, "not finite": 0, "singular": 0,
                 "raised": 0}
@@ -290,6 +294,7 @@ def test_the_falcon_kinematics_compiled_computes_the_same_bits_as_its_source():
             outs.append((got, out.tolist(), side.iterations, side.residual, side._last))
         assert _same(outs[0][0], outs[1][0]) and _bits(outs[0][1]) == _bits(outs[1][1]), (trial, counts, angles)
         assert outs[0][2] == outs[1][2] and _same(outs[0][3:], outs[1][3:]), trial
+        assert _same((kin._Q, kin._Mt, kin._det), (twin._Q, twin._Mt, twin._det)), trial  # the last Jacobian
         outcomes["forward failed"] += outs[0][0] == ("returned", False)
         # forces at the last forward pose, and at a random position
         force = [rng.gauss(0.0, rng.choice([1.0, 10.0, 1e4])) for _ in range(3)]
@@ -302,7 +307,7 @@ def test_the_falcon_kinematics_compiled_computes_the_same_bits_as_its_source():
                 motor = np.full(3, 7, dtype=np.int64)
                 motors.append((_result(side.forces_to_motor, position, force, motor), motor.tolist()))
             assert motors[0] == motors[1] and _same(motors[0][0], motors[1][0]), (trial, position, force)
-            outcomes["saturated"] += max(map(abs, motors[0][1])) >= 4095
+            outcomes["saturated"] += max(map(abs, motors[0][1])) == int(twin._motor_cap)
             outcomes["not finite"] += motors[0][0] == ("returned", False) and not all(map(math.isfinite, force))
         tau = [rng.gauss(0.0, rng.choice([0.1, 1.0, 100.0])) for _ in range(3)]
         if rng.random() < 0.03:
