@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import hapticop
+from hapticop.devices.falcon.mechanism import WORKSPACE_BOX_M, Drive, Geometry
 from hapticop.devices.ropod.controller_params import THESIS_PLATFORM_THETA, THESIS_PLATFORM_XY, THESIS_WHEEL
 from hapticop.devices.ropod.plant import PlantParams, RopodPlant
 
@@ -281,3 +282,159 @@ def test_the_beam_loops_compiled_and_as_written_agree_and_refuse_a_span_beyond_t
         with pytest.raises(ValueError, match="every beam buffer"):
             module.BeamBuffers(*(np.zeros(4) for _ in range(2)), np.zeros(4, np.uint8), np.zeros(3),
                                *(np.zeros(4) for _ in range(2)))
+
+
+# ---------------------------------------------------------------- the Falcon's kinematics and its legs
+def _falcon_pair(drive: Drive):
+    """The compiled FalconKinematics on compiled legs, and its source on the legs' source."""
+    legs, kinematics = "hapticop.devices.falcon.legs", "hapticop.devices.falcon.kinematics"
+    compiled_legs, compiled = _compiled(legs), _compiled(kinematics)
+    source_legs, source = _interpreted(legs), _interpreted(kinematics)
+    source.LegMaths = source_legs.LegMaths  # the source's own legs, not the compiled ones it imported
+    kin, twin = compiled.FalconKinematics(drive=drive), source.FalconKinematics(drive=drive)
+    assert type(kin) is not type(twin)
+    assert type(kin._leg1) is compiled_legs.LegMaths and type(twin._leg1) is source_legs.LegMaths
+    return kin, twin
+
+
+def _result(call, *args):
+    """What a call returned, or the type and message of what it raised."""
+    try:
+        return "returned", call(*args)
+    except Exception as error:  # noqa: BLE001 - compiled and source must raise alike, whatever it is
+        return "raised", type(error), str(error)
+
+
+def _same(a, b) -> bool:
+    """Equal results, floats (nested in tuples and arrays) compared by their bits."""
+    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
+        return a.dtype == b.dtype and _same(tuple(a.ravel().tolist()), tuple(b.ravel().tolist()))
+    if isinstance(a, float) and isinstance(b, float):
+        return _bits([a]) == _bits([b])
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b
+
+
+def _position(rng: random.Random) -> tuple[float, float, float]:
+    """Mostly in the workspace box, a third of them up to half its size outside, some not finite."""
+    lo, hi = WORKSPACE_BOX_M
+    margin = rng.choice([0.0, 0.0, 0.5])
+    p = [rng.uniform(a - margin * (b - a), b + margin * (b - a)) for a, b in zip(lo, hi)]
+    if rng.random() < 0.05:
+        p[rng.randrange(3)] = rng.choice([math.nan, math.inf, -math.inf, 0.0])
+    return p[0], p[1], p[2]
+
+
+def test_the_falcon_legs_compiled_compute_the_same_bits_as_their_source():
+    name = "hapticop.devices.falcon.legs"
+    compiled, source = _compiled(name), _interpreted(name)
+    g = Geometry()
+    rng = random.Random(11)
+    unreachable = singular = 0
+    for phi in (*g.leg_angles_deg, 17.0):
+        leg, twin = compiled.LegMaths(g, phi), source.LegMaths(g, phi)
+        assert type(leg) is not type(twin)
+        assert _bits([getattr(leg, a) for a in source.LegMaths.__slots__]) == _bits(
+            [getattr(twin, a) for a in source.LegMaths.__slots__])
+        for _ in range(2000):
+            p = _position(rng)
+            ik = _result(leg.ik, *p)
+            assert _same(ik, _result(twin.ik, *p)), p
+            unreachable += ik[1] is None
+            state = ik[1] if ik[1] is not None else tuple(rng.uniform(-4.0, 4.0) for _ in range(8))
+            if rng.random() < 0.1:  # thigh along the link (D = 0), or not finite
+                state = (state[0], state[0], *state[2:]) if rng.random() < 0.5 else tuple(
+                    rng.choice([v, math.nan, math.inf]) for v in state)
+            row = _result(leg.row, state)
+            assert _same(row, _result(twin.row, state)), state
+            singular += row == ("returned", None)
+    assert unreachable > 100 and singular > 10  # the refusals were compared too
+
+
+@pytest.mark.parametrize("drive", [Drive(), Drive(motor_per_nm=-9876.54321, torque_limit_nm=0.1234567)],
+                         ids=["libnifalcon's drive", "a motor cap and scale no float holds exactly"])
+def test_the_falcon_kinematics_compiled_computes_the_same_bits_as_its_source(drive):
+    kin, twin = _falcon_pair(drive)
+    constants = ("_rad_per_count", "_zero_rad", "_motor_per_nm", "_motor_cap", "tol_rad", "tol_m", "max_condition")
+    assert _bits([getattr(kin, a) for a in constants]) == _bits([getattr(twin, a) for a in constants])
+    rng = random.Random(13)
+    outcomes = {"forward failed": 0, "inverse failed": 0, "saturated": 0, "not finite": 0, "singular": 0,
+                "raised": 0}
+    theta = np.zeros(3)
+    assert kin.inverse(np.array([0.0, 0.0, 0.125]), theta)
+    counts = kin.counts_from_angles(theta, np.zeros(3, dtype=np.int64)).tolist()
+    for trial in range(3000):
+        condition = 4.0 if trial % 37 == 0 else 1e6  # now and then a Jacobian too ill-conditioned to use
+        kin.max_condition = twin.max_condition = condition
+        # forward: a walk of a few counts a cycle, now and then a jump, an unreachable or non-finite reading
+        kind, reading, angles = rng.random(), None, None
+        if kind < 0.03 and kin.inverse(_position(rng), theta):  # a jump across the workspace
+            counts = kin.counts_from_angles(theta, np.zeros(3, dtype=np.int64)).tolist()
+        elif kind < 0.06:  # one reading no pose gives
+            reading = [rng.randrange(-30000, 30000) for _ in range(3)]
+        elif kind < 0.08:
+            kin.reset()
+            twin.reset()
+        elif kind > 0.97:
+            angles = [rng.choice([0.3, math.nan, math.inf, -math.inf, 1e300]) for _ in range(3)]
+        else:
+            counts = [c + rng.randrange(-6, 7) for c in counts]
+        outs = []
+        for side in (kin, twin):
+            out = np.full(3, -1.0)
+            got = (_result(side.forward, np.array(reading or counts, dtype=np.int64), out) if angles is None
+                   else _result(side.forward_angles, angles, out))
+            outs.append((got, out.tolist(), side.iterations, side.residual, side._last))
+        assert _same(outs[0][0], outs[1][0]) and _bits(outs[0][1]) == _bits(outs[1][1]), (trial, counts, angles)
+        assert outs[0][2] == outs[1][2] and _same(outs[0][3:], outs[1][3:]), trial
+        assert _same((kin._Q, kin._Mt, kin._det), (twin._Q, twin._Mt, twin._det)), trial  # the last Jacobian
+        outcomes["forward failed"] += outs[0][0] == ("returned", False)
+        # forces at the last forward pose, and at a random position
+        force = [rng.gauss(0.0, rng.choice([1.0, 10.0, 1e4])) for _ in range(3)]
+        if rng.random() < 0.03:
+            force[rng.randrange(3)] = rng.choice([math.nan, math.inf, -math.inf])
+        p = _position(rng)
+        for position in (None, p):
+            motors = []
+            for side in (kin, twin):
+                motor = np.full(3, 7, dtype=np.int64)
+                motors.append((_result(side.forces_to_motor, position, force, motor), motor.tolist()))
+            assert motors[0] == motors[1] and _same(motors[0][0], motors[1][0]), (trial, position, force)
+            outcomes["saturated"] += max(map(abs, motors[0][1])) == int(twin._motor_cap)
+            outcomes["not finite"] += motors[0][0] == ("returned", False) and not all(map(math.isfinite, force))
+        tau = [rng.gauss(0.0, rng.choice([0.1, 1.0, 100.0])) for _ in range(3)]
+        if rng.random() < 0.03:
+            tau[rng.randrange(3)] = rng.choice([math.nan, math.inf])
+        for method, args, shape, dtype in (
+                ("forces_to_torques", (p, force), 3, float), ("torques_to_force", (p, tau), 3, float),
+                ("torques_to_motor", (tau,), 3, np.int64), ("inverse", (p,), 3, float),
+                ("jacobian", (p,), (3, 3), float), ("angles_from_counts", (counts,), 3, float)):
+            results = []
+            for side in (kin, twin):
+                out = np.full(shape, -3, dtype=dtype)
+                results.append((_result(getattr(side, method), *args, out), out.ravel().tolist()))
+            assert _same(results[0][0], results[1][0]), (trial, method, args)
+            assert _bits(results[0][1]) == _bits(results[1][1]) if dtype is float else results[0] == results[1]
+            if method == "inverse":
+                outcomes["inverse failed"] += results[0][0] == ("returned", False)
+            if method == "jacobian":
+                outcomes["singular"] += results[0][0] == ("returned", False) and condition == 4.0
+        outs = []
+        for side in (kin, twin):
+            theta2, theta3 = np.zeros(3), np.zeros(3)
+            outs.append((_result(side.inverse, p, np.zeros(3), theta2, theta3), theta2.tolist() + theta3.tolist()))
+        assert _same(outs[0][0], outs[1][0]) and _bits(outs[0][1]) == _bits(outs[1][1]), p
+        # the simulator's float-level API
+        pose = _result(kin.pose, *p)
+        assert _same(pose, _result(twin.pose, *p)), p
+        if pose[1] is not None:
+            assert _same(_result(kin.pose_force, pose[1], *tau), _result(twin.pose_force, pose[1], *tau)), p
+        angles = [rng.uniform(-1.0, 2.0) for _ in range(3)]
+        if rng.random() < 0.05:
+            angles[rng.randrange(3)] = rng.choice([math.nan, math.inf])
+        counted = _result(kin.counts_from_angles, angles, np.zeros(3, dtype=np.int64))
+        assert _same(counted, _result(twin.counts_from_angles, angles, np.zeros(3, dtype=np.int64))), angles
+        outcomes["raised"] += counted[0] == "raised"  # a NaN or infinite angle has no count
+        assert _same(_result(kin.count, angles[0]), _result(twin.count, angles[0]))
+    assert all(n > 10 for n in outcomes.values()), outcomes  # every refusal and the saturation were compared

@@ -13,11 +13,17 @@ The per-call maths is scalar `math` on Python floats, three legs unrolled: at 3-
 3x3 matrices numpy's per-call overhead, not arithmetic, would be the cost. Array outputs are
 written in place into caller-provided arrays: nothing is created per 1 kHz cycle that stays.
 One `FalconKinematics` per thread.
+
+This module and `legs` are compiled kernels: when the package is built with Cython,
+`kinematics.pxd` and `legs.pxd` type their attributes and locals as C doubles and the legs'
+IK and Jacobian rows become C calls. Interpreted or compiled, every operation is the same
+IEEE double operation in the same order (tests/test_compiled_kernels.py compares the two);
+`math`'s functions stay Python's, imported by name: a global look-up per call, not an attribute one.
 """
 
 from __future__ import annotations
 
-import math
+from math import inf, isfinite, sqrt
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -89,7 +95,7 @@ class FalconKinematics:
         self._have_last = False
         #: Iterations and final |residual| (rad, Euclidean) of the last `forward` call.
         self.iterations = 0
-        self.residual = math.inf
+        self.residual = inf
 
     # ------------------------------------------------------------------ encoders
     def angles_from_counts(self, counts: ArrayLike, out: F64) -> F64:
@@ -165,7 +171,7 @@ class FalconKinematics:
                   + a20 * a20 + a21 * a21 + a22 * a22)
         norm_q = (q00 * q00 + q01 * q01 + q02 * q02 + q10 * q10 + q11 * q11 + q12 * q12
                   + q20 * q20 + q21 * q21 + q22 * q22)
-        if not (det != 0.0 and math.sqrt(norm_m * norm_q) <= self.max_condition * abs(det)):
+        if not (det != 0.0 and sqrt(norm_m * norm_q) <= self.max_condition * abs(det)):
             return False
         self._Mt = (a00, a01, a02, a10, a11, a12, a20, a21, a22)
         self._Q = (q00, q01, q02, q10, q11, q12, q20, q21, q22)
@@ -230,11 +236,11 @@ class FalconKinematics:
         puts the root far closer than that); at most max_iterations. At 1 kHz a warm start
         needs 1-3 iterations. Returns the root and its IK, or None if not converged.
         """
-        tol_rad, tol_m, pose = self.tol_rad, self.tol_m, self.pose
+        tol_rad, tol_m = self.tol_rad, self.tol_m
         m0, m1, m2 = self._meas
         x, y, z = p
         e0, e1, e2 = m0 - cur[0][0], m1 - cur[1][0], m2 - cur[2][0]
-        rn = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        rn = sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         converged = rn <= tol_rad
         it = 0
         while not converged and it < self.max_iterations and self._budget > 0:
@@ -246,15 +252,15 @@ class FalconKinematics:
             s0 = (q00 * e0 + q01 * e1 + q02 * e2) * inv_det  # J e
             s1 = (q10 * e0 + q11 * e1 + q12 * e2) * inv_det
             s2 = (q20 * e0 + q21 * e1 + q22 * e2) * inv_det
-            norm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-            lam, trial, rt = 1.0, None, math.inf
+            norm = sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+            lam, trial, rt = 1.0, None, inf
             for _ in range(min(self.max_halvings, self._budget)):
                 self._budget -= 1
                 tx, ty, tz = s0 * lam + x, s1 * lam + y, s2 * lam + z
-                trial = pose(tx, ty, tz)
+                trial = self.pose(tx, ty, tz)
                 if trial is not None:
                     f0, f1, f2 = m0 - trial[0][0], m1 - trial[1][0], m2 - trial[2][0]
-                    rt = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+                    rt = sqrt(f0 * f0 + f1 * f1 + f2 * f2)
                     if rt < rn or rt <= tol_rad:
                         break
                     trial = None
@@ -323,13 +329,14 @@ class FalconKinematics:
         libnifalcon does for its 30 N m torque clamp), so the rendered force keeps its
         direction; per-axis clipping would bend it. Non-finite torques give zeros, False.
         """
-        return self._motor(*_three(tau), out_motor)
+        t0, t1, t2 = _three(tau)
+        return self._motor(t0, t1, t2, out_motor)
 
     def _motor(self, t0: float, t1: float, t2: float, out_motor: I64) -> bool:
         """`torques_to_motor` on floats."""
         k = self._motor_per_nm
         m0, m1, m2 = t0 * k, t1 * k, t2 * k
-        if not (math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2)):
+        if not (isfinite(m0) and isfinite(m1) and isfinite(m2)):
             out_motor.fill(0)
             return False
         peak, cap = max(abs(m0), abs(m1), abs(m2)), self._motor_cap
@@ -347,4 +354,6 @@ class FalconKinematics:
         if not self._pose(position):
             out_motor.fill(0)
             return False
-        return self._motor(*self._torques(*_three(force)), out_motor)
+        f0, f1, f2 = _three(force)
+        t0, t1, t2 = self._torques(f0, f1, f2)
+        return self._motor(t0, t1, t2, out_motor)
