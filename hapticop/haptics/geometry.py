@@ -133,8 +133,12 @@ class BeamGeometry:
             return last_gap
         if self._loops is not None:
             gap = self._loops.corridor_kth(self.half_width + margin_m, self.half_length, k)
-            self._corridor = (margin_m, k, gap)
-            return gap
+        else:
+            gap = self._corridor_numpy(margin_m, k)
+        self._corridor = (margin_m, k, gap)
+        return gap
+
+    def _corridor_numpy(self, margin_m: float, k: int) -> float:
         inside, ahead, work = self._m1, self._m2, self._work
         np.abs(self.py, out=self._dx)
         np.less_equal(self._dx, self.half_width + margin_m, out=inside)
@@ -144,9 +148,7 @@ class BeamGeometry:
         np.logical_not(inside, out=inside)
         np.subtract(self.px, self.half_length, out=work)
         np.copyto(work, math.inf, where=inside)
-        gap = kth_smallest(work, k)
-        self._corridor = (margin_m, k, gap)
-        return gap
+        return kth_smallest(work, k)
 
     def select_sides(self, rear_m: float, ahead_m: float) -> None:
         """Choose the side points for ``side_clearances``: beside or diagonal to the body now.
