@@ -214,14 +214,16 @@ class Watch:
             self.applied += self.system.composition.model_dump() != self.before
             self.before = self.system.composition.model_dump()
             self.noise = self.system.runners["noise"].block
-            self.params = self.noise.params
-            # A reconfiguration is asked by a request flag its activity takes at its next step: until then it
-            # still says running. Settled is no request left and every activity running, seen twice apart
-            # (the flag is taken and the state left in one step, which a poll may fall between).
+            # A retune is taken by the block at its next step, on its own thread: the parameters to keep are
+            # the ones it holds once settled. A reconfiguration is asked by a request flag its activity takes
+            # at its next step: until then it still says running. Settled is no retune or request left and
+            # every activity running, seen twice apart (the flag is taken and the state left in one step,
+            # which a poll may fall between).
             deadline = time.monotonic() + PATIENCE_S
             while not (self.settled() and time.sleep(0.05) is None and self.settled()):
                 assert time.monotonic() < deadline, "an activity did not come back to running after a patch"
                 time.sleep(0.005)
+            self.params = self.noise.params
         assert self.system.composition.model_dump() == self.before
         assert self.noise.params is self.params
         assert self.running()
@@ -233,7 +235,8 @@ class Watch:
         """No re-configuration asked and not yet taken, and every activity running."""
         asked = any(self.system.flag(f"{name}.lcsm.{request}") for name in ACTIVITIES
                     for request in ("request_resource_configuration", "request_capability_configuration"))
-        return not asked and self.running()
+        retuning = any(runner.retuned is not None for runner in self.system.runners.values())
+        return not asked and not retuning and self.running()
 
 
 ACTIVITIES = ("mediator", "noise", "recorder")
