@@ -420,3 +420,16 @@ class SlowSum(Block):
         self.total += int(self.inputs.value.value) if valid else 0
         self.outputs.total.value[:] = (self.total, self.cycles, valid)
         self.outputs.total.publish()
+
+
+class SlowCleanParams(Params):
+    clean_s: float = Field(0.3, ge=0, description="how long cleaning takes, on its thread")
+
+
+class SlowClean(Block):
+    """Takes `clean_s` to clean, holding its thread: a shutdown that overruns its loop's periods."""
+
+    Params = SlowCleanParams
+
+    def clean(self):
+        time.sleep(self.params.clean_s)

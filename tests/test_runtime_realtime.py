@@ -18,7 +18,7 @@ from hapticop.composition.lcsm import State
 from hapticop.runtime.system import ExitStatus
 
 from .conftest import ROOT
-from .runtime_helpers import IGNORES_SHUTDOWN, PATIENCE_S, compose, counting, pipeline, run_until, steps
+from .runtime_helpers import COUNTER, IGNORES_SHUTDOWN, PATIENCE_S, compose, counting, pipeline, run_until, steps
 
 
 def test_threads_in_the_main_process(tmp_path):
@@ -76,6 +76,20 @@ def _compose_process(tmp_path, text, ready: str | None = "noise"):
 
 
 SIMPLE = counting()
+
+
+def test_a_runs_timing_ends_where_the_run_starts_ending_and_counts_the_shutdown_apart(tmp_path):
+    """A cleaning hook that holds the main loop for 0.3 s makes it overrun about 300 periods while the run
+    ends: they are the shutdown's, reported as such, not the run's missed deadlines or wake-up latencies."""
+    text = COUNTER.replace("schedules: {0: [mediator, counter]}", "schedules: {0: [mediator, counter, slow]}")
+    text += '  slow: {block: "tests.blocks:SlowClean", params: {clean_s: 0.3}}\n'
+    result = run_until(tmp_path, text, lambda system: steps(system, "counter") > 50, "the counter stepped 50 times")
+    assert result.outcome.status is ExitStatus.SUCCESS, result.outcome.reasons
+    main = result.timing["threads"]["main"]
+    assert main["missed_while_ending"] >= 290  # 0.3 s of 1 ms periods, overrun while cleaning
+    assert main["missed_deadlines"] < 290 and main["cycle_us"]["max"] < 290_000, main  # none of it in the run's
+    assert result.timing["activities"]["counter"]["steps"] > 50
+    assert "timing is counted up to here" in (tmp_path / "run-c" / "system.log").read_text()
 
 
 def test_ctrl_c_shuts_down_and_reports_interruption(tmp_path):

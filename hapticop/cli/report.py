@@ -46,6 +46,10 @@ def print_timing(data: dict, console: Console, virtual: bool) -> None:
         table.add_row(name, t["period"], str(t["cycles"]), _percentile(lat["p50"]), _percentile(lat["p99"]),
                       _percentile(lat["p99.9"]), _cell(lat["max"]), missed, _cell(t.get("cpu_percent")))
     console.print(table)
+    late = ", ".join(f"{name} {t['missed_while_ending']}" for name, t in data["threads"].items()
+                     if t.get("missed_while_ending"))
+    if late:
+        console.print(f"missed while the run ended (cleaning, processes leaving), not counted above: {late}")
     if data.get("latencies"):
         table = Table(title="end-to-end latencies", title_justify="left")
         for column in ("path", "from", "to", "samples", "p50 us", "p99", "p99.9", "max"):

@@ -49,7 +49,7 @@ class OriginRelay:
         self._out[...] = self.newest
 
     def after_step(self) -> None:
-        if not self.sinks:
+        if not self.sinks or self.region.system[Region.ENDING]:
             return
         region, seen, now = self.region, self.seen, self.now_ns()
         for port, slot in self.sinks:

@@ -208,6 +208,7 @@ class Region:
     STARTED_NS = 1
     EPOCH_NS = 2  # every real-time loop's deadlines are counted from here (deadlines.py)
     OPERATING_NS = 3  # every thread had cycled: timing statistics count from here (0: not yet)
+    ENDING = 4  # the run has started ending: the loops' histograms no longer count (the shutdown is not the run)
 
     def __init__(self, layout: Layout, memory: shared_memory.SharedMemory, owner: bool):
         self.layout = layout

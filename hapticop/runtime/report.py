@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from hapticop.composition.units import format_period
 from hapticop.runtime.region import Region
@@ -13,11 +16,31 @@ from hapticop.runtime.timing import BINS, Summary
 CEILING_US = BINS - 1  # the histogram's last bin: a percentile there is only known to be at least this
 
 
-def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
+@dataclass(frozen=True)
+class Ending:
+    """The counters as the run started ending (its duration reached, a stop asked): the window the
+    figures describe ends here. What the loops count after it (cleaning, processes leaving) is the
+    shutdown's, reported beside the run's rather than in it, as the start-up's first cycles are left out."""
+
+    at_ns: int
+    cycles: np.ndarray
+    missed: np.ndarray
+    cpu_ns: np.ndarray
+
+    @classmethod
+    def of(cls, region: Region, now_ns: int) -> Ending:
+        """Tell every loop the run is ending (their histograms stop counting), then note the counters."""
+        region.system[Region.ENDING] = 1
+        return cls(now_ns, region.cycles.copy(), region.missed.copy(), region.cpu_ns.copy())
+
+
+def timing(region: Region, composition, elapsed_ns: int | None = None, ending: Ending | None = None) -> dict:
     """Every figure of a run, from the region's counters. `elapsed_ns` (wall time the loops ran)
     turns each thread's CPU time into a share of one core; histograms are kept, sparse, so a
-    report can be drawn from the file alone."""
+    report can be drawn from the file alone. With an `ending`, cycles, misses and CPU time are
+    those before it, and each thread's misses after it are `missed_while_ending`."""
     layout = region.layout
+    counted = ending or Ending(0, region.cycles, region.missed, region.cpu_ns)
     simulating = _simulation_threads(region, composition)
     threads = {}
     for name, index in layout.thread_index.items():
@@ -25,9 +48,9 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
         # makes numpy's nonzero fail (`status` on the control socket reads a live system).
         histogram = region.latency[index].copy()
         summary = Summary.of(histogram, int(region.latency_max[index]))
-        cycles = int(region.cycles[index] - region.cycles_base[index])
-        missed = int(region.missed[index])
-        cpu_ns = int(region.cpu_ns[index] - region.cpu_base[index])
+        cycles = int(counted.cycles[index] - region.cycles_base[index])
+        missed = int(counted.missed[index])
+        cpu_ns = int(counted.cpu_ns[index] - region.cpu_base[index])
         threads[name] = {
             "period": format_period(composition.threads[name].period),
             "priority": composition.threads[name].priority,
@@ -36,6 +59,7 @@ def timing(region: Region, composition, elapsed_ns: int | None = None) -> dict:
             "cycles": cycles,
             "missed_deadlines": missed,
             "missed_percent": round(100.0 * missed / (cycles + missed), 3) if cycles + missed else None,
+            "missed_while_ending": int(region.missed[index]) - missed,
             "cpu_percent": round(100.0 * cpu_ns / elapsed_ns, 1) if elapsed_ns and cpu_ns else None,
             "wakeup_latency_us": _numbers(summary),
             "cycle_us": _numbers(Summary.of(region.busy[index].copy(), int(region.busy_max[index]))),

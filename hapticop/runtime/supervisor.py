@@ -21,6 +21,7 @@ from hapticop.runtime.described import Description
 from hapticop.runtime.lifecycle import FAILURE_TEXT, OK
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
+from hapticop.runtime.report import Ending
 from hapticop.runtime.scheduler import Scheduler
 
 SECOND = 1_000_000_000
@@ -71,6 +72,7 @@ class Supervisor:
         self.shutdown_at: int | None = None
         self.forced = False
         self.operating_ns: int | None = None
+        self.ending: Ending | None = None  # the counters as the run started ending
         self._next_watch_ns = 0
 
     def time_limit_ns(self) -> int | None:
@@ -102,6 +104,7 @@ class Supervisor:
             # coordinate (a simulation's thread running from the start) the runtime cleans itself.
             if self.shutdown_at is None:
                 self.shutdown_at = now
+                self._end_timing()
             if now - self.shutdown_at > self.shutdown_timeout_ns:
                 self.reasons.append("what the coordination left running did not clean within "
                                     f"{format_duration(self.shutdown_timeout_ns)}")
@@ -139,6 +142,12 @@ class Supervisor:
         region.system[Region.OPERATING_NS] = now
         self.log.info("every thread runs, %.1f s after start: timing is counted from here", (now - started) / SECOND)
 
+    def _end_timing(self) -> None:
+        """The run starts ending: its figures end here; what the shutdown costs is counted apart."""
+        if self.ending is None:
+            self.ending = Ending.of(self.region, self.clock.now_ns())
+            self.log.info("the run is ending: timing is counted up to here")
+
     def _processes_loading(self, now: int, started: int) -> bool:
         """Threads started in processes of their own that have not run a cycle yet: still loading
         (seconds on a busy machine). A shutdown asked meanwhile (Ctrl+C during start-up) waits
@@ -153,6 +162,7 @@ class Supervisor:
         if self.shutdown_at is not None:
             return
         self.shutdown_at = self.clock.now_ns()
+        self._end_timing()
         if "system.shutdown_requested" in self.region.layout.flag_index:
             self.region.set_flag("system.shutdown_requested")
 

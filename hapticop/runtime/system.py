@@ -324,10 +324,11 @@ def run_system(validated: Validated, options: RunOptions,
             on_start(system)
         outcome = system.run()
         elapsed = None
+        ending = system.supervisor.ending
         if not system.virtual:
             since = int(system.region.system[Region.OPERATING_NS]) or int(system.region.system[Region.STARTED_NS])
-            elapsed = system.clock.now_ns() - since
-        data = timing(system.region, system.composition, elapsed)
+            elapsed = (ending.at_ns if ending is not None else system.clock.now_ns()) - since
+        data = timing(system.region, system.composition, elapsed, ending)
         write_timing(data, system.run_dir)
         states = {owner: system.state(owner) for owner in system.layout.owner_index}
         flags = {name for name, i in system.flag_index.items() if system.region.flags[i]}

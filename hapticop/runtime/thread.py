@@ -3,8 +3,8 @@
 The same `CyclicThread` runs as a thread of the main process, as the only loop of its own
 process, or stepped by the virtual-clock scheduler: only the loop that calls `cycle()`
 differs. In real time the loop sleeps to absolute deadlines, records each wake-up latency
-and counts every missed deadline (a cycle that overruns skips, and counts, the periods it
-covered).
+(until the run starts ending) and counts every missed deadline (a cycle that overruns skips,
+and counts, the periods it covered).
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ class ActivityRunner:
     def _finish(self) -> None:
         """Count the cycle's compute time (not a configuring or cleaning hook's: a world plotting its
         run as it cleans is no 1.5 s compute), and the end-to-end latencies ending here."""
-        if self.computing:
+        if self.computing and not self.region.system[Region.ENDING]:
             record(self.region.compute, self.region.compute_max, self.index, self.took)
         if self.relay is not None:
             self.relay.after_step()
@@ -261,13 +261,14 @@ class CyclicThread:
 
     def run_realtime(self, first_deadline_ns: int, should_stop: Callable[[], bool]) -> None:
         region, index, period = self.region, self.index, self.period
+        system = region.system
         deadline = first_deadline_ns
         clock = self.clock
         spin = self.spec.busy_wait
         on_data = self.spec.wake == "data"
         if self.apply_realtime:
             realtime.plain()  # until its resource configuration, not its creator's real time
-        while not region.system[Region.TERMINATE] and not should_stop():
+        while not system[Region.TERMINATE] and not should_stop():
             if on_data and self._wait_for_data(deadline):
                 self.cycle()  # data woke us before the deadline: an extra cycle, off the grid
                 region.cpu_ns[index] = time.thread_time_ns()
@@ -280,10 +281,13 @@ class CyclicThread:
             else:
                 clock.sleep_until(deadline)
             woke = clock.now_ns()
-            record(region.latency, region.latency_max, index, woke - deadline)
+            timed = not system[Region.ENDING]
+            if timed:
+                record(region.latency, region.latency_max, index, woke - deadline)
             self.cycle()
             finished = clock.now_ns()
-            record(region.busy, region.busy_max, index, finished - woke)
+            if timed:
+                record(region.busy, region.busy_max, index, finished - woke)
             region.cpu_ns[index] = time.thread_time_ns()
             if self.done:
                 break
