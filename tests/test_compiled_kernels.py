@@ -438,3 +438,102 @@ def test_the_falcon_kinematics_compiled_computes_the_same_bits_as_its_source(dri
         outcomes["raised"] += counted[0] == "raised"  # a NaN or infinite angle has no count
         assert _same(_result(kin.count, angles[0]), _result(twin.count, angles[0]))
     assert all(n > 10 for n in outcomes.values()), outcomes  # every refusal and the saturation were compared
+
+
+def _channel_tokens(rng, count: int, digits: int) -> bytes:
+    """`count` hex tokens of a scan channel, mostly good; some with a flaw a broken link might bring."""
+    tokens = []
+    for _ in range(count):
+        width = int(rng.integers(1, digits + 1))
+        token = "".join(rng.choice(list("0123456789ABCDEFabcdef"), size=width))
+        flaw = rng.random()
+        if flaw < 0.004:
+            token = ""  # a double space
+        elif flaw < 0.008:
+            token += "F"  # one digit too many
+        elif flaw < 0.012:
+            token = token[:-1] + str(rng.choice(list("G-x\x00\xff.")))  # not a hex digit
+        tokens.append(token)
+    return " ".join(tokens).encode("latin-1")
+
+
+def test_the_scan_loops_compiled_decode_a_channel_as_numpy_does():
+    """`TokenReader.values` through the compiled decode against its numpy passes, over random channels:
+    the same values and position, or the same error, whatever the flaw and wherever the body ends."""
+    from hapticop.devices.sick import cola
+
+    compiled = _compiled("hapticop.devices.sick.scan_loops")
+    as_numpy = _interpreted("hapticop.devices.sick.scan_loops")
+    assert compiled.COMPILED and not as_numpy.COMPILED
+    rng = np.random.default_rng(5)
+    outcomes = set()
+    for trial in range(3000):
+        digits = int(rng.choice([2, 4, 8]))
+        count = int(rng.integers(1, 60))
+        body = _channel_tokens(rng, count + int(rng.integers(-3, 4)), digits)
+        lead = rng.choice([b"", b"DIST1 ", b"X "])
+        body = lead + body + rng.choice([b"", b" 0 0", b" ", b"  1"])
+        answers = []
+        for module in (compiled, as_numpy):
+            cola.scan_loops = module
+            reader = cola.TokenReader(body, len(lead))
+            try:
+                values = reader.values(count, digits, "DIST1 values")
+                answers.append(("ok", values.tolist(), values.dtype, reader.pos))
+            except cola.ColaError as error:
+                answers.append(("error", str(error)))
+        cola.scan_loops = compiled
+        assert answers[0] == answers[1], f"trial {trial}: {body!r}, {count} values of {digits} digits"
+        out, written = np.zeros(count, np.uint32), np.zeros(count, np.uint32)
+        after = compiled.decode_hex(body, len(lead), count, digits, out)  # and the loop as written, interpreted
+        assert as_numpy.decode_hex(body, len(lead), count, digits, written) == after
+        if after >= 0:
+            assert out.tolist() == written.tolist() == answers[0][1]
+        outcomes.add({compiled.TOO_FEW: "too few", compiled.NOT_HEX: "not hex", compiled.EMPTY: "empty",
+                      compiled.TOO_WIDE: "too wide"}.get(after, "ok"))
+    assert outcomes == {"ok", "too few", "not hex", "empty", "too wide"}  # every answer was compared
+
+
+def test_the_scan_loops_compiled_scale_and_lay_out_as_numpy_does():
+    """Whole telegrams through `parse_scan`, with the compiled loops and with numpy's passes: the same bits
+    for ranges and angles over scale factors, offsets (±0 too) and minimum ranges; float32 outputs, which
+    the loops do not write, give numpy's too."""
+    from hapticop.devices.sick import scan
+
+    compiled = _compiled("hapticop.devices.sick.scan_loops")
+    as_numpy = _interpreted("hapticop.devices.sick.scan_loops")
+    rng = np.random.default_rng(9)
+    n = 811
+    for trial in range(300):
+        dist = scan.Channel("DIST1", float(rng.choice([1.0, 2.0, 0.1, 3.7e-5, 1e30])),
+                            float(rng.choice([0.0, -0.0, 0.25, -1.5])), int(rng.integers(-1_350_000, 0)),
+                            int(rng.integers(1, 5000)), n)
+        header = scan.ScanHeader("sSN", 1, 1, 1, (0, 0), 1, 1, 1, 1, (0, 0), (0, 0), 0, 1500, 162,
+                                 channels16=(dist,))
+        raw = rng.integers(0, 1 << 16, n)
+        raw[rng.random(n) < 0.1] = rng.choice([0, 1, 2, 50, 65535])
+        telegram = scan.build_scan(header, raw)
+        minimum = float(rng.choice([0.0, 0.05, 1.0, math.nan]))
+        dtype = np.float32 if trial % 5 == 4 else np.float64
+        results = []
+        for module in (compiled, as_numpy):
+            scan.scan_loops = module
+            ranges, angles = np.empty(n, dtype), np.empty(n, dtype)
+            scan.parse_scan(telegram, ranges, angles, min_range_m=minimum)
+            results.append((ranges.tobytes(), angles.tobytes()))
+        scan.scan_loops = compiled
+        assert results[0] == results[1], f"trial {trial}: {dist}, minimum {minimum}, {dtype.__name__}"
+
+
+def test_the_scan_loops_refuse_an_output_that_does_not_fit_before_writing():
+    compiled, source = _compiled("hapticop.devices.sick.scan_loops"), _interpreted("hapticop.devices.sick.scan_loops")
+    for module in (compiled, source):
+        out = np.full(3, 7, np.uint32)
+        with pytest.raises(IndexError):
+            module.decode_hex(b"1 2 3 4", 0, 4, 4, out)
+        assert out.tolist() == [7, 7, 7]
+        assert module.decode_hex(b"1 2 3 4", 2, 3, 4, out) == 8 and out.tolist() == [2, 3, 4]
+        ranges = np.full(2, 7.0)
+        with pytest.raises(IndexError):
+            module.scale_ranges(np.array([1, 2, 3], np.uint32), 1.0, 0.0, 0.0, ranges)
+        assert ranges.tolist() == [7.0, 7.0]

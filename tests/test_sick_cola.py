@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hapticop.devices.sick import cola, commands, scan
+from hapticop.devices.sick import cola, commands, scan, scan_loops
 from hapticop.devices.sick.cola import ColaDeviceError, ColaError
 from hapticop.devices.sick.scan import SensorMount
 from hapticop.devices.sick.stream import TelegramReader
@@ -247,11 +247,22 @@ MALFORMED = {
 }
 
 
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled loops", "numpy passes"])
 @pytest.mark.parametrize("name", MALFORMED)
-def test_malformed_scans_raise_cola_error(name):
+def test_malformed_scans_raise_cola_error(name, compiled, monkeypatch):
     ranges, angles, raw, rssi = arrays()
+    monkeypatch.setattr(scan_loops, "COMPILED", scan_loops.COMPILED and compiled)
     with pytest.raises(ColaError):
         scan.parse_scan(MALFORMED[name], ranges, angles, out_raw=raw, out_rssi=rssi)
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled loops", "numpy passes"])
+@pytest.mark.parametrize("body", [b"", b" ", b" 1 2", b"1  2", b"1 2 "])
+def test_an_empty_value_token_is_a_cola_error_on_either_path(body, compiled, monkeypatch):
+    """An empty first token once made numpy's decode raise ValueError (a reduction over nothing)."""
+    monkeypatch.setattr(scan_loops, "COMPILED", scan_loops.COMPILED and compiled)
+    with pytest.raises(ColaError, match="empty value"):
+        cola.TokenReader(body).values(3 if body.strip() else 1, 4, "v")
 
 
 def _decode_everything(data: bytes) -> None:

@@ -19,6 +19,8 @@ import struct
 import numpy as np
 from numpy.typing import NDArray
 
+from hapticop.devices.sick import scan_loops
+
 STX = 0x02
 ETX = 0x03
 LEVEL3_HASH = "F4724744"  # "Authorized client": md5-fold of "client"
@@ -254,6 +256,8 @@ class TokenReader:
             return np.empty(0, np.uint32)
         if self.pos > self.end:
             raise ColaError(f"telegram ends before {what}")
+        if scan_loops.COMPILED:
+            return self._values_compiled(count, digits, what)
         if self._codes is None:
             self._codes = np.frombuffer(self.body.translate(_CODE_TABLE), dtype=np.uint8)
             self._spaces = np.flatnonzero(self._codes == _SPACE_CODE)
@@ -269,7 +273,7 @@ class TokenReader:
         else:
             raise ColaError(f"{what}: {count} values announced, the telegram ends after {available + 1} tokens")
         last = int(ends[-1])
-        if codes[self.pos:last].max() == _BAD_CODE:
+        if last > self.pos and codes[self.pos:last].max() == _BAD_CODE:  # (an empty first token is below)
             raise ColaError(f"{what}: a value is not a hex number")
         widths = np.empty(count, dtype=np.intp)
         widths[0] = ends[0] - self.pos
@@ -292,3 +296,17 @@ class TokenReader:
             values += digit
         self.pos = last + 1
         return values
+
+    def _values_compiled(self, count: int, digits: int, what: str) -> NDArray[np.uint32]:
+        """The same decode as one compiled loop (scan_loops.py): the same values, the same errors."""
+        values = np.empty(count, np.uint32)
+        after = scan_loops.decode_hex(self.body, self.pos, count, digits, values)
+        if after >= 0:
+            self.pos = after
+            return values
+        if after == scan_loops.TOO_FEW:
+            found = self.body.count(b" ", self.pos) + 1
+            raise ColaError(f"{what}: {count} values announced, the telegram ends after {found} tokens")
+        raise ColaError({scan_loops.NOT_HEX: f"{what}: a value is not a hex number",
+                         scan_loops.EMPTY: f"{what}: empty value (double space)",
+                         scan_loops.TOO_WIDE: f"{what}: a value has more than {digits} hex digits"}[after])

@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hapticop.devices.sick import scan_loops
 from hapticop.devices.sick.cola import (
     ColaDeviceError,
     ColaError,
@@ -226,13 +227,19 @@ def parse_scan(
         raise ColaError(f"{dist.name}: unusable scale factor {dist.scale_factor} / offset {dist.scale_offset}")
 
     if out_ranges_m is not None:
-        np.multiply(raw, dist.scale_factor / 1000.0, out=out_ranges_m)
-        if dist.scale_offset:
-            out_ranges_m += dist.scale_offset
-        np.copyto(out_ranges_m, np.nan, where=out_ranges_m < min_range_m)
+        if scan_loops.COMPILED and _loopable(out_ranges_m) and raw.dtype == np.uint32:
+            scan_loops.scale_ranges(raw, dist.scale_factor / 1000.0, dist.scale_offset, min_range_m, out_ranges_m)
+        else:
+            np.multiply(raw, dist.scale_factor / 1000.0, out=out_ranges_m)
+            if dist.scale_offset:
+                out_ranges_m += dist.scale_offset
+            np.copyto(out_ranges_m, np.nan, where=out_ranges_m < min_range_m)
     if out_angles_rad is not None:
-        np.multiply(_index(dist.count), dist.step_rad, out=out_angles_rad)
-        out_angles_rad += dist.start_rad
+        if scan_loops.COMPILED and _loopable(out_angles_rad):
+            scan_loops.beam_angles(dist.start_rad, dist.step_rad, out_angles_rad)
+        else:
+            np.multiply(_index(dist.count), dist.step_rad, out=out_angles_rad)
+            out_angles_rad += dist.start_rad
     if out_raw is not None:
         out_raw[:] = raw
     if out_rssi is not None and rssi_values is not None:
@@ -283,6 +290,11 @@ def _fast_channel(data: bytes, reader: TokenReader) -> Channel | None:
                    struct.unpack(">f", bytes.fromhex(offset.decode()))[0],
                    start_angle - (1 << 32) if start_angle & 0x80000000 else start_angle,
                    int(step, 16), int(count, 16))
+
+
+def _loopable(array: np.ndarray) -> bool:
+    """What the compiled loops write (scan_loops.py): a contiguous, writable float64 array."""
+    return array.dtype == np.float64 and array.flags.c_contiguous and array.flags.writeable
 
 
 def _check_out(array: np.ndarray, count: int, what: str) -> None:
