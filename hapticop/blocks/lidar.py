@@ -106,18 +106,15 @@ class Lidar(Block):
                                  startup=startup_sequence(output_range=output_range),
                                  # a simulator under the virtual clock serves in this thread, in memory
                                  sockets=MEMORY_SOCKETS if p.driver == "sim" and self.clock.virtual else socket.socket)
-        self.ranges = np.zeros(p.points, dtype=np.float32)
-        self.angles = np.zeros(p.points, dtype=np.float32)
         self.yaw = np.radians(p.yaw_deg)
         self.connected = False
         return True
 
     def compute(self) -> None:
         client = self.client
-        if client.poll(self.clock.now_ns()) and client.latest_scan(self.ranges, self.angles):
-            out = self.outputs
-            np.copyto(out.ranges.value, self.ranges)
-            np.add(self.angles, self.yaw, out=out.angles.value)  # sensor frame to robot frame
+        out = self.outputs
+        if client.poll(self.clock.now_ns()) and client.latest_scan(out.ranges.value, out.angles.value):
+            np.add(out.angles.value, self.yaw, out=out.angles.value)  # sensor frame to robot frame
             out.ranges.origin_ns = out.angles.origin_ns = client.scan_host_ns  # when its last byte was read
             out.ranges.publish()
             out.angles.publish()
