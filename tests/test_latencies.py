@@ -41,9 +41,10 @@ def test_origins_cross_activities_and_threads_under_the_virtual_clock(tmp_path):
     assert (relay["from"], relay["to"]) == ("source.count", "relay.input")
     # Same thread, relay after source: the origin arrives in the same instant, every cycle.
     assert relay["samples"] > 900 and relay["latency_us"]["max"] == 0
-    # The 4 ms sink steps after main at shared deadlines: it sees the newest count, born that instant
-    # (once: the first sample it sees was born a cycle before, while the relay was starting).
-    assert sink["samples"] > 200 and sink["histogram_us"] == {"0": sink["samples"] - 1, "1000": 1}
+    # The 4 ms sink steps after main at shared deadlines: it sees the newest count, born that instant.
+    # (As the run ends, the source cleans first and the last count relayed is a cycle old: the shutdown's,
+    # which the run's timing leaves out.)
+    assert sink["samples"] > 200 and sink["histogram_us"] == {"0": sink["samples"]}
 
 
 def test_origins_reach_a_thread_in_its_own_process(tmp_path):
