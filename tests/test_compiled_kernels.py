@@ -537,3 +537,45 @@ def test_the_scan_loops_refuse_an_output_that_does_not_fit_before_writing():
         with pytest.raises(IndexError):
             module.scale_ranges(np.array([1, 2, 3], np.uint32), 1.0, 0.0, 0.0, ranges)
         assert ranges.tolist() == [7.0, 7.0]
+
+
+def test_the_tallies_compiled_count_and_merge_as_the_runtime_did():
+    """`Histograms.count` against `timing.record`, and `OriginMerge.merge` against numpy's reduction, compiled
+    and as written: random durations (negative, past the last bin, new maxima) and stamps (negative too)."""
+    from hapticop.runtime.timing import BINS, record
+
+    name = "hapticop.runtime.tallies"
+    compiled, source = _compiled(name), _interpreted(name)
+    assert compiled.COMPILED and not source.COMPILED
+    rng = np.random.default_rng(3)
+    reference = (np.zeros((4, BINS), np.int64), np.zeros(4, np.int64))
+    counted = {module: (np.zeros((4, BINS), np.int64), np.zeros(4, np.int64)) for module in (compiled, source)}
+    tallies = {module: module.Histograms(*arrays) for module, arrays in counted.items()}
+    for value in np.concatenate([rng.integers(-5_000, 40_000_000, 3000), [0, 999, 1000, BINS * 1000 - 1,
+                                                                           BINS * 1000, -1, 2**62]]):
+        index = int(rng.integers(0, 4))
+        record(*reference, index, int(value))
+        for tally in tallies.values():
+            tally.count(index, int(value))
+    for histogram, maximum in counted.values():
+        assert np.array_equal(histogram, reference[0]) and np.array_equal(maximum, reference[1])
+    for module in (compiled, source):
+        histogram, maximum = counted[module]
+        before = histogram.copy()
+        for index in (-1, 4):
+            with pytest.raises(IndexError):
+                tallies[module].count(index, 5)
+        assert np.array_equal(histogram, before)
+        with pytest.raises(ValueError):
+            module.Histograms(histogram, np.zeros(3, np.int64))
+    for trial in range(300):
+        rows, outs, width = int(rng.integers(1, 6)), int(rng.integers(0, 4)), 5
+        inputs = rng.integers(-2**40, 2**40, (rows, width))
+        inputs[rng.random((rows, width)) < 0.3] = 0
+        expected = np.maximum.reduce(inputs, axis=0)
+        for module in (compiled, source):
+            newest, outputs = np.full(width, 7, np.int64), np.full((outs, width), 7, np.int64)
+            module.OriginMerge(inputs, newest, outputs).merge()
+            assert np.array_equal(newest, expected) and all(np.array_equal(row, expected) for row in outputs), trial
+    with pytest.raises(ValueError):
+        compiled.OriginMerge(np.zeros((0, 5), np.int64), np.zeros(5, np.int64), np.zeros((1, 5), np.int64))

@@ -14,10 +14,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hapticop.runtime import tallies
 from hapticop.runtime.context import InputPort, OutputPort
 from hapticop.runtime.region import Region
 from hapticop.runtime.streams import ORIGINS
-from hapticop.runtime.timing import record
+from hapticop.runtime.tallies import Histograms, OriginMerge
 
 
 class OriginRelay:
@@ -27,7 +28,8 @@ class OriginRelay:
     reduction and one broadcast copy per step, however many ports the activity has.
     """
 
-    __slots__ = ("inputs", "outputs", "sinks", "region", "now_ns", "newest", "seen", "_in", "_out")
+    __slots__ = ("inputs", "outputs", "sinks", "region", "now_ns", "newest", "seen", "_in", "_out", "_merge",
+                 "_e2e")
 
     def __init__(self, inputs: list[InputPort], outputs: list[OutputPort], sinks: list[tuple[InputPort, int]],
                  region: Region, now_ns: Callable[[], int]):
@@ -43,17 +45,23 @@ class OriginRelay:
                 port.origins = row  # the port reads and publishes through its row from now on
         self.newest = np.zeros(ORIGINS, dtype=np.int64)
         self.seen = np.zeros(ORIGINS, dtype=np.int64)
+        # Compiled, one loop over the few stamps; interpreted, numpy's two calls are the faster
+        self._merge = OriginMerge(self._in, self.newest, self._out) if tallies.COMPILED else None
+        self._e2e = Histograms(region.e2e, region.e2e_max)
 
     def before_step(self) -> None:
+        if self._merge is not None:
+            self._merge.merge()
+            return
         np.maximum.reduce(self._in, axis=0, out=self.newest)
         self._out[...] = self.newest
 
     def after_step(self) -> None:
         if not self.sinks or self.region.system[Region.ENDING]:
             return
-        region, seen, now = self.region, self.seen, self.now_ns()
+        seen, now = self.seen, self.now_ns()
         for port, slot in self.sinks:
             origin = int(port.origins[slot])
             if origin > seen[slot]:
                 seen[slot] = origin
-                record(region.e2e, region.e2e_max, slot, now - origin)
+                self._e2e.count(slot, now - origin)

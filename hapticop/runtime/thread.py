@@ -27,7 +27,7 @@ from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
-from hapticop.runtime.timing import record
+from hapticop.runtime.tallies import Histograms
 
 
 class ActivityRunner:
@@ -56,6 +56,7 @@ class ActivityRunner:
         self._retuning = threading.Lock()
         layout = region.layout
         self.index = layout.activity_index[name]
+        self.compute_counts = Histograms(region.compute, region.compute_max)
         self.inputs = [port for port in vars(block.inputs).values()]
         self.lifecycle = Lifecycle(
             region.flags, region.state, region.failed, layout.owner_index[name], layout.flag_index, name,
@@ -130,7 +131,7 @@ class ActivityRunner:
         """Count the cycle's compute time (not a configuring or cleaning hook's: a world plotting its
         run as it cleans is no 1.5 s compute), and the end-to-end latencies ending here."""
         if self.computing and not self.region.system[Region.ENDING]:
-            record(self.region.compute, self.region.compute_max, self.index, self.took)
+            self.compute_counts.count(self.index, self.took)
         if self.relay is not None:
             self.relay.after_step()
         if self.cycle_log is not None:
@@ -262,6 +263,7 @@ class CyclicThread:
     def run_realtime(self, first_deadline_ns: int, should_stop: Callable[[], bool]) -> None:
         region, index, period = self.region, self.index, self.period
         system = region.system
+        latencies, busy = Histograms(region.latency, region.latency_max), Histograms(region.busy, region.busy_max)
         deadline = first_deadline_ns
         clock = self.clock
         spin = self.spec.busy_wait
@@ -283,11 +285,11 @@ class CyclicThread:
             woke = clock.now_ns()
             timed = not system[Region.ENDING]
             if timed:
-                record(region.latency, region.latency_max, index, woke - deadline)
+                latencies.count(index, woke - deadline)
             self.cycle()
             finished = clock.now_ns()
             if timed:
-                record(region.busy, region.busy_max, index, finished - woke)
+                busy.count(index, finished - woke)
             region.cpu_ns[index] = time.thread_time_ns()
             if self.done:
                 break
