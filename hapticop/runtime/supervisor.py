@@ -8,6 +8,7 @@ runtime itself: activities, then threads, then the main thread.
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from collections.abc import Callable
@@ -54,6 +55,14 @@ def _read_by_flag_map(composition: Composition, flag: str) -> bool:
 def _written_by_flag_map(composition: Composition, flag: str) -> bool:
     return any(flag in fm.converting_sinks or flag in fm.tracking_sinks
                for fm in composition.coordination.flag_maps.values())
+
+
+def _a_child_ended() -> bool:
+    """Whether any child of this process has ended and not been collected yet (it stays uncollected)."""
+    try:
+        return os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None
+    except ChildProcessError:  # no child at all
+        return False
 
 
 class Supervisor:
@@ -191,12 +200,15 @@ class Supervisor:
             self.finish()
 
     def _watch_processes(self) -> None:
-        """Children that ended unasked; looked at every 10 ms, not every cycle: each look costs
-        two system calls per child."""
+        """Children that ended unasked; looked at every 10 ms, not every cycle. One system call asks
+        whether any child of this process has ended (without collecting it); only then is each
+        looked at, which costs a system call per child (about 30 us for seven, in one main cycle)."""
         now = self.clock.now_ns()
         if now < self._next_watch_ns:
             return
         self._next_watch_ns = now + WATCH_PROCESSES_NS
+        if not self.scheduler.processes or not _a_child_ended():
+            return
         for child in {id(c): c for c in self.scheduler.processes.values()}.values():
             if child.reported or child.process.is_alive():
                 continue
