@@ -8,6 +8,7 @@ what the run shows (a module loaded, a line logged), never by how long it has be
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -83,6 +84,10 @@ def test_ctrl_c_leaves_cleanly_at_every_moment_of_start_up(tmp_path, moment, pre
     assert not [name for name in segments if Path("/dev/shm", name).exists()]
     assert not [pid for pid in children if _alive(pid)]
     assert not (tmp_path / "control.sock").exists()
+    timing = tmp_path / "run" / "timing.json"
+    if timing.exists():  # the figures end where the stop was asked, even when the threads ran after it
+        for name, thread in json.loads(timing.read_text())["threads"].items():
+            assert thread["cycles"] >= 0 and thread["missed_deadlines"] >= 0, (name, thread)
 
 
 def test_a_command_started_with_ctrl_c_ignored_takes_it_from_the_start():

@@ -96,7 +96,7 @@ class Supervisor:
         now = self.clock.now_ns()
         started = int(self.region.system[Region.STARTED_NS])
         virtual = self.scheduler.virtual
-        if self.operating_ns is None and not virtual:
+        if self.operating_ns is None and not virtual and self.ending is None:  # an ended window starts no more
             self._watch_start(now, started)
         counted_from = started if virtual else (self.operating_ns or now)
         if self.duration_ns is not None and self.shutdown_at is None and now - counted_from >= self.duration_ns:
