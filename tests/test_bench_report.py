@@ -13,7 +13,8 @@ from hapticop.benchmark import cyclictest, report
 from hapticop.benchmark.runner import BenchRun, Condition
 from hapticop.benchmark.stats import Distribution, Goal, missed_percent, thread_goals
 from hapticop.runtime.report import sparse
-from hapticop.runtime.timing import BINS, percentile_us, record
+from hapticop.runtime.tallies import Histograms
+from hapticop.runtime.timing import BINS, percentile_us
 
 FIXTURES = Path(__file__).parent / "fixtures" / "bench"
 
@@ -34,8 +35,9 @@ def test_sparse_histograms_round_trip_and_agree_with_the_runtime():
     histogram = np.zeros((1, BINS), dtype=np.int64)
     maximum = np.zeros(1, dtype=np.int64)
     rng = np.random.default_rng(1)
+    counts = Histograms(histogram, maximum, np.zeros(1, dtype=np.int64))
     for value_ns in rng.gamma(2.0, 20_000.0, size=5000).astype(np.int64):
-        record(histogram, maximum, 0, int(value_ns))
+        counts.count(0, int(value_ns))
     d = Distribution.from_sparse(sparse(histogram[0]), maximum[0] / 1000)
     for q in (50, 99, 99.9):
         assert d.percentile(q) == percentile_us(histogram[0], q)

@@ -540,23 +540,28 @@ def test_the_scan_loops_refuse_an_output_that_does_not_fit_before_writing():
 
 
 def test_the_tallies_compiled_count_and_merge_as_the_runtime_did():
-    """`Histograms.count` against `timing.record`, and `OriginMerge.merge` against numpy's reduction, compiled
-    and as written: random durations (negative, past the last bin, new maxima) and stamps (negative too)."""
-    from hapticop.runtime.timing import BINS, record
+    """`Histograms.count` against the same counts made by numpy, and `OriginMerge.merge` against numpy's
+    reduction, compiled and as written: random durations (negative, past the last bin, new maxima) and
+    stamps (negative too). Once closed (the run ending), they count nothing."""
+    from hapticop.runtime.timing import BINS
 
     name = "hapticop.runtime.tallies"
     compiled, source = _compiled(name), _interpreted(name)
     assert compiled.COMPILED and not source.COMPILED
     rng = np.random.default_rng(3)
-    reference = (np.zeros((4, BINS), np.int64), np.zeros(4, np.int64))
+    reference = (np.zeros((4, BINS), np.int64), np.full(4, np.iinfo(np.int64).min))
     counted = {module: (np.zeros((4, BINS), np.int64), np.zeros(4, np.int64)) for module in (compiled, source)}
-    tallies = {module: module.Histograms(*arrays) for module, arrays in counted.items()}
-    for value in np.concatenate([rng.integers(-5_000, 40_000_000, 3000), [0, 999, 1000, BINS * 1000 - 1,
-                                                                           BINS * 1000, -1, 2**62]]):
-        index = int(rng.integers(0, 4))
-        record(*reference, index, int(value))
+    closed = np.zeros(1, np.int64)
+    tallies = {module: module.Histograms(*arrays, closed) for module, arrays in counted.items()}
+    values = np.concatenate([rng.integers(-5_000, 40_000_000, 3000), [0, 999, 1000, BINS * 1000 - 1, BINS * 1000,
+                                                                       -1, 2**62]])
+    rows = rng.integers(0, 4, values.shape[0])
+    for index, value in zip(rows.tolist(), values.tolist()):
         for tally in tallies.values():
-            tally.count(index, int(value))
+            tally.count(index, value)
+    np.add.at(reference[0], (rows, np.clip(values // 1000, 0, BINS - 1)), 1)  # floor to the us, clipped to the bins
+    np.maximum.at(reference[1], rows, values)
+    reference[1][reference[1] < 0] = 0  # a maximum starts at 0
     for histogram, maximum in counted.values():
         assert np.array_equal(histogram, reference[0]) and np.array_equal(maximum, reference[1])
     for module in (compiled, source):
@@ -567,7 +572,12 @@ def test_the_tallies_compiled_count_and_merge_as_the_runtime_did():
                 tallies[module].count(index, 5)
         assert np.array_equal(histogram, before)
         with pytest.raises(ValueError):
-            module.Histograms(histogram, np.zeros(3, np.int64))
+            module.Histograms(histogram, np.zeros(3, np.int64), closed)
+    closed[0] = 1
+    for module, tally in tallies.items():
+        before = [array.copy() for array in counted[module]]
+        tally.count(0, 5_000_000_000)
+        assert all(np.array_equal(a, b) for a, b in zip(counted[module], before))
     for trial in range(300):
         rows, outs, width = int(rng.integers(1, 6)), int(rng.integers(0, 4)), 5
         inputs = rng.integers(-2**40, 2**40, (rows, width))

@@ -18,7 +18,7 @@ from hapticop.runtime import tallies
 from hapticop.runtime.context import InputPort, OutputPort
 from hapticop.runtime.region import Region
 from hapticop.runtime.streams import ORIGINS
-from hapticop.runtime.tallies import Histograms, OriginMerge
+from hapticop.runtime.tallies import OriginMerge
 
 
 class OriginRelay:
@@ -47,7 +47,7 @@ class OriginRelay:
         self.seen = np.zeros(ORIGINS, dtype=np.int64)
         # Compiled, one loop over the few stamps; interpreted, numpy's two calls are the faster
         self._merge = OriginMerge(self._in, self.newest, self._out) if tallies.COMPILED else None
-        self._e2e = Histograms(region.e2e, region.e2e_max)
+        self._e2e = region.histograms("e2e")
 
     def before_step(self) -> None:
         if self._merge is not None:
@@ -57,7 +57,7 @@ class OriginRelay:
         self._out[...] = self.newest
 
     def after_step(self) -> None:
-        if not self.sinks or self.region.system[Region.ENDING]:
+        if not self.sinks:
             return
         seen, now = self.seen, self.now_ns()
         for port, slot in self.sinks:

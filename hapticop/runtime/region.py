@@ -18,6 +18,7 @@ from hapticop.composition.description import ARENA_BYTES, SPARE_ACTIVITIES, SPAR
 from hapticop.composition.loader import ResolvedActivity
 from hapticop.runtime import cycle_log
 from hapticop.runtime import streams as st
+from hapticop.runtime.tallies import Histograms
 from hapticop.runtime.timing import BINS
 from hapticop.runtime.transport import StreamTransport, transport_for, writer_port
 
@@ -209,6 +210,11 @@ class Region:
     EPOCH_NS = 2  # every real-time loop's deadlines are counted from here (deadlines.py)
     OPERATING_NS = 3  # every thread had cycled: timing statistics count from here (0: not yet)
     ENDING = 4  # the run has started ending: the loops' histograms no longer count (the shutdown is not the run)
+
+    def histograms(self, name: str) -> Histograms:
+        """The `name` histograms (`latency`, `busy`, `compute`, `e2e`) and their maxima, as a counter that
+        stops counting when the run starts ending."""
+        return Histograms(getattr(self, name), getattr(self, f"{name}_max"), self.system[self.ENDING:self.ENDING + 1])
 
     def __init__(self, layout: Layout, memory: shared_memory.SharedMemory, owner: bool):
         self.layout = layout

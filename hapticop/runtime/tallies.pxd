@@ -4,7 +4,7 @@ from libc.stdint cimport int64_t
 
 cdef class Histograms:
     cdef readonly int64_t[:, ::1] histogram
-    cdef readonly int64_t[::1] maximum
+    cdef readonly int64_t[::1] maximum, closed
     cdef readonly Py_ssize_t rows, bins
 
     @cython.locals(us=int64_t)

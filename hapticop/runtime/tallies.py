@@ -6,7 +6,7 @@ into its outputs' (end-to-end latencies). Each is a few numpy element or whole-a
 a handful of integers, which cost more than the work: about 2 us per step, all of it overhead, at 1 kHz
 on every loop and at every simulated millisecond under the virtual clock. Compiled
 (``tallies.pxd``), each is a C loop over arrays bound when the activity is built. Interpreted, this
-module gives the same counts (``timing.record``'s and ``np.maximum.reduce``'s), only slower.
+module gives the same counts, only slower (``np.maximum.reduce`` stays the faster merge there).
 
 Only these arrays are touched, never a stream's slots: the seqlocks between processes keep their
 Python reads (``streams.py``), whose order the interpreter does not change.
@@ -22,18 +22,22 @@ COMPILED = __file__.endswith(tuple(importlib.machinery.EXTENSION_SUFFIXES))
 
 class Histograms:
     """Rows of 1 us histograms (``timing.BINS`` bins, the last one holds everything longer) and each
-    row's exact maximum in ns: ``count`` is ``timing.record`` on them."""
+    row's exact maximum in ns, counted one duration at a time without allocating; a 1 kHz loop cannot
+    keep a list of its latencies. Nothing is counted once ``closed[0]`` is set: the run is ending
+    (``Region.ENDING``), and the shutdown is not the run."""
 
-    def __init__(self, histogram, maximum) -> None:
-        if histogram.shape[0] != maximum.shape[0] or histogram.shape[1] < 1:
-            raise ValueError("a histogram row and a maximum for each counted thing")
-        self.histogram, self.maximum = histogram, maximum
+    def __init__(self, histogram, maximum, closed) -> None:
+        if histogram.shape[0] != maximum.shape[0] or histogram.shape[1] < 1 or closed.shape[0] < 1:
+            raise ValueError("a histogram row and a maximum for each counted thing, and the flag that closes them")
+        self.histogram, self.maximum, self.closed = histogram, maximum, closed
         self.rows, self.bins = histogram.shape[0], histogram.shape[1]
 
     def count(self, index: int, value_ns: int) -> None:
-        """Count one duration in row ``index``."""
+        """Count one duration in row ``index`` (a negative one as 0, one past the last bin in it)."""
         if index < 0 or index >= self.rows:
             raise IndexError(f"row {index} of {self.rows}")
+        if self.closed[0]:
+            return
         us = value_ns // 1000
         if us < 0:
             us = 0

@@ -27,7 +27,6 @@ from hapticop.runtime.latencies import OriginRelay
 from hapticop.runtime.lifecycle import Hooks, Lifecycle
 from hapticop.runtime.logs import Logger
 from hapticop.runtime.region import Region
-from hapticop.runtime.tallies import Histograms
 
 
 class ActivityRunner:
@@ -56,7 +55,7 @@ class ActivityRunner:
         self._retuning = threading.Lock()
         layout = region.layout
         self.index = layout.activity_index[name]
-        self.compute_counts = Histograms(region.compute, region.compute_max)
+        self.compute_counts = region.histograms("compute")
         self.inputs = [port for port in vars(block.inputs).values()]
         self.lifecycle = Lifecycle(
             region.flags, region.state, region.failed, layout.owner_index[name], layout.flag_index, name,
@@ -130,7 +129,7 @@ class ActivityRunner:
     def _finish(self) -> None:
         """Count the cycle's compute time (not a configuring or cleaning hook's: a world plotting its
         run as it cleans is no 1.5 s compute), and the end-to-end latencies ending here."""
-        if self.computing and not self.region.system[Region.ENDING]:
+        if self.computing:
             self.compute_counts.count(self.index, self.took)
         if self.relay is not None:
             self.relay.after_step()
@@ -263,7 +262,7 @@ class CyclicThread:
     def run_realtime(self, first_deadline_ns: int, should_stop: Callable[[], bool]) -> None:
         region, index, period = self.region, self.index, self.period
         system = region.system
-        latencies, busy = Histograms(region.latency, region.latency_max), Histograms(region.busy, region.busy_max)
+        latencies, busy = region.histograms("latency"), region.histograms("busy")
         deadline = first_deadline_ns
         clock = self.clock
         spin = self.spec.busy_wait
@@ -283,13 +282,10 @@ class CyclicThread:
             else:
                 clock.sleep_until(deadline)
             woke = clock.now_ns()
-            timed = not system[Region.ENDING]
-            if timed:
-                latencies.count(index, woke - deadline)
+            latencies.count(index, woke - deadline)
             self.cycle()
             finished = clock.now_ns()
-            if timed:
-                busy.count(index, finished - woke)
+            busy.count(index, finished - woke)
             region.cpu_ns[index] = time.thread_time_ns()
             if self.done:
                 break

@@ -1,8 +1,9 @@
-"""Timing statistics that cost one array increment per cycle: microsecond histograms.
+"""Timing statistics read off microsecond histograms.
 
 A 1 kHz loop cannot keep a list of its latencies, so every thread and activity counts them
 in a fixed histogram of 1 us bins (the last bin holds everything longer) and keeps the exact
-maximum. Percentiles are read off the histogram when someone asks: exact to 1 us.
+maximum (`tallies.Histograms`, one array increment per count). Percentiles are read off the
+histogram when someone asks: exact to 1 us.
 """
 
 from __future__ import annotations
@@ -12,16 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 BINS = 20_000  # 0 .. 19.999 ms in 1 us bins; the last bin collects longer ones
-
-
-def record(histogram: np.ndarray, maximum: np.ndarray, index: int, value_ns: int) -> None:
-    """Count one duration (no allocation: integer arithmetic and two element updates)."""
-    us = value_ns // 1000
-    if us < 0:
-        us = 0
-    histogram[index, us if us < BINS else BINS - 1] += 1
-    if value_ns > maximum[index]:
-        maximum[index] = value_ns
 
 
 def percentile_us(histogram: np.ndarray, q: float) -> float:
