@@ -167,15 +167,17 @@ def show_token(token: bytes, limit: int = 24) -> str:
 
 # Vectorised hex for value blocks: bytes.translate maps every byte of the body to its nibble
 # (0..15), a space to 16 and anything else to 255, in C; numpy then works on those codes.
-_SPACE_CODE = 16
-_BAD_CODE = 255
-_CODES = bytearray([_BAD_CODE]) * 256
-for _i, _c in enumerate(b"0123456789ABCDEF"):
-    _CODES[_c] = _i
-for _i, _c in enumerate(b"abcdef"):
-    _CODES[_c] = 10 + _i
-_CODES[0x20] = _SPACE_CODE
-_CODE_TABLE = bytes(_CODES)
+_SPACE_CODE = scan_loops.SPACE_CODE
+_BAD_CODE = scan_loops.NOT_A_DIGIT
+_CODE_TABLE = scan_loops.CODES
+
+
+def _bad_channel(problem: int, what: str, count: int, digits: int, tokens: int = 0) -> ColaError:
+    """What is wrong with a channel's values (a `scan_loops` code), in words; both decodes say it so."""
+    return ColaError({scan_loops.TOO_FEW: f"{what}: {count} values announced, the telegram ends after {tokens} tokens",
+                      scan_loops.NOT_HEX: f"{what}: a value is not a hex number",
+                      scan_loops.EMPTY: f"{what}: empty value (double space)",
+                      scan_loops.TOO_WIDE: f"{what}: a value has more than {digits} hex digits"}[problem])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -271,18 +273,18 @@ class TokenReader:
             ends[:-1] = spaces[first:]
             ends[-1] = self.end
         else:
-            raise ColaError(f"{what}: {count} values announced, the telegram ends after {available + 1} tokens")
+            raise _bad_channel(scan_loops.TOO_FEW, what, count, digits, available + 1)
         last = int(ends[-1])
         if last > self.pos and codes[self.pos:last].max() == _BAD_CODE:  # (an empty first token is below)
-            raise ColaError(f"{what}: a value is not a hex number")
+            raise _bad_channel(scan_loops.NOT_HEX, what, count, digits)
         widths = np.empty(count, dtype=np.intp)
         widths[0] = ends[0] - self.pos
         np.subtract(ends[1:], ends[:-1], out=widths[1:])
         widths[1:] -= 1
         if widths.min() < 1:
-            raise ColaError(f"{what}: empty value (double space)")
+            raise _bad_channel(scan_loops.EMPTY, what, count, digits)
         if widths.max() > digits:
-            raise ColaError(f"{what}: a value has more than {digits} hex digits")
+            raise _bad_channel(scan_loops.TOO_WIDE, what, count, digits)
         ends -= 1  # now the last digit of each token
         values = codes[ends].astype(np.uint32)
         near_start = int(ends[0]) < digits  # keep the indexes of padding digits inside the body
@@ -304,9 +306,4 @@ class TokenReader:
         if after >= 0:
             self.pos = after
             return values
-        if after == scan_loops.TOO_FEW:
-            found = self.body.count(b" ", self.pos) + 1
-            raise ColaError(f"{what}: {count} values announced, the telegram ends after {found} tokens")
-        raise ColaError({scan_loops.NOT_HEX: f"{what}: a value is not a hex number",
-                         scan_loops.EMPTY: f"{what}: empty value (double space)",
-                         scan_loops.TOO_WIDE: f"{what}: a value has more than {digits} hex digits"}[after])
+        raise _bad_channel(after, what, count, digits, self.body.count(b" ", self.pos) + 1)

@@ -227,7 +227,7 @@ def parse_scan(
         raise ColaError(f"{dist.name}: unusable scale factor {dist.scale_factor} / offset {dist.scale_offset}")
 
     if out_ranges_m is not None:
-        if scan_loops.COMPILED and _loopable(out_ranges_m) and raw.dtype == np.uint32:
+        if scan_loops.COMPILED and _loopable(out_ranges_m):  # `values` gives uint32 either way
             scan_loops.scale_ranges(raw, dist.scale_factor / 1000.0, dist.scale_offset, min_range_m, out_ranges_m)
         else:
             np.multiply(raw, dist.scale_factor / 1000.0, out=out_ranges_m)
